@@ -1,0 +1,1 @@
+"""Torch-batched controllers: optimization fabrics, A* + PID base tracking, gripper logic."""
