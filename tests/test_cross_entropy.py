@@ -1,0 +1,348 @@
+"""Tests for realize.cross_entropy on toy cost functions (no simulator)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+
+from realize.cross_entropy import (
+    CEConfig,
+    CEState,
+    CrossEntropyOptimizer,
+    EvalResult,
+    optimize,
+    rank_samples,
+)
+from realize.regions import Annulus, Box, Fixed, Hemisphere, ParamLayout
+
+F64 = torch.float64
+
+
+def box_layout(lo: float = -5.0, hi: float = 5.0, dim: int = 2) -> ParamLayout:
+    return ParamLayout({"p": Box([lo] * dim, [hi] * dim)})
+
+
+def quadratic(target):
+    t = torch.tensor(target, dtype=F64)
+
+    def evaluate(Z: torch.Tensor) -> EvalResult:
+        cost = ((Z - t) ** 2).sum(dim=1)
+        return EvalResult(cost=cost, feasible=torch.ones(Z.shape[0], dtype=torch.bool))
+
+    return evaluate
+
+
+# ---------------------------------------------------------------- convergence
+
+
+def test_shifted_quadratic_minimum():
+    target = [1.3, -2.1]
+    res = optimize(box_layout(), quadratic(target), CEConfig(n_samples=200, n_elite=10, iterations=15, seed=1))
+    t = torch.tensor(target, dtype=F64)
+    assert res.best_feasible
+    assert float((res.best_z - t).norm()) < 0.05
+    assert float((res.mean - t).norm()) < 0.05
+    assert res.best_cost < 0.0025
+    assert len(res.history) == 15 and res.history[0].sampled_from == "uniform"
+    assert all(h.sampled_from == "gaussian" for h in res.history[1:])
+
+
+def test_constrained_optimum_on_boundary():
+    """min ||z||^2 s.t. z0 + z1 >= 1: optimum (0.5, 0.5) on the constraint boundary."""
+
+    def evaluate(Z):
+        return EvalResult(cost=(Z**2).sum(1), feasible=Z.sum(1) >= 1.0)
+
+    res = optimize(box_layout(-3, 3), evaluate, CEConfig(n_samples=300, n_elite=15, iterations=20, seed=2))
+    assert res.best_feasible and float(res.best_z.sum()) >= 1.0
+    assert float((res.best_z - torch.tensor([0.5, 0.5], dtype=F64)).norm()) < 0.08
+    assert abs(res.best_cost - 0.5) < 0.02
+
+
+def test_constrained_optimum_interior_with_sparse_feasible_set():
+    """Feasible only in a small disc (about 3 % of the box); cost minimum inside the disc."""
+    c, target = torch.tensor([2.0, 2.0], dtype=F64), torch.tensor([2.3, 1.9], dtype=F64)
+
+    def evaluate(Z):
+        d = (Z - c).norm(dim=1)
+        return EvalResult(cost=((Z - target) ** 2).sum(1), feasible=d <= 1.0, progress=-d)
+
+    res = optimize(box_layout(-5, 5), evaluate, CEConfig(n_samples=200, n_elite=10, iterations=15, seed=3))
+    assert res.best_feasible
+    assert float((res.best_z - target).norm()) < 0.05
+    assert 0.0 < res.history[0].success_share < 0.1
+    assert res.history[-1].success_share > 0.9
+
+
+def test_mixed_regions_problem():
+    """Annulus + hemisphere (+ a fixed value): the optimum lies on the region boundaries."""
+    lay = ParamLayout(
+        {
+            "base": Annulus([0.0, 0.0], 0.5, 1.0),
+            "grasp": Hemisphere([0.0, 0.0, 1.0], 0.2),
+            "torso": Fixed([0.3]),
+        }
+    )
+    goal_base = torch.tensor([2.0, 0.0], dtype=F64)  # nearest annulus point: (1, 0)
+    goal_grasp = torch.tensor([0.0, 1.0, 1.0], dtype=F64)  # nearest cap point: (0, 0.2, 1) on the rim
+
+    def evaluate(Z):
+        p = lay.split(Z)
+        cost = (p["base"] - goal_base).norm(dim=1) + (p["grasp"] - goal_grasp).norm(dim=1)
+        return EvalResult(cost=cost, feasible=torch.ones(Z.shape[0], dtype=torch.bool))
+
+    res = optimize(lay, evaluate, CEConfig(n_samples=200, n_elite=10, iterations=15, seed=4))
+    assert torch.allclose(res.best_params["base"][0], torch.tensor([1.0, 0.0], dtype=F64), atol=0.03)
+    assert torch.allclose(res.best_params["grasp"][0], torch.tensor([0.0, 0.2, 1.0], dtype=F64), atol=0.03)
+    assert float(res.best_params["torso"][0, 0]) == 0.3
+    for h in res.history:
+        assert bool(lay.contains(h.Z).all())
+
+
+# ---------------------------------------------------------------- determinism and resume
+
+
+def noisy_problem(Z):
+    cost = ((Z - 0.7) ** 2).sum(1) + 0.3 * torch.sin(17.0 * Z[:, 0])
+    return EvalResult(cost=cost, feasible=Z[:, 1] > -1.0, progress=Z[:, 1], distance=(Z[:, 1] + 1).abs())
+
+
+def test_same_seed_identical_and_different_seed_differs():
+    cfg = CEConfig(n_samples=64, n_elite=8, iterations=6, seed=7)
+    a = optimize(box_layout(), noisy_problem, cfg)
+    b = optimize(box_layout(), noisy_problem, CEConfig(**cfg.to_dict()))
+    for ha, hb in zip(a.history, b.history):
+        assert torch.equal(ha.Z, hb.Z) and torch.equal(ha.elite_idx, hb.elite_idx)
+    assert torch.equal(a.best_z, b.best_z) and torch.equal(a.mean, b.mean) and torch.equal(a.std, b.std)
+    c = optimize(box_layout(), noisy_problem, CEConfig(**{**cfg.to_dict(), "seed": 8}))
+    assert not torch.equal(a.history[0].Z, c.history[0].Z)
+
+
+def test_resume_from_json_state_is_bit_identical():
+    cfg = CEConfig(n_samples=50, n_elite=5, iterations=8, seed=11, uniform_share=0.2)
+    full = optimize(box_layout(), noisy_problem, cfg)
+
+    saved: dict = {}
+
+    def stop_after_3(rec, state):
+        saved["json"] = json.dumps(state.to_dict())
+        return rec.iteration == 2
+
+    part = optimize(box_layout(), noisy_problem, cfg, on_iteration=stop_after_3)
+    assert len(part.history) == 3
+    state = CEState.from_dict(json.loads(saved["json"]))
+    assert state.iteration == 3
+    rest = optimize(box_layout(), noisy_problem, cfg, state=state)
+    assert [h.iteration for h in rest.history] == [3, 4, 5, 6, 7]
+    for hf, hr in zip(full.history[3:], rest.history):
+        assert torch.equal(hf.Z, hr.Z)
+    assert torch.equal(full.best_z, rest.best_z) and full.best_cost == rest.best_cost
+    assert torch.equal(full.mean, rest.mean) and torch.equal(full.std, rest.std)
+
+
+def test_ask_tell_matches_run_and_ask_is_repeatable():
+    cfg = CEConfig(n_samples=40, n_elite=4, iterations=3, seed=5)
+    opt = CrossEntropyOptimizer(box_layout(), cfg)
+    recs = []
+    while not opt.done:
+        Z = opt.ask()
+        assert torch.equal(Z, opt.ask())  # same pending batch
+        recs.append(opt.tell(noisy_problem(Z)))
+    ref = optimize(box_layout(), noisy_problem, cfg)
+    for a, b in zip(recs, ref.history):
+        assert torch.equal(a.Z, b.Z)
+    with pytest.raises(RuntimeError, match="ask"):
+        opt.tell(noisy_problem(Z))
+
+
+# ---------------------------------------------------------------- schedule, fallback, stats
+
+
+def test_linear_schedule_counts():
+    cfg = CEConfig(n_samples=100, n_samples_end=20, schedule="linear", n_elite=5, iterations=5)
+    assert [cfg.n_samples_at(i) for i in range(5)] == [100, 80, 60, 40, 20]
+    res = optimize(box_layout(), quadratic([0.0, 0.0]), cfg)
+    assert [h.n_samples for h in res.history] == [100, 80, 60, 40, 20]
+    journal = CEConfig(n_samples=3000, n_samples_end=300, schedule="linear", n_elite=50, iterations=20)
+    assert journal.n_samples_at(0) == 3000 and journal.n_samples_at(19) == 300
+    with pytest.raises(ValueError, match=r"ce\.n_elite \(30\).*only 20 at iteration 4"):
+        CEConfig(n_samples=100, n_samples_end=20, schedule="linear", n_elite=30, iterations=5)
+
+
+def test_fallback_progress_when_nothing_feasible_at_iteration_0():
+    """Feasible only for z0 > 4.98 (never in iteration 0 for this seed); progress = floor(z0)."""
+
+    def evaluate(Z):
+        return EvalResult(
+            cost=(Z**2).sum(1), feasible=Z[:, 0] > 4.98, progress=torch.floor(Z[:, 0]), distance=-Z[:, 0]
+        )
+
+    cfg = CEConfig(n_samples=100, n_elite=10, iterations=6, seed=0, fallback="progress")
+    opt = CrossEntropyOptimizer(box_layout(), cfg)
+    Z = opt.ask()
+    res0 = evaluate(Z)
+    assert not bool(res0.feasible.any())
+    rec = opt.tell(res0)
+    assert rec.refit == "fallback_progress" and rec.n_feasible == 0
+    # elites are the 10 samples with the largest z0 (progress, ties by distance = -z0)
+    top = torch.argsort(Z[:, 0], descending=True)[:10]
+    assert torch.equal(rec.elite_idx, top)
+    assert float(rec.mean[0]) > 4.0
+    assert math.isinf(rec.best_cost) and math.isnan(rec.elite_cost_mean)
+    full = opt.run(evaluate)
+    assert full.best_feasible  # the fallback steered it into the feasible set
+
+
+def test_fallback_feasible_only_keeps_uniform_then_refits():
+    def evaluate_none(Z):
+        return EvalResult(cost=Z[:, 0], feasible=torch.zeros(Z.shape[0], dtype=torch.bool))
+
+    cfg = CEConfig(n_samples=50, n_elite=10, iterations=3, seed=0, fallback="feasible_only")
+    res = optimize(box_layout(), evaluate_none, cfg)
+    assert [h.refit for h in res.history] == ["kept"] * 3
+    assert [h.sampled_from for h in res.history] == ["uniform"] * 3
+    assert res.mean is None and not res.best_feasible and res.best_z.shape == (2,)
+
+    def evaluate_few(Z):  # 3 feasible rows per batch at most: refit from those
+        feas = torch.zeros(Z.shape[0], dtype=torch.bool)
+        feas[:3] = True
+        return EvalResult(cost=Z[:, 0], feasible=feas)
+
+    opt = CrossEntropyOptimizer(box_layout(), cfg)
+    Z = opt.ask()
+    rec = opt.tell(evaluate_few(Z))
+    assert rec.refit == "feasible_only" and rec.elite_idx.numel() == 3
+    assert torch.allclose(rec.mean, Z[:3].mean(0))
+
+    keep = CEConfig(n_samples=50, n_elite=10, iterations=2, seed=0, fallback="keep")
+    res = optimize(box_layout(), evaluate_few, keep)
+    assert [h.refit for h in res.history] == ["kept", "kept"] and res.best_feasible
+
+
+def test_best_cost_never_increases_and_is_global_best():
+    cfg = CEConfig(n_samples=60, n_elite=6, iterations=10, seed=3, alpha=0.7)
+    res = optimize(box_layout(), noisy_problem, cfg)
+    best = [h.best_cost for h in res.history]
+    assert all(b2 <= b1 for b1, b2 in zip(best, best[1:]))
+    all_cost = torch.cat([h.cost[h.feasible] for h in res.history])
+    assert res.best_cost == float(all_cost.min()) == best[-1]
+    it = res.best_iteration
+    row = int(torch.nonzero(res.history[it].cost == res.best_cost)[0])
+    assert torch.equal(res.history[it].Z[row], res.best_z)
+    h = res.history[-1]
+    assert h.elite_cost_min <= h.elite_cost_mean <= h.elite_cost_max
+    assert h.success_share == h.n_feasible / h.n_samples
+    json.dumps(h.summary())
+
+
+def test_rank_samples_order():
+    cost = torch.tensor([5.0, 1.0, 3.0, float("nan"), 0.5, 2.0, 2.0])
+    feas = torch.tensor([True, True, False, True, False, False, False])
+    prog = torch.tensor([9.0, 9.0, 2.0, 0.0, 1.0, 2.0, 2.0])
+    dist = torch.tensor([0.0, 0.0, 0.5, 0.0, 0.0, 0.1, 0.5])
+    # feasible by cost (nan last), then infeasible by progress desc, distance asc, cost asc
+    assert rank_samples(cost, feas, prog, dist).tolist() == [1, 0, 3, 5, 6, 2, 4]
+    assert rank_samples(cost, feas).tolist() == [1, 0, 3, 4, 5, 6, 2]
+
+
+def test_min_std_floor_and_convergence_stop():
+    cfg = CEConfig(n_samples=100, n_elite=10, iterations=50, seed=0, min_std=0.01, converge_std=0.02)
+    res = optimize(box_layout(), quadratic([0.5, 0.5]), cfg)
+    assert res.converged and len(res.history) < 50
+    assert float(res.std.min()) >= 0.01 and float(res.std.max()) < 0.02
+    lay = ParamLayout({"a": Fixed([1.0]), "b": Box([0.0], [1.0])})
+    res = optimize(lay, quadratic([1.0, 0.2]), CEConfig(n_samples=50, n_elite=5, iterations=4, min_std=0.05))
+    assert float(res.std[0]) == 0.05  # the fixed column sits at the floor
+    assert bool((res.history[-1].Z[:, 0] == 1.0).all())
+
+
+def test_uniform_share_and_rank_weighted():
+    cfg = CEConfig(n_samples=100, n_elite=10, iterations=8, seed=2, uniform_share=0.25, rank_weighted=True)
+    res = optimize(box_layout(), quadratic([-1.0, 2.0]), cfg)
+    assert float((res.best_z - torch.tensor([-1.0, 2.0], dtype=F64)).norm()) < 0.1
+    last = res.history[-1].Z
+    # the last 25 rows are fresh uniform draws: they spread over the box, the rest do not
+    assert float(last[75:].std(0).min()) > 1.5 and float(last[:75].std(0).max()) < 0.5
+
+
+def test_alpha_smoothing_blends_with_previous():
+    """The first refit blends with the moments of the uniform batch it was fitted on."""
+    a = optimize(box_layout(), quadratic([3.0, 3.0]), CEConfig(n_samples=50, n_elite=5, iterations=1, seed=0))
+    b = optimize(box_layout(), quadratic([3.0, 3.0]), CEConfig(n_samples=50, n_elite=5, iterations=1, seed=0, alpha=0.5))
+    Z0 = a.history[0].Z
+    assert torch.allclose(b.mean, 0.5 * a.mean + 0.5 * Z0.mean(0))
+    assert torch.allclose(b.std, 0.5 * a.std + 0.5 * Z0.std(0, correction=0))
+
+
+def test_callback_sees_every_iteration():
+    seen = []
+    optimize(box_layout(), quadratic([0, 0]), CEConfig(n_samples=20, n_elite=2, iterations=4),
+             on_iteration=lambda rec, st: seen.append((rec.iteration, st.iteration)))
+    assert seen == [(0, 1), (1, 2), (2, 3), (3, 4)]
+
+
+# ---------------------------------------------------------------- validation
+
+
+@pytest.mark.parametrize(
+    "kwargs, msg",
+    [
+        ({"iterations": 0}, r"ce\.iterations must be >= 1"),
+        ({"n_elite": 300}, r"ce\.n_elite \(300\) must be <="),
+        ({"n_elite": 0}, r"ce\.n_elite must be >= 1"),
+        ({"fallback": "magic"}, r"ce\.fallback must be one of"),
+        ({"schedule": "cosine"}, r"ce\.schedule must be one of"),
+        ({"schedule": "linear"}, r"ce\.n_samples_end"),
+        ({"n_samples_end": 50}, r"ce\.n_samples_end .*only used with schedule 'linear'"),
+        ({"alpha": 0.0}, r"ce\.alpha"),
+        ({"min_std": -1.0}, r"ce\.min_std"),
+        ({"converge_std": 1e-4}, r"ce\.converge_std .* must be > ce\.min_std"),
+        ({"uniform_share": 1.0}, r"ce\.uniform_share"),
+        ({"n_modes": 2}, r"ce\.n_modes"),
+        ({"knn_robust": 5}, r"ce\.knn_robust"),
+        ({"n_samples": 2.5}, r"ce\.n_samples must be an integer"),
+        ({"dtype": "float16"}, r"ce\.dtype"),
+    ],
+)
+def test_config_validation_names_key(kwargs, msg):
+    with pytest.raises(ValueError, match=msg):
+        CEConfig(**kwargs)
+
+
+def test_config_from_dict():
+    cfg = CEConfig.from_dict({"n_samples": 3000.0, "n_samples_end": 300, "schedule": "linear", "n_elite": 50, "iterations": 20})
+    assert cfg.n_samples == 3000 and cfg.n_samples_at(19) == 300
+    assert CEConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match=r"^configs/ce/x\.yaml: unknown key\(s\) \['n_elites'\]"):
+        CEConfig.from_dict({"n_elites": 5}, where="configs/ce/x.yaml")
+    with pytest.raises(ValueError, match=r"^configs/ce/x\.yaml\.n_elite"):
+        CEConfig.from_dict({"n_elite": 500}, where="configs/ce/x.yaml")
+
+
+def test_bad_eval_result_shape_and_bad_state():
+    opt = CrossEntropyOptimizer(box_layout(), CEConfig(n_samples=10, n_elite=2, iterations=1))
+    opt.ask()
+    with pytest.raises(ValueError, match=r"EvalResult\.feasible: expected shape \(10,\)"):
+        opt.tell(EvalResult(cost=torch.zeros(10), feasible=torch.ones(9, dtype=torch.bool)))
+    st = CEState(iteration=1, rng_state=torch.Generator().get_state(), mean=torch.zeros(3), std=torch.ones(3))
+    with pytest.raises(ValueError, match=r"state\.mean: expected shape \(2,\)"):
+        CrossEntropyOptimizer(box_layout(), CEConfig(), state=st)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+@pytest.mark.gpu
+def test_cuda_evaluator_gets_device_tensors_and_same_samples():
+    seen = []
+
+    def evaluate(Z):
+        seen.append(Z.device.type)
+        return quadratic([0.0, 0.0])(Z.cpu())
+
+    cfg = CEConfig(n_samples=30, n_elite=3, iterations=3, seed=1)
+    g = optimize(box_layout(), evaluate, cfg, device="cuda")
+    c = optimize(box_layout(), quadratic([0.0, 0.0]), cfg)
+    assert seen == ["cuda"] * 3
+    assert all(torch.equal(a.Z, b.Z) for a, b in zip(g.history, c.history))
