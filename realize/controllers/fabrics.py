@@ -1,0 +1,387 @@
+"""Batched, differentiable static optimization fabrics in pure torch.
+
+What it does
+------------
+Computes the joint accelerations ``qdd`` of a *speed-controlled static fabric*
+(Ratliff et al. 2020, "Optimization Fabrics"; eq. (4) of the seed paper:
+``M qdd + f + gamma * d_q psi + B qd = 0``) for N plans at once, with the same
+conventions, default expressions and constants as the reference ``fabrics``
+package (M. Spahn, ``ParameterizedFabricPlanner``, ``forcing_type =
+'speed-controlled'``). The fabric is a sum of leaves pulled back into joint
+space:
+
+* a base energy ``0.5 * base_inertia * |qd|^2`` (zero geometry);
+* one collision-avoidance leaf per (collision sphere on the robot, obstacle),
+  leaf coordinate ``x = |p_k(q) - c| / (r_obst + r_body) - 1`` by default,
+  geometry ``h = -lam / x^5 * s(xd) * xd^2`` with ``s(xd) = 1`` while
+  approaching (``xd < 0``), ``0.5`` at ``xd == 0`` and ``0`` when leaving,
+  Finsler energy ``0.1 / x * xd^2``;
+* two joint-limit leaves per joint, ``x = q_i - lower_i`` and
+  ``x = upper_i - q_i``, geometry ``-0.1 / x * xd^2``, energy
+  ``0.1 / x * s(xd) * xd^2``;
+* a goal attractor on the end-effector position, ``x = x_ee(q) - goal``,
+  potential ``gamma * k * (|x| + log(1 + exp(-2 a |x|)) / a)`` and metric
+  ``((m_max - m_min) exp(-(a_m |x|)^2) + m_min) I``;
+* speed control: execution energy ``|qd|^2``, interpolation ``eta`` between the
+  energized unforced and forced systems, and the damper ``beta`` that switches
+  from ``beta_distant`` to ``beta_close + beta_distant`` near the goal.
+
+Pull-backs follow the reference package exactly, including its convention
+``Jdot = -d(J qd)/dq`` (``Jdot_sign = -1``): a spec ``(M, f)`` in leaf
+coordinates is pulled back as ``J^T M J`` and ``J^T (f - M a)`` with
+``a = qd^T (d^2 x / dq^2) qd`` (the true curvature term), whereas the leaf
+energies are pulled back through their Lagrangians, i.e. with ``+a``. The
+energization coefficients ``alpha`` use both, as in the package. Inverses are
+``(M + eps I)^-1`` with ``eps = 1e-6`` and actions whose norm is below ``eps``
+or above ``1 / eps`` are zeroed, as ``compute_action`` does.
+
+The robot enters only through a differentiable forward map supplied by the
+caller (see :class:`Kinematics`): end-effector position ``x_ee(q)`` (N, d) and
+collision-sphere centres ``p(q)`` (N, K, d). Jacobians and curvature terms
+are computed with forward-mode AD (``torch.func.jvp``, vmapped over joint
+directions), so any differentiable torch function works; everything is
+batched over N plans with no Python loop over N, device- and dtype-agnostic,
+and differentiable w.r.t. ``q``, ``qd``, the goal, obstacles and gains.
+
+Bad input: invalid *configuration* constants (non-positive gains, ...) raise
+``ValueError`` naming the parameter. Invalid *per-plan* data (NaN/inf in
+``q``, ``qd``, goal, goal weight or an unmasked obstacle, a non-positive goal
+weight, a non-finite result) never fails the batch: such rows get ``qdd = 0``
+and ``valid = False`` in the returned ``(N,)`` mask.
+
+What it does not do
+-------------------
+No dynamic fabrics (moving obstacles, reference-path tracking), no
+self-collision, capsule or cuboid leaves, no orientation goals and no
+secondary goals. The obstacle leaf coordinate is pluggable
+(``obstacle_distance``), so signed-distance maps for other shapes (boxes) can
+be added without touching the fabric. Like the reference, the leaves have no
+distance cut-off, and a goal reached exactly gives zero attractor force (the
+reference gives NaN there).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Callable, Protocol
+
+import torch
+from torch import Tensor
+from torch.func import jvp, vmap
+
+__all__ = [
+    "FabricConfig",
+    "FabricKinematics",
+    "Kinematics",
+    "sphere_distance",
+    "fabric_acceleration",
+    "integrate",
+]
+
+
+@dataclass(frozen=True)
+class FabricConfig:
+    """Fabric constants; the defaults are the reference package's defaults."""
+
+    # base energy 0.5 * base_inertia * |qd|^2 (reference: "0.5 * 0.2 * ca.dot(xdot, xdot)")
+    base_inertia: float = 0.2
+    # obstacle collision geometry  h = -collision_lam / x^collision_exp * s(xd) * xd^2
+    collision_lam: float = 0.5
+    collision_exp: float = 5.0
+    # obstacle collision Finsler energy  l = collision_metric_lam / x^collision_metric_exp * xd^2
+    collision_metric_lam: float = 0.1
+    collision_metric_exp: float = 1.0
+    # joint-limit geometry  h = -limit_lam / x^limit_exp * xd^2
+    limit_lam: float = 0.1
+    limit_exp: float = 1.0
+    # joint-limit energy  l = limit_metric_lam / x^limit_metric_exp * s(xd) * xd^2
+    limit_metric_lam: float = 0.1
+    limit_metric_exp: float = 1.0
+    # attractor potential  psi = gamma * k_psi * (|x| + log(1 + exp(-2 a_psi |x|)) / a_psi)
+    gamma: float = 1.0  # attractor weight ("weight_goal_0"); overridable per plan
+    k_psi: float = 5.0
+    a_psi: float = 10.0
+    # attractor metric  ((m_max - m_min) exp(-(a_m |x|)^2) + m_min) * I
+    m_min: float = 0.3
+    m_max: float = 2.0
+    a_m: float = 0.75
+    # damper  beta = 0.5 (tanh(-alpha_b (|x| - radius_shift)) + 1) beta_close + beta_distant
+    #                + max(0, alpha_geometry - alpha_execution)
+    alpha_b: float = 0.5
+    radius_shift: float = 0.02
+    beta_close: float = 6.5
+    beta_distant: float = 0.01
+    # interpolation  eta = 0.5 (tanh(-alpha_eta * |qd|^2 * (1 - ex_factor) - 0.5) + 1)
+    alpha_eta: float = 0.9
+    ex_factor: float = 0.5
+    # regularisation of inverses and alpha denominators; actions with norm < eps or
+    # > 1 / eps are zeroed (set zero_extreme_actions=False to keep them)
+    eps: float = 1e-6
+    zero_extreme_actions: bool = True
+
+    def __post_init__(self) -> None:
+        positive = ("base_inertia", "collision_metric_lam", "limit_metric_lam", "gamma",
+                    "k_psi", "a_psi", "m_min", "m_max", "eps")
+        non_negative = ("collision_lam", "collision_exp", "collision_metric_exp", "limit_lam",
+                        "limit_exp", "limit_metric_exp", "a_m", "alpha_b", "beta_close",
+                        "beta_distant", "alpha_eta")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "zero_extreme_actions":
+                continue
+            if not math.isfinite(v):
+                raise ValueError(f"FabricConfig.{f.name} must be finite, got {v}")
+            if f.name in positive and v <= 0:
+                raise ValueError(f"FabricConfig.{f.name} must be > 0, got {v}")
+            if f.name in non_negative and v < 0:
+                raise ValueError(f"FabricConfig.{f.name} must be >= 0, got {v}")
+        if self.m_max < self.m_min:
+            raise ValueError(f"FabricConfig.m_max ({self.m_max}) must be >= m_min ({self.m_min})")
+
+
+class FabricKinematics(Protocol):
+    """What the fabric needs from a robot.
+
+    ``body_radii``: radii of the K collision spheres, shape (K,) or (N, K).
+    ``__call__(q)``: for q (N, n) return ``(x_ee (N, d), points (N, K, d))``.
+    Must be a differentiable torch function of q, without in-place writes to q,
+    and work under ``torch.func`` forward-mode AD (vmap over tangents unless
+    ``vectorize=False`` is passed to :func:`fabric_acceleration`). For gradients
+    through the fabric (reverse over forward-over-forward), avoid ops whose
+    forward-mode rule is in place (e.g. ``torch.linalg.vector_norm``; write
+    ``sqrt((x * x).sum(-1))``).
+    """
+
+    body_radii: Tensor
+
+    def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]: ...
+
+
+@dataclass
+class Kinematics:
+    """Plain implementation of :class:`FabricKinematics` from a function."""
+
+    forward: Callable[[Tensor], tuple[Tensor, Tensor]]
+    body_radii: Tensor
+
+    def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]:
+        return self.forward(q)
+
+
+def sphere_distance(points: Tensor, body_radii: Tensor, obstacles: Tensor) -> Tensor:
+    """Reference sphere-sphere leaf map ``|p - c| / (r_obst + r_body) - 1``.
+
+    points (N, K, d), body_radii (N, K), obstacles (N, M, d + 1) = centre, radius.
+    Returns (N, K, M). Any function with this signature can replace it (e.g. a
+    signed distance to boxes), as long as it is differentiable in ``points``.
+    """
+    centre, radius = obstacles[..., :-1], obstacles[..., -1]
+    diff = points[:, :, None, :] - centre[:, None, :, :]
+    # not torch.linalg.vector_norm: its forward-mode rule writes in place, which
+    # breaks reverse mode through the nested jvp used for the curvature terms
+    dist = torch.sqrt((diff * diff).sum(-1))
+    return dist / (radius[:, None, :] + body_radii[:, :, None]) - 1.0
+
+
+def _one_sided(xd: Tensor) -> Tensor:
+    """Reference switch ``-0.5 * (sign(xd) - 1)``: 1 approaching, 0.5 at rest, 0 leaving."""
+    return -0.5 * (torch.sign(xd) - 1.0)
+
+
+def _jets(fn: Callable[[Tensor], Tensor], q: Tensor, qd: Tensor, vectorize: bool
+          ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Value y (N, L), Jacobian J (N, L, n), velocity J qd (N, L), curvature qd^T H qd (N, L)."""
+
+    def velocity(z: Tensor) -> tuple[Tensor, Tensor]:
+        return jvp(fn, (z,), (qd,))
+
+    (y, yd), (_, curvature) = jvp(velocity, (q,), (qd,))
+    n = q.shape[-1]
+    basis = torch.eye(n, dtype=q.dtype, device=q.device)[:, None, :].expand(n, *q.shape)
+    if vectorize:
+        J = vmap(lambda v: jvp(fn, (q,), (v,))[1], out_dims=-1)(basis)
+    else:
+        J = torch.stack([jvp(fn, (q,), (basis[j],))[1] for j in range(n)], dim=-1)
+    return y, J, yd, curvature
+
+
+def _pull(J: Tensor, m: Tensor) -> Tensor:
+    """Sum over scalar leaves of m_l J_l^T J_l: J (N, L, n), m (N, L) -> (N, n, n)."""
+    return torch.einsum("nli,nl,nlj->nij", J, m, J)
+
+
+def _safe_norm(x: Tensor) -> Tensor:
+    tiny = torch.finfo(x.dtype).tiny ** 0.5
+    return torch.sqrt((x * x).sum(-1) + tiny)
+
+
+def fabric_acceleration(
+    q: Tensor,
+    qd: Tensor,
+    goal: Tensor,
+    kin: FabricKinematics,
+    cfg: FabricConfig = FabricConfig(),
+    *,
+    obstacles: Tensor | None = None,
+    obstacle_mask: Tensor | None = None,
+    lower: Tensor | None = None,
+    upper: Tensor | None = None,
+    weight: Tensor | float | None = None,
+    obstacle_distance: Callable[[Tensor, Tensor, Tensor], Tensor] = sphere_distance,
+    vectorize: bool = True,
+) -> tuple[Tensor, Tensor]:
+    """Joint accelerations of the speed-controlled static fabric for N plans.
+
+    Args:
+        q, qd: joint positions and velocities (N, n).
+        goal: end-effector goal positions (N, d).
+        kin: forward maps of the robot, see :class:`FabricKinematics`.
+        cfg: fabric constants (reference defaults).
+        obstacles: (N, M, P) obstacle parameters for ``obstacle_distance``; for the
+            default spheres/circles P = d + 1 (centre, radius). None: no obstacles.
+        obstacle_mask: (N, M) bool, False marks padding. Default: all True.
+        lower, upper: joint limits (n,) or (N, n); None: no joint-limit leaves.
+        weight: attractor weight gamma, float or (N,); default ``cfg.gamma``.
+        obstacle_distance: leaf map ``(points (N,K,d), body_radii (N,K),
+            obstacles (N,M,P)) -> (N,K,M)``.
+        vectorize: vmap the Jacobian over joint directions (else a loop over n).
+
+    Returns:
+        ``(qdd, valid)``: accelerations (N, n), zero where ``valid`` (N,) is False.
+    """
+    if q.ndim != 2 or qd.shape != q.shape:
+        raise ValueError(f"q and qd must both be (N, n), got {tuple(q.shape)} and {tuple(qd.shape)}")
+    N, n = q.shape
+    if goal.ndim != 2 or goal.shape[0] != N:
+        raise ValueError(f"goal must be (N, d) with N={N}, got {tuple(goal.shape)}")
+    dtype, device = q.dtype, q.device
+    eps = cfg.eps
+
+    # ---- per-plan validity and sanitised inputs (invalid rows never poison the batch)
+    if weight is None:
+        weight = cfg.gamma
+    if not torch.is_tensor(weight):
+        if not math.isfinite(weight) or weight <= 0:
+            raise ValueError(f"weight (attractor gain gamma) must be finite and > 0, got {weight}")
+    w = torch.as_tensor(weight, dtype=dtype, device=device).expand(N)
+    finite = lambda t: torch.isfinite(t).flatten(1).all(1)  # noqa: E731
+    valid = finite(q) & finite(qd) & finite(goal) & torch.isfinite(w) & (w > 0)
+    if obstacles is not None and (obstacles.ndim != 3 or obstacles.shape[0] != N):
+        raise ValueError(f"obstacles must be (N, M, P), got {tuple(obstacles.shape)}")
+    if obstacles is not None and obstacles.shape[1] == 0:
+        obstacles = None
+    if obstacles is not None:
+        M = obstacles.shape[1]
+        mask = (torch.ones(N, M, dtype=torch.bool, device=device) if obstacle_mask is None
+                else obstacle_mask.to(device=device, dtype=torch.bool))
+        obs_ok = torch.isfinite(obstacles).all(-1) | ~mask
+        valid = valid & obs_ok.all(1)
+        # padding -> a harmless far-away unit sphere; its leaves are masked out below
+        far = torch.cat([torch.full_like(obstacles[..., :-1], 1e3),
+                         torch.ones_like(obstacles[..., -1:])], dim=-1)
+        obstacles = torch.where(mask[..., None] & valid[:, None, None], obstacles, far)
+    v2 = valid[:, None]
+    if lower is not None and upper is not None:
+        lo = torch.as_tensor(lower, dtype=dtype, device=device).expand(N, n)
+        up = torch.as_tensor(upper, dtype=dtype, device=device).expand(N, n)
+        q = torch.where(v2, q, 0.5 * (lo + up))
+    else:
+        q = torch.where(v2, q, torch.zeros_like(q))
+    qd = torch.where(v2, qd, torch.zeros_like(qd))
+    w = torch.where(valid, w, torch.ones_like(w))
+
+    # ---- leaf maps: attractor (x_ee - goal) and all (sphere, obstacle) pairs
+    body_radii = torch.as_tensor(kin.body_radii, dtype=dtype, device=device)
+    d = goal.shape[1]
+
+    def leaf_maps(z: Tensor) -> Tensor:
+        x_ee, points = kin(z)
+        parts = [x_ee]
+        if obstacles is not None:
+            radii = body_radii.expand(points.shape[0], points.shape[1])
+            parts.append(obstacle_distance(points, radii, obstacles).flatten(1))
+        return torch.cat(parts, dim=1)
+
+    y, J, yd, curv = _jets(leaf_maps, q, qd, vectorize)
+    goal = torch.where(valid[:, None], goal, y[:, :d].detach() + 1.0)
+
+    # ---- unforced geometry: base + collision leaves + joint-limit leaves
+    # M_g, f_g: spec pulled with the package's Jdot sign (f - M a);
+    # f_le: pulled energies (Lagrangian pull-back, f + M a); their M equals M_g.
+    eye = torch.eye(n, dtype=dtype, device=device).expand(N, n, n)
+    M_g = cfg.base_inertia * eye
+    f_g = torch.zeros(N, n, dtype=dtype, device=device)
+    f_le = torch.zeros(N, n, dtype=dtype, device=device)
+    if obstacles is not None:
+        on_b = mask[:, None, :].expand(N, (y.shape[1] - d) // M, M).flatten(1)
+        on = on_b.to(dtype)
+        # masked (padding) leaves: neutral values so that nothing non-finite is formed
+        x = torch.where(on_b, y[:, d:], torch.ones_like(y[:, d:]))
+        xd = torch.where(on_b, yd[:, d:], torch.zeros_like(yd[:, d:]))
+        a = torch.where(on_b, curv[:, d:], torch.zeros_like(curv[:, d:]))
+        Jc = torch.where(on_b[..., None], J[:, d:], torch.zeros_like(J[:, d:]))
+        h = -cfg.collision_lam / x ** cfg.collision_exp * _one_sided(xd) * xd ** 2
+        m = 2.0 * cfg.collision_metric_lam / x ** cfg.collision_metric_exp * on
+        f_le_x = (-cfg.collision_metric_exp * cfg.collision_metric_lam
+                  / x ** (cfg.collision_metric_exp + 1.0) * xd ** 2 * on)
+        M_g = M_g + _pull(Jc, m)
+        f_g = f_g + torch.einsum("nli,nl->ni", Jc, m * (h - a))
+        f_le = f_le + torch.einsum("nli,nl->ni", Jc, m * a + f_le_x)
+    if lower is not None and upper is not None:
+        # x = q - lower (J = +1) and x = upper - q (J = -1); linear maps, a = 0
+        for sign, x in ((1.0, q - lo), (-1.0, up - q)):
+            xd = sign * qd
+            s = _one_sided(xd)
+            h = -cfg.limit_lam / x ** cfg.limit_exp * xd ** 2
+            m = 2.0 * cfg.limit_metric_lam / x ** cfg.limit_metric_exp * s
+            f_le_x = (-cfg.limit_metric_exp * cfg.limit_metric_lam
+                      / x ** (cfg.limit_metric_exp + 1.0) * s * xd ** 2)
+            M_g = M_g + torch.diag_embed(m)
+            f_g = f_g + sign * m * h
+            f_le = f_le + sign * f_le_x
+
+    # ---- forcing: attractor leaf on x = x_ee(q) - goal
+    xa = y[:, :d] - goal
+    xda, aa, Ja = yd[:, :d], curv[:, :d], J[:, :d]
+    r = _safe_norm(xa)
+    grad_psi = (w * cfg.k_psi * torch.tanh(cfg.a_psi * r) / r)[:, None] * xa
+    m_att = 2.0 * ((cfg.m_max - cfg.m_min) * torch.exp(-(cfg.a_m * r) ** 2) + cfg.m_min)
+    M_f = M_g + m_att[:, None, None] * Ja.transpose(1, 2) @ Ja
+    f_f = f_g + m_att[:, None] * torch.einsum("nki,nk->ni", Ja, grad_psi - aa)
+
+    # ---- energization and speed control
+    reg = eps * eye
+    h_g = torch.linalg.solve(M_g + reg, f_g)
+    h_f = torch.linalg.solve(M_f + reg, f_f)
+    qd2 = (qd * qd).sum(-1)
+    alpha_geo = -(qd * (f_g - f_le)).sum(-1) / (eps + torch.einsum("ni,nij,nj->n", qd, M_g, qd))
+    alpha_ex = -2.0 * (qd * h_g).sum(-1) / (eps + 2.0 * qd2)
+    alpha_fex = -2.0 * (qd * h_f).sum(-1) / (eps + 2.0 * qd2)
+    eta = 0.5 * (torch.tanh(-cfg.alpha_eta * qd2 * (1.0 - cfg.ex_factor) - 0.5) + 1.0)
+    a_ex = eta * alpha_ex + (1.0 - eta) * alpha_fex
+    beta = (0.5 * (torch.tanh(-cfg.alpha_b * (r - cfg.radius_shift)) + 1.0) * cfg.beta_close
+            + cfg.beta_distant + torch.clamp(alpha_geo - a_ex, min=0.0))
+    qdd = -h_f - (a_ex + beta)[:, None] * qd
+
+    # ---- outputs
+    valid = valid & torch.isfinite(qdd).all(-1)
+    if cfg.zero_extreme_actions:
+        norm = torch.linalg.vector_norm(qdd.detach(), dim=-1)
+        keep = valid & (norm >= eps) & (norm <= 1.0 / eps)
+    else:
+        keep = valid
+    qdd = torch.where(keep[:, None], qdd, torch.zeros_like(qdd))
+    return qdd, valid
+
+
+def integrate(q: Tensor, qd: Tensor, qdd: Tensor, dt: float) -> tuple[Tensor, Tensor]:
+    """Semi-implicit Euler step to position/velocity targets for PD drives.
+
+    ``qd_next = qd + dt * qdd``, ``q_next = q + dt * qd_next``; returns
+    ``(q_next, qd_next)`` (N, n) each.
+    """
+    if not dt > 0:
+        raise ValueError(f"dt must be > 0, got {dt}")
+    qd_next = qd + dt * qdd
+    return q + dt * qd_next, qd_next
