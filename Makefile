@@ -1,0 +1,21 @@
+# Two commands on a fresh clone:  `make run` (the seed paper experiment)  and  `make test`.
+# Both run scripts/setup.sh first, which installs whatever is missing (venv, torch, Vulkan).
+PY := .venv/bin/python
+ARGS ?=
+
+.PHONY: setup run test test-all bench
+setup:
+	@bash scripts/setup.sh
+
+run: setup
+	$(PY) -m realize experiment=seed_paper $(ARGS)
+
+test: setup
+	$(PY) -m pytest -m "not slow" -q $(ARGS)
+
+test-all: setup
+	$(PY) -m pytest -q $(ARGS)
+
+bench: setup
+	$(PY) scripts/bench_sim.py --quick
+	$(PY) scripts/bench_controllers.py --quick

@@ -1,0 +1,251 @@
+"""Scene geometry of the pick-and-place world, as plain dataclasses built from config.
+
+What it does: describes the static world (tables, an optional wall or ramp, the exit area, the
+cube and the robot's start pose) in one copy's local frame, validates it, and offers the
+obstacle boxes that the controllers (A* occupancy grid, fabric collision terms) need.
+What it doesn't: build anything in a simulator (see `envs/scene_builder.py`), nor hold the
+symbolic parameter regions of a plan (those live in the task config, see `realize/regions.py`).
+
+Frames: z up, floor at z = 0, metres, yaw in radians about +z. Boxes are given by their centre
+and half extents; a box may be tilted about its local y axis (`pitch`) to make a ramp.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, Mapping
+
+VARIANTS = ("plain", "wall", "ramp")
+
+
+class GeometryError(ValueError):
+    """A scene geometry config value is invalid; the message names the key."""
+
+
+@dataclass(frozen=True)
+class Box:
+    """A static box obstacle: centre (x, y, z), half sizes (hx, hy, hz), yaw and pitch (rad)."""
+
+    name: str
+    center: tuple[float, float, float]
+    half_size: tuple[float, float, float]
+    yaw: float = 0.0
+    pitch: float = 0.0
+    color: tuple[float, float, float, float] = (0.45, 0.32, 0.22, 1.0)
+
+    @property
+    def top_z(self) -> float:
+        """Height of the highest point of the box (exact for un-pitched boxes)."""
+        hx, _, hz = self.half_size
+        return self.center[2] + abs(math.sin(self.pitch)) * hx + math.cos(self.pitch) * hz
+
+    def footprint_half_size(self) -> tuple[float, float]:
+        """Half extents of the box projected on the floor (in its own yawed frame)."""
+        hx, hy, hz = self.half_size
+        return (abs(math.cos(self.pitch)) * hx + abs(math.sin(self.pitch)) * hz, hy)
+
+    def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
+        """Whether floor point (x, y) lies inside the padded footprint."""
+        dx, dy = x - self.center[0], y - self.center[1]
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        fx, fy = self.footprint_half_size()
+        return abs(lx) <= fx + margin and abs(ly) <= fy + margin
+
+
+@dataclass(frozen=True)
+class SceneGeometry:
+    """The whole static world of one copy (local frame), plus the dynamic cube's start."""
+
+    variant: str
+    tables: tuple[Box, ...]
+    extras: tuple[Box, ...]  # wall / ramp
+    cube_half_size: float
+    cube_pos: tuple[float, float, float]
+    cube_mass: float
+    cube_friction: float
+    robot_start: tuple[float, float, float]  # x, y, yaw
+    robot_radius: float
+    exit_low: tuple[float, float]
+    exit_high: tuple[float, float]
+    bounds_low: tuple[float, float]
+    bounds_high: tuple[float, float]
+
+    @property
+    def obstacles(self) -> tuple[Box, ...]:
+        """Every static box the robot base must avoid."""
+        return self.tables + self.extras
+
+    def table(self, name: str) -> Box:
+        for t in self.tables:
+            if t.name == name:
+                return t
+        raise KeyError(f"scene has no table named {name!r}; tables: {[t.name for t in self.tables]}")
+
+    @property
+    def extent(self) -> tuple[float, float]:
+        """Size (x, y) of the world rectangle; used to tile copies without overlap."""
+        return (self.bounds_high[0] - self.bounds_low[0], self.bounds_high[1] - self.bounds_low[1])
+
+
+@dataclass
+class TableCfg:
+    name: str = "table1"
+    center: tuple[float, float] = (0.0, 1.2)
+    size: tuple[float, float] = (0.6, 0.6)
+    height: float = 0.72
+
+
+@dataclass
+class GeometryCfg:
+    """Config of the world (a Hydra `scene` group maps onto this one to one)."""
+
+    variant: str = "plain"
+    tables: list[TableCfg] = field(
+        default_factory=lambda: [
+            TableCfg("table1", (0.0, 1.2), (0.6, 0.6), 0.72),
+            TableCfg("table2", (0.0, -1.2), (0.6, 0.6), 0.72),
+        ]
+    )
+    cube_size: float = 0.045
+    cube_offset: tuple[float, float] = (0.0, 0.0)  # relative to table1's centre
+    cube_mass: float = 0.05
+    cube_friction: float = 1.0
+    robot_start: tuple[float, float, float] = (-2.0, 0.0, 0.0)
+    robot_radius: float = 0.32
+    exit_low: tuple[float, float] = (1.8, -0.4)
+    exit_high: tuple[float, float] = (2.6, 0.4)
+    bounds_low: tuple[float, float] = (-3.0, -2.5)
+    bounds_high: tuple[float, float] = (3.0, 2.5)
+    # wall variant: a thin wall across the direct route between the tables
+    wall_center: tuple[float, float] = (0.0, 0.0)
+    wall_size: tuple[float, float, float] = (1.6, 0.1, 1.0)
+    # ramp variant: a tilted plank from above table1's height down onto table2's edge
+    ramp_center: tuple[float, float] = (0.0, 0.0)
+    ramp_length: float = 1.0
+    ramp_width: float = 0.4
+    ramp_drop: float = 0.25
+
+
+def _err(key: str, value: Any, allowed: str) -> GeometryError:
+    return GeometryError(f"scene.{key} = {value!r} is invalid: {allowed}")
+
+
+def _table_from(cfg: Any, i: int) -> TableCfg:
+    if isinstance(cfg, TableCfg):
+        return cfg
+    if not isinstance(cfg, Mapping):
+        raise _err(f"tables[{i}]", cfg, "expected a mapping with name, center, size, height")
+    known = {f.name for f in fields(TableCfg)}
+    unknown = set(cfg) - known
+    if unknown:
+        raise _err(f"tables[{i}]", sorted(unknown), f"unknown keys; allowed: {sorted(known)}")
+    return TableCfg(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.items()})
+
+
+def geometry_cfg_from_dict(d: Mapping[str, Any] | None) -> GeometryCfg:
+    """Build a `GeometryCfg` from a (Hydra) mapping, rejecting unknown keys by name."""
+    d = dict(d or {})
+    known = {f.name for f in fields(GeometryCfg)}
+    unknown = set(d) - known
+    if unknown:
+        raise GeometryError(f"scene: unknown keys {sorted(unknown)}; allowed: {sorted(known)}")
+    kw: dict[str, Any] = {}
+    for k, v in d.items():
+        if k == "tables":
+            kw[k] = [_table_from(t, i) for i, t in enumerate(v)]
+        elif isinstance(v, (list, tuple)):
+            kw[k] = tuple(float(x) for x in v)
+        else:
+            kw[k] = v
+    return GeometryCfg(**kw)
+
+
+def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
+    """Validate `cfg` and turn it into boxes. Raises `GeometryError` naming the bad key."""
+    if cfg.variant not in VARIANTS:
+        raise _err("variant", cfg.variant, f"allowed: {list(VARIANTS)}")
+    if len(cfg.tables) < 2:
+        raise _err("tables", [t.name for t in cfg.tables], "need at least two tables (pick and place)")
+    names = [t.name for t in cfg.tables]
+    if len(set(names)) != len(names):
+        raise _err("tables", names, "table names must be unique")
+    tables = []
+    for i, t in enumerate(cfg.tables):
+        if len(t.center) != 2 or len(t.size) != 2:
+            raise _err(f"tables[{i}]", t, "center and size are (x, y) pairs")
+        if min(t.size) <= 0:
+            raise _err(f"tables[{i}].size", t.size, "both sides must be > 0")
+        if not 0.3 <= t.height <= 1.1:
+            raise _err(f"tables[{i}].height", t.height, "must be in [0.3, 1.1] m for Fetch to work at it")
+        tables.append(
+            Box(t.name, (t.center[0], t.center[1], t.height / 2), (t.size[0] / 2, t.size[1] / 2, t.height / 2))
+        )
+    if not 0.02 <= cfg.cube_size <= 0.08:
+        raise _err("cube_size", cfg.cube_size, "must be in [0.02, 0.08] m (the gripper opens to ~0.1 m)")
+    if cfg.cube_mass <= 0:
+        raise _err("cube_mass", cfg.cube_mass, "must be > 0")
+    if cfg.cube_friction < 0:
+        raise _err("cube_friction", cfg.cube_friction, "must be >= 0")
+    if cfg.robot_radius <= 0:
+        raise _err("robot_radius", cfg.robot_radius, "must be > 0")
+    t1 = tables[0]
+    cx, cy = t1.center[0] + cfg.cube_offset[0], t1.center[1] + cfg.cube_offset[1]
+    if not t1.contains_xy(cx, cy, margin=-cfg.cube_size / 2):
+        raise _err("cube_offset", cfg.cube_offset, f"the cube must rest on {t1.name}'s top")
+    cube_pos = (cx, cy, 2 * t1.half_size[2] + cfg.cube_size / 2)
+
+    extras: list[Box] = []
+    if cfg.variant == "wall":
+        wx, wy, wz = cfg.wall_size
+        if min(wx, wy, wz) <= 0:
+            raise _err("wall_size", cfg.wall_size, "all sides must be > 0")
+        extras.append(
+            Box("wall", (cfg.wall_center[0], cfg.wall_center[1], wz / 2), (wx / 2, wy / 2, wz / 2),
+                color=(0.6, 0.6, 0.65, 1.0))
+        )
+    elif cfg.variant == "ramp":
+        if cfg.ramp_length <= 0 or cfg.ramp_width <= 0:
+            raise _err("ramp_length", (cfg.ramp_length, cfg.ramp_width), "length and width must be > 0")
+        # The ramp runs along y from table1's side (high end) to table2's side (low end).
+        t2 = tables[1]
+        low_z = 2 * t2.half_size[2] + 0.01
+        high_z = low_z + cfg.ramp_drop
+        pitch = math.asin(min(1.0, cfg.ramp_drop / cfg.ramp_length))
+        thick = 0.02
+        # yaw = -pi/2 makes the box's local +x point towards -y (from table1 to table2)
+        extras.append(
+            Box("ramp", (cfg.ramp_center[0], cfg.ramp_center[1], (low_z + high_z) / 2),
+                (cfg.ramp_length / 2, cfg.ramp_width / 2, thick / 2),
+                yaw=-math.pi / 2 * (1 if t1.center[1] > t2.center[1] else -1), pitch=pitch,
+                color=(0.55, 0.55, 0.6, 1.0))
+        )
+        # legs under the high end so it is a physical structure, not a floating plank
+    sx, sy, syaw = cfg.robot_start
+    for b in tables + extras:
+        if b.contains_xy(sx, sy, margin=cfg.robot_radius):
+            raise _err("robot_start", cfg.robot_start, f"the robot's footprint overlaps {b.name}")
+    bl, bh = cfg.bounds_low, cfg.bounds_high
+    if not (bl[0] < bh[0] and bl[1] < bh[1]):
+        raise _err("bounds_low", (bl, bh), "bounds_low must be < bounds_high in x and y")
+    if not (bl[0] + cfg.robot_radius <= sx <= bh[0] - cfg.robot_radius and bl[1] + cfg.robot_radius <= sy <= bh[1] - cfg.robot_radius):
+        raise _err("robot_start", cfg.robot_start, f"must lie inside the bounds {bl}..{bh}")
+    el, eh = cfg.exit_low, cfg.exit_high
+    if not (el[0] < eh[0] and el[1] < eh[1]):
+        raise _err("exit_low", (el, eh), "the exit rectangle is empty (exit_low must be < exit_high)")
+    return SceneGeometry(
+        variant=cfg.variant,
+        tables=tuple(tables),
+        extras=tuple(extras),
+        cube_half_size=cfg.cube_size / 2,
+        cube_pos=cube_pos,
+        cube_mass=cfg.cube_mass,
+        cube_friction=cfg.cube_friction,
+        robot_start=(sx, sy, syaw),
+        robot_radius=cfg.robot_radius,
+        exit_low=tuple(el),
+        exit_high=tuple(eh),
+        bounds_low=tuple(bl),
+        bounds_high=tuple(bh),
+    )

@@ -1,0 +1,238 @@
+"""RealizePickPlace-v1: the seed paper's mobile pick-and-place world, for plan realization.
+
+**Task description.** A Fetch mobile manipulator (omnidirectional planar base, torso, 7-DOF
+arm, parallel gripper) starts in a free area. A small cube rests on ``table1``. The robot must
+carry the cube to ``table2`` and then drive into the exit (rest) area. Between the tables there
+is room to drive; variants add a wall between them (``variant="wall"``) or a ramp from
+table 1's side down onto table 2 (``variant="ramp"``) down which a released cube can slide.
+All geometry comes from an ``envs.geometry.GeometryCfg`` (the Hydra ``scene`` config group).
+
+**Parallelism.** ``num_envs = N`` with the PhysX GPU backend gives ManiSkill's usual batched
+sub-scenes. On CPU, ManiSkill allows one env only, so ``n_copies = N`` tiles N copies of the
+whole world (robot, tables, cube) in ONE PhysX CPU scene, spaced so they can never touch, and
+stepped by one call. ``realize.scene.BatchedScene`` hides which of the two is used.
+
+**Randomizations** (``reset(options=dict(randomize=...))``, off by default: plan realization
+wants the same initial state for every sample): the cube's xy offset on table 1 by up to
+``cube_xy_noise`` m and its yaw, and the robot's start xy by up to ``robot_xy_noise`` m.
+
+**Success conditions** (``evaluate``): the cube rests on table 2 (its centre is above table 2's
+top footprint, within 2 cm of resting height, and nearly still) AND the base is inside the exit
+rectangle.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import sapien
+import torch
+
+from mani_skill.agents.robots.fetch import FETCH_BASE_COLLISION_BIT, FETCH_WHEELS_COLLISION_BIT
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
+from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.pose import Pose
+from mani_skill.utils.structs.types import SceneConfig, SimConfig
+
+from envs import fetch_omni  # noqa: F401  (registers the agent)
+from envs.geometry import Box, GeometryCfg, SceneGeometry, build_geometry, geometry_cfg_from_dict
+
+ENV_ID = "RealizePickPlace-v1"
+TILE_MARGIN = 3.0  # metres of empty floor between tiled copies
+
+
+def tile_offsets(n: int, extent: tuple[float, float], margin: float = TILE_MARGIN) -> np.ndarray:
+    """(n, 2) xy offsets of n copies laid out on a near-square grid without overlap."""
+    cols = max(1, math.ceil(math.sqrt(n)))
+    sx, sy = extent[0] + margin, extent[1] + margin
+    i = np.arange(n)
+    return np.stack([(i % cols) * sx, (i // cols) * sy], axis=1).astype(np.float64)
+
+
+def yaw_pitch_quat(yaw: float, pitch: float) -> list[float]:
+    """wxyz quaternion of R = Rz(yaw) @ Ry(pitch)."""
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    return [cy * cp, -sy * sp, cy * sp, sy * cp]
+
+
+@register_env(ENV_ID, max_episode_steps=2000)
+class RealizePickPlaceEnv(BaseEnv):
+    SUPPORTED_ROBOTS = ["fetch_omni"]
+
+    def __init__(
+        self,
+        *args: Any,
+        geometry: GeometryCfg | dict | None = None,
+        n_copies: int = 1,
+        solver_position_iterations: int = 15,
+        solver_velocity_iterations: int = 1,
+        cpu_workers: int = 0,
+        sim_freq: int = 100,
+        control_freq: int = 20,
+        cube_xy_noise: float = 0.02,
+        robot_xy_noise: float = 0.05,
+        robot_uids: str = "fetch_omni",
+        **kwargs: Any,
+    ):
+        if isinstance(n_copies, bool) or not isinstance(n_copies, int) or n_copies < 1:
+            raise ValueError(f"n_copies = {n_copies!r} is invalid: must be an integer >= 1")
+        gcfg = geometry if isinstance(geometry, GeometryCfg) else geometry_cfg_from_dict(geometry)
+        self.geometry: SceneGeometry = build_geometry(gcfg)
+        self.n_copies = n_copies
+        self.offsets = tile_offsets(n_copies, self.geometry.extent)
+        self.cube_xy_noise = cube_xy_noise
+        self.robot_xy_noise = robot_xy_noise
+        self._sim_settings = dict(
+            sim_freq=sim_freq,
+            control_freq=control_freq,
+            scene_config=dict(
+                solver_position_iterations=solver_position_iterations,
+                solver_velocity_iterations=solver_velocity_iterations,
+                cpu_workers=cpu_workers,
+                # far-apart copies must not influence each other's solver results
+                enable_enhanced_determinism=True,
+            ),
+        )
+        if robot_uids != "fetch_omni":
+            raise ValueError(f"robot_uids = {robot_uids!r}: this task supports only 'fetch_omni'")
+        uids = "fetch_omni" if n_copies == 1 else tuple(["fetch_omni"] * n_copies)
+        kwargs.setdefault("control_mode", "pd_joint_pos_base_vel")
+        super().__init__(*args, robot_uids=uids, **kwargs)
+
+    # ------------------------------------------------------------------ configuration
+    @property
+    def _default_sim_config(self) -> SimConfig:
+        s = self._sim_settings
+        return SimConfig(
+            sim_freq=s["sim_freq"],
+            control_freq=s["control_freq"],
+            spacing=max(self.geometry.extent) + TILE_MARGIN,
+            scene_config=SceneConfig(**s["scene_config"]),
+        )
+
+    @property
+    def _default_sensor_configs(self):
+        return []
+
+    @property
+    def _default_human_render_camera_configs(self):
+        g = self.geometry
+        cx = (g.bounds_low[0] + g.bounds_high[0]) / 2
+        cy = (g.bounds_low[1] + g.bounds_high[1]) / 2
+        pose = sapien_utils.look_at(eye=[cx - 4.2, cy - 4.2, 4.0], target=[cx, cy, 0.4])
+        return CameraConfig("render_camera", pose=pose, width=512, height=512, fov=1.0, near=0.01, far=100)
+
+    # ------------------------------------------------------------------ building
+    def _load_agent(self, options: dict):
+        sx, sy, _ = self.geometry.robot_start
+        poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
+        super()._load_agent(options, poses if self.n_copies > 1 else poses[0])
+
+    @property
+    def agents(self) -> list:
+        """The robot agents of every copy (one on GPU: it is batched itself)."""
+        return list(self.agent.agents) if self.n_copies > 1 else [self.agent]
+
+    def _build_box(self, box: Box, offset: np.ndarray, copy: int):
+        b = self.scene.create_actor_builder()
+        b.add_box_collision(half_size=list(box.half_size))
+        b.add_box_visual(half_size=list(box.half_size), material=sapien.render.RenderMaterial(base_color=list(box.color)))
+        b.initial_pose = sapien.Pose(
+            p=[box.center[0] + offset[0], box.center[1] + offset[1], box.center[2]],
+            q=yaw_pitch_quat(box.yaw, box.pitch),
+        )
+        return b.build_static(name=f"{box.name}_{copy}")
+
+    def _load_scene(self, options: dict):
+        g = self.geometry
+        ground = self.scene.create_actor_builder()
+        ground.add_plane_collision(sapien.Pose(p=[0, 0, 0], q=[0.7071068, 0, -0.7071068, 0]))
+        extent = self.offsets.max(axis=0) + np.array(g.extent) + 2 * TILE_MARGIN
+        ground.add_box_visual(
+            sapien.Pose(p=[extent[0] / 2 - TILE_MARGIN + g.bounds_low[0], extent[1] / 2 - TILE_MARGIN + g.bounds_low[1], -0.005]),
+            half_size=[extent[0] / 2, extent[1] / 2, 0.005],
+            material=sapien.render.RenderMaterial(base_color=[0.86, 0.86, 0.84, 1]),
+        )
+        ground.initial_pose = sapien.Pose()
+        self.ground = ground.build_static(name="ground")
+        # the base is driven through its planar joints: wheels and base never touch the floor
+        self.ground.set_collision_group_bit(group=2, bit_idx=FETCH_WHEELS_COLLISION_BIT, bit=1)
+        self.ground.set_collision_group_bit(group=2, bit_idx=FETCH_BASE_COLLISION_BIT, bit=1)
+
+        self.obstacles: list[list] = []
+        self.cubes: list = []
+        for c, off in enumerate(self.offsets):
+            self.obstacles.append([self._build_box(box, off, c) for box in g.obstacles])
+            cb = self.scene.create_actor_builder()
+            h = g.cube_half_size
+            mat = sapien.physx.PhysxMaterial(g.cube_friction, g.cube_friction, 0.0)
+            cb.add_box_collision(half_size=[h, h, h], material=mat, density=g.cube_mass / (2 * h) ** 3)
+            cb.add_box_visual(half_size=[h, h, h], material=sapien.render.RenderMaterial(base_color=[0.85, 0.1, 0.1, 1]))
+            cb.initial_pose = sapien.Pose(p=[g.cube_pos[0] + off[0], g.cube_pos[1] + off[1], g.cube_pos[2]])
+            self.cubes.append(cb.build(name=f"cube_{c}"))
+
+    # ------------------------------------------------------------------ episodes
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        g = self.geometry
+        randomize = bool(options.get("randomize", False))
+        with torch.device(self.device):
+            b = len(env_idx)
+            for c, (agent, cube) in enumerate(zip(self.agents, self.cubes)):
+                off = torch.tensor(self.offsets[c], dtype=torch.float32)
+                qpos = torch.tensor(fetch_omni.REST_QPOS, dtype=torch.float32).repeat(b, 1)
+                start = torch.tensor(g.robot_start[:2], dtype=torch.float32).repeat(b, 1)
+                cube_xy = torch.tensor(g.cube_pos[:2], dtype=torch.float32).repeat(b, 1) + off
+                cube_q = torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)
+                if randomize:
+                    start = start + (torch.rand(b, 2) * 2 - 1) * self.robot_xy_noise
+                    cube_xy = cube_xy + (torch.rand(b, 2) * 2 - 1) * self.cube_xy_noise
+                    yaw = (torch.rand(b) * 2 - 1) * math.pi / 4
+                    cube_q = torch.stack([torch.cos(yaw / 2), 0 * yaw, 0 * yaw, torch.sin(yaw / 2)], dim=1)
+                # The root sits at the copy's start xy with zero yaw; the planar joints hold
+                # the base pose relative to it, so joint velocities are world-frame velocities.
+                qpos[:, 0:2] = start - torch.tensor(g.robot_start[:2])
+                qpos[:, 2] = g.robot_start[2]
+                root = torch.cat([torch.tensor(g.robot_start[:2]) + off, torch.zeros(1)]).repeat(b, 1)
+                agent.robot.set_pose(Pose.create_from_pq(root, torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)))
+                agent.reset(qpos)
+                agent.robot.set_qvel(torch.zeros_like(qpos))
+                z = torch.full((b, 1), g.cube_pos[2])
+                cube.set_pose(Pose.create_from_pq(torch.cat([cube_xy, z], dim=1), cube_q))
+                cube.set_linear_velocity(torch.zeros(b, 3))
+                cube.set_angular_velocity(torch.zeros(b, 3))
+
+    # ------------------------------------------------------------------ success
+    def evaluate(self) -> dict:
+        """Goal of the seed task for every env (copy 0 only when tiled: use BatchedScene for all)."""
+        g = self.geometry
+        t2 = g.tables[1]
+        cube = self.cubes[0]
+        p = cube.pose.p
+        lv = cube.linear_velocity
+        top = 2 * t2.half_size[2] + g.cube_half_size
+        on_t2 = (
+            ((p[:, 0] - t2.center[0]).abs() <= t2.half_size[0])
+            & ((p[:, 1] - t2.center[1]).abs() <= t2.half_size[1])
+            & ((p[:, 2] - top).abs() <= 0.02)
+            & (lv.norm(dim=1) < 0.05)
+        )
+        base = self.agents[0].robot.get_qpos()[:, :2] + torch.tensor(g.robot_start[:2], device=self.device)
+        in_exit = (
+            (base[:, 0] >= g.exit_low[0]) & (base[:, 0] <= g.exit_high[0])
+            & (base[:, 1] >= g.exit_low[1]) & (base[:, 1] <= g.exit_high[1])
+        )
+        return dict(success=on_t2 & in_exit, cube_on_table2=on_t2, base_in_exit=in_exit)
+
+    def _get_obs_extra(self, info: dict):
+        return dict()
+
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return info["success"].float()
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return self.compute_dense_reward(obs, action, info)

@@ -1,0 +1,131 @@
+"""The batched scene view on CPU: shapes, independence of copies, determinism, rendering, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from envs.geometry import GeometryError
+from realize.scene import BatchedScene, SceneConfigError, SimSettings
+
+SIM = SimSettings(backend="cpu")
+
+
+def _drive(scene: BatchedScene, steps: int) -> None:
+    """A fixed scripted motion: base drives diagonally while the arm swings."""
+    q0 = scene.whole_body_q()
+    for k in range(steps):
+        v = torch.zeros(scene.n, 3)
+        v[:, 0] = 0.3
+        v[:, 1] = 0.1 * np.sin(k * 0.1)
+        scene.set_base_velocity(v)
+        arm = q0[:, 3:].clone()
+        arm[:, 1] += 0.3 * np.sin(k * 0.05)
+        scene.set_arm_targets(arm)
+        scene.step()
+
+
+@pytest.mark.parametrize("n", [1, 8])
+def test_builds_and_shapes(n: int) -> None:
+    with BatchedScene(n, sim=SIM) as s:
+        s.reset()
+        assert s.qpos().shape == (n, 15)
+        assert s.whole_body_q().shape == (n, 11)
+        assert s.whole_body_qd().shape == (n, 11)
+        assert s.base_pose().shape == (n, 3)
+        assert s.ee_pose().shape == (n, 7)
+        assert s.cube_pose().shape == (n, 7)
+        assert s.cube_velocity().shape == (n, 6)
+        assert s.holds_cube().shape == (n,) and s.holds_cube().dtype == torch.bool
+        # every copy starts in the same local state, at the configured start pose
+        g = s.geometry
+        assert torch.allclose(s.base_pose()[:, :2], torch.tensor(g.robot_start[:2]).repeat(n, 1), atol=1e-5)
+        assert torch.allclose(s.cube_pose()[:, :3], torch.tensor(g.cube_pos, dtype=torch.float32).repeat(n, 1), atol=1e-4)
+
+
+def test_base_follows_velocity_command() -> None:
+    with BatchedScene(2, sim=SIM) as s:
+        s.reset()
+        start = s.base_pose()
+        v = torch.tensor([[0.4, 0.0, 0.0], [0.0, -0.3, 0.5]])
+        s.set_base_velocity(v)
+        for _ in range(20):  # 1 s
+            s.step()
+        moved = s.base_pose() - start
+        assert moved[0, 0] == pytest.approx(0.4, abs=0.03) and abs(moved[0, 1]) < 0.01
+        assert moved[1, 1] == pytest.approx(-0.3, abs=0.03) and moved[1, 2] == pytest.approx(0.5, abs=0.05)
+
+
+def test_pushing_one_copy_leaves_the_others_unchanged() -> None:
+    def run(push: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        with BatchedScene(4, sim=SIM) as s:
+            s.reset(seed=1)
+            if push:
+                s.push_cube(2, (0.0, -1.5, 0.5))
+            _drive(s, 30)
+            return s.cube_pose(), s.whole_body_q()
+
+    cube_a, q_a = run(False)
+    cube_b, q_b = run(True)
+    others = [0, 1, 3]
+    assert torch.equal(cube_a[others], cube_b[others])
+    assert torch.equal(q_a[others], q_b[others])
+    assert (cube_a[2, :3] - cube_b[2, :3]).norm() > 0.1  # the pushed cube did move
+
+
+def test_same_seed_gives_identical_states_after_200_steps() -> None:
+    def run() -> torch.Tensor:
+        with BatchedScene(3, sim=SIM) as s:
+            s.reset(seed=7, randomize=True)
+            _drive(s, 200)
+            return torch.cat([s.whole_body_q(), s.cube_pose(), s.ee_pose()], dim=1)
+
+    assert torch.equal(run(), run())
+
+
+def test_renders_a_frame_to_png(tmp_path) -> None:
+    from PIL import Image
+
+    with BatchedScene(1, sim=SIM) as s:
+        s.reset()
+        frame = s.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    assert frame.std() > 10, "frame is blank"
+    path = tmp_path / "frame.png"
+    Image.fromarray(frame).save(path)
+    assert path.stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    "geometry, sim, n, key",
+    [
+        (dict(variant="zigzag"), SIM, 1, "scene.variant"),
+        (dict(robot_start=(0.0, 1.2, 0.0)), SIM, 1, "scene.robot_start"),
+        (None, SIM, 0, "n"),
+        (None, SimSettings(backend="cpu", sim_freq=100, control_freq=30), 1, "sim.sim_freq"),
+        (dict(exit_low=(2.0, 0.0), exit_high=(1.0, 1.0)), SIM, 1, "scene.exit_low"),
+        (dict(wrong_key=1), SIM, 1, "wrong_key"),
+    ],
+)
+def test_bad_input_names_the_key(geometry, sim, n, key) -> None:
+    with pytest.raises((GeometryError, SceneConfigError)) as e:
+        BatchedScene(n, geometry=geometry, sim=sim)
+    assert key in str(e.value)
+
+
+def test_variants_build() -> None:
+    for variant in ("wall", "ramp"):
+        with BatchedScene(1, geometry=dict(variant=variant), sim=SIM) as s:
+            s.reset()
+            names = [b.name for b in s.geometry.extras]
+            assert names == [variant]
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (PhysX GPU backend)")
+def test_gpu_backend_matches_shapes() -> None:  # pragma: no cover - GPU machines only
+    with BatchedScene(16, sim=SimSettings(backend="gpu")) as s:
+        s.reset()
+        _drive(s, 10)
+        assert s.whole_body_q().shape == (16, 11) and s.whole_body_q().device.type == "cuda"
+        assert s.cube_pose().shape == (16, 7)
