@@ -186,3 +186,55 @@ def test_attractor_reaches_goal_point_mass():
         qdd, _ = fabric_acceleration(q, qd, goal, kin)
         q, qd = integrate(q, qd, qdd, 0.05)
     assert float((q - goal).norm(dim=-1).max()) < 0.05
+
+
+class ArmWithJets:
+    """Planar arm with closed-form jets (the optional fast path of FabricKinematics)."""
+
+    def __init__(self, l1: float, l2: float, body_radii: torch.Tensor):
+        self.l1, self.l2, self.body_radii = l1, l2, body_radii
+        self._forward = planar_arm_forward(l1, l2)
+
+    def __call__(self, q):
+        return self._forward(q)
+
+    def jets(self, q, qd):
+        def e(t):
+            return torch.stack([torch.cos(t), torch.sin(t)], dim=-1)
+
+        def de(t):  # d e / dt
+            return torch.stack([-torch.sin(t), torch.cos(t)], dim=-1)
+
+        t1, t12 = q[:, 0], q[:, 0] + q[:, 1]
+        w1, w12 = qd[:, 0], qd[:, 0] + qd[:, 1]
+        zero = torch.zeros_like(q[:, :1].expand(-1, 2))
+        elbow, J_elbow = self.l1 * e(t1), torch.stack([self.l1 * de(t1), zero], dim=-1)
+        a_elbow = -self.l1 * e(t1) * w1[:, None] ** 2
+        J_tip = self.l2 * de(t12)[..., None].expand(-1, -1, 2)
+        ee, J_ee = elbow + self.l2 * e(t12), J_elbow + J_tip
+        a_ee = a_elbow - self.l2 * e(t12) * w12[:, None] ** 2
+        vel = lambda J: torch.einsum("ndj,nj->nd", J, qd)  # noqa: E731
+        pts = torch.stack([0.5 * elbow, elbow, ee], dim=1)
+        Jp = torch.stack([0.5 * J_elbow, J_elbow, J_ee], dim=1)
+        ap = torch.stack([0.5 * a_elbow, a_elbow, a_ee], dim=1)
+        return (ee, J_ee, vel(J_ee), a_ee), (pts, Jp, torch.einsum("nkdj,nj->nkd", Jp, qd), ap)
+
+
+def test_closed_form_jets_and_generic_distance_paths():
+    data = load("planar_arm")
+    idx = slice(0, 64)
+    ref = data["qddot"][idx]
+    kin = ArmWithJets(*data["arm_lengths"].tolist(), data["body_radii"][idx])
+    common = dict(obstacles=data["obst"][idx][:, None, :], weight=data["weight"][idx],
+                  lower=data["lower"], upper=data["upper"])
+    q, qd, goal = data["q"][idx], data["qdot"][idx], data["goal"][idx]
+    fast, _ = fabric_acceleration(q, qd, goal, kin, **common)
+    torch.testing.assert_close(fast, ref, rtol=1e-9, atol=1e-9)
+
+    def my_sphere_distance(points, radii, obstacles):  # same map, generic AD path
+        diff = points[:, :, None, :] - obstacles[:, None, :, :-1]
+        dist = torch.sqrt((diff * diff).sum(-1))
+        return dist / (obstacles[:, None, :, -1] + radii[:, :, None]) - 1.0
+
+    generic, _ = fabric_acceleration(q, qd, goal, kin, obstacle_distance=my_sphere_distance, **common)
+    torch.testing.assert_close(generic, ref, rtol=1e-9, atol=1e-9)

@@ -77,6 +77,7 @@ __all__ = [
     "sphere_distance",
     "fabric_acceleration",
     "integrate",
+    "kinematic_jets",
 ]
 
 
@@ -151,6 +152,13 @@ class FabricKinematics(Protocol):
     through the fabric (reverse over forward-over-forward), avoid ops whose
     forward-mode rule is in place (e.g. ``torch.linalg.vector_norm``; write
     ``sqrt((x * x).sum(-1))``).
+
+    Optional fast path: a method ``jets(q, qd)`` returning the same as
+    :func:`kinematic_jets` (values, Jacobians, velocities and curvature terms
+    ``qd^T (d^2 x / dq^2) qd`` of the end effector and of the sphere centres),
+    e.g. from closed forms. Without it the fabric differentiates ``__call__``
+    with nested forward-mode AD, which is exact but costs about one Python-level
+    op dispatch per op of the map per directional derivative.
     """
 
     body_radii: Tensor
@@ -206,6 +214,69 @@ def _jets(fn: Callable[[Tensor], Tensor], q: Tensor, qd: Tensor, vectorize: bool
     return y, J, yd, curvature
 
 
+Jets = tuple[Tensor, Tensor, Tensor, Tensor]
+
+
+def kinematic_jets(kin: FabricKinematics, q: Tensor, qd: Tensor, d: int, vectorize: bool = True
+                   ) -> tuple[Jets, Jets]:
+    """Jets of the robot maps: ``((x_ee, J_ee, xd_ee, a_ee), (p, J_p, pd, a_p))``.
+
+    Shapes (N, d), (N, d, n), (N, d), (N, d) and (N, K, d'), (N, K, d', n),
+    (N, K, d'), (N, K, d'); ``a = qd^T (d^2 x / dq^2) qd`` is the true curvature
+    term. Uses ``kin.jets(q, qd)`` when the kinematics provides it (e.g. closed
+    forms), otherwise forward-mode AD through ``kin(q)``.
+    """
+    if hasattr(kin, "jets"):
+        return kin.jets(q, qd)
+    N = q.shape[0]
+
+    def flat(z: Tensor) -> Tensor:
+        x_ee, points = kin(z)
+        return torch.cat([x_ee, points.flatten(1)], dim=1)
+
+    y, J, yd, a = _jets(flat, q, qd, vectorize)
+    K = int(torch.as_tensor(kin.body_radii).shape[-1])
+    dp = (y.shape[1] - d) // max(K, 1)
+    ee = (y[:, :d], J[:, :d], yd[:, :d], a[:, :d])
+    pts = (y[:, d:].reshape(N, K, dp), J[:, d:].reshape(N, K, dp, -1),
+           yd[:, d:].reshape(N, K, dp), a[:, d:].reshape(N, K, dp))
+    return ee, pts
+
+
+def _sphere_jets(p: Tensor, Jp: Tensor, pd: Tensor, ap: Tensor, radii: Tensor,
+                 obstacles: Tensor) -> Jets:
+    """Closed-form jets of :func:`sphere_distance` composed with the point jets."""
+    centre, radius = obstacles[..., :-1], obstacles[..., -1]
+    u = p[:, :, None, :] - centre[:, None, :, :]  # (N, K, M, d)
+    rho = torch.sqrt((u * u).sum(-1))
+    R = radius[:, None, :] + radii[:, :, None]
+    phi = rho / R - 1.0
+    g = u / (rho * R)[..., None]  # d phi / d p
+    J = torch.einsum("nkmd,nkdj->nkmj", g, Jp)
+    pdm = pd[:, :, None, :]
+    phid = (g * pdm).sum(-1)
+    u_pd = (u * pdm).sum(-1)
+    a = (g * ap[:, :, None, :]).sum(-1) + ((pdm * pdm).sum(-1) - u_pd ** 2 / rho ** 2) / (rho * R)
+    return phi.flatten(1), J.flatten(1, 2), phid.flatten(1), a.flatten(1)
+
+
+def _distance_jets(distance: Callable[[Tensor, Tensor, Tensor], Tensor], p: Tensor, Jp: Tensor,
+                   pd: Tensor, ap: Tensor, radii: Tensor, obstacles: Tensor, vectorize: bool) -> Jets:
+    """Jets of a generic leaf map ``distance(p, radii, obstacles)`` by forward-mode AD."""
+
+    def f(z: Tensor) -> Tensor:
+        return distance(z, radii, obstacles)
+
+    (phi, phid), (_, a2) = jvp(lambda z: jvp(f, (z,), (pd,)), (p,), (pd,))
+    a1 = jvp(f, (p,), (ap,))[1]
+    cols = Jp.movedim(-1, 0)  # (n, N, K, d)
+    if vectorize:
+        J = vmap(lambda v: jvp(f, (p,), (v,))[1], out_dims=-1)(cols)
+    else:
+        J = torch.stack([jvp(f, (p,), (c,))[1] for c in cols], dim=-1)
+    return phi.flatten(1), J.flatten(1, 2), phid.flatten(1), (a1 + a2).flatten(1)
+
+
 def _pull(J: Tensor, m: Tensor) -> Tensor:
     """Sum over scalar leaves of m_l J_l^T J_l: J (N, L, n), m (N, L) -> (N, n, n)."""
     return torch.einsum("nli,nl,nlj->nij", J, m, J)
@@ -241,7 +312,8 @@ def fabric_acceleration(
         obstacles: (N, M, P) obstacle parameters for ``obstacle_distance``; for the
             default spheres/circles P = d + 1 (centre, radius). None: no obstacles.
         obstacle_mask: (N, M) bool, False marks padding. Default: all True.
-        lower, upper: joint limits (n,) or (N, n); None: no joint-limit leaves.
+        lower, upper: joint limits (n,) or (N, n), +-inf for an unlimited joint;
+            None: no joint-limit leaves.
         weight: attractor weight gamma, float or (N,); default ``cfg.gamma``.
         obstacle_distance: leaf map ``(points (N,K,d), body_radii (N,K),
             obstacles (N,M,P)) -> (N,K,M)``.
@@ -282,10 +354,14 @@ def fabric_acceleration(
                          torch.ones_like(obstacles[..., -1:])], dim=-1)
         obstacles = torch.where(mask[..., None] & valid[:, None, None], obstacles, far)
     v2 = valid[:, None]
+    if (lower is None) != (upper is None):
+        raise ValueError("give both joint limits lower and upper, or neither")
     if lower is not None and upper is not None:
+        # +-inf entries are allowed: such a joint gets no limit leaf (h = M = 0)
         lo = torch.as_tensor(lower, dtype=dtype, device=device).expand(N, n)
         up = torch.as_tensor(upper, dtype=dtype, device=device).expand(N, n)
-        q = torch.where(v2, q, 0.5 * (lo + up))
+        mid = 0.5 * (lo + up)
+        q = torch.where(v2, q, torch.where(torch.isfinite(mid), mid, torch.zeros_like(mid)))
     else:
         q = torch.where(v2, q, torch.zeros_like(q))
     qd = torch.where(v2, qd, torch.zeros_like(qd))
@@ -295,15 +371,16 @@ def fabric_acceleration(
     body_radii = torch.as_tensor(kin.body_radii, dtype=dtype, device=device)
     d = goal.shape[1]
 
-    def leaf_maps(z: Tensor) -> Tensor:
-        x_ee, points = kin(z)
-        parts = [x_ee]
-        if obstacles is not None:
-            radii = body_radii.expand(points.shape[0], points.shape[1])
-            parts.append(obstacle_distance(points, radii, obstacles).flatten(1))
-        return torch.cat(parts, dim=1)
-
-    y, J, yd, curv = _jets(leaf_maps, q, qd, vectorize)
+    ee_jets, point_jets = kinematic_jets(kin, q, qd, d, vectorize=vectorize)
+    parts = [ee_jets]
+    if obstacles is not None:
+        radii = body_radii.expand(N, point_jets[0].shape[1])
+        if obstacle_distance is sphere_distance:
+            parts.append(_sphere_jets(*point_jets, radii, obstacles))
+        else:
+            parts.append(_distance_jets(obstacle_distance, *point_jets, radii, obstacles, vectorize))
+    # leaves in one layout: [attractor (d) | collision pairs (K * M, index k * M + m)]
+    y, J, yd, curv = (torch.cat(t, dim=1) for t in zip(*parts))
     goal = torch.where(valid[:, None], goal, y[:, :d].detach() + 1.0)
 
     # ---- unforced geometry: base + collision leaves + joint-limit leaves
