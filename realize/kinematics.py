@@ -17,6 +17,9 @@ What it does
   On CPU these are 10-30x faster than ``torch.func`` forward-mode AD through the same FK
   (forward AD costs ~0.1-0.4 ms of overhead per op here), and match it to float64 precision.
 * Joint limits and the map between ManiSkill's 15 active joints and the 11-DOF vector.
+* ``FetchKinematics`` is itself a ``realize.controllers.fabrics.FabricKinematics``:
+  ``kin(q) -> (tcp, sphere centres)``, ``kin.body_radii``, and the closed-form fast path
+  ``kin.jets(q, qd)``.
 
 Every map is written with out-of-place torch ops only (no ``.item()``, no numpy, no Python
 control flow on tensor values), so it works under ``torch.func.jacfwd`` / ``jvp`` / ``vmap``
@@ -718,6 +721,35 @@ class FetchKinematics:
         """``(dJ/dt) q'`` of the sphere centres: ``(..., K, 3)`` (centre acceleration at q'' = 0)."""
         fk, z, o = self._chain_terms(q, list(dict.fromkeys(self.sphere_links)), root_pose)
         return self._jdot_qdot(z, o, self._sphere_centres(fk), self.sphere_dof_mask, qd)
+
+    # ------------------------------------------------------------------ fabrics protocol
+
+    @property
+    def body_radii(self) -> Tensor:
+        """(K,) sphere radii (``realize.controllers.fabrics.FabricKinematics`` protocol)."""
+        return self.sphere_radii
+
+    def __call__(self, q: Tensor, root_pose: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """TCP position ``(..., 3)`` and sphere centres ``(..., K, 3)`` from one FK pass."""
+        fk = self._fk(q, [self.ee_link] + list(dict.fromkeys(self.sphere_links)), root_pose)
+        return self._tcp_from(fk)[1], self._sphere_centres(fk)
+
+    def jets(
+        self, q: Tensor, qd: Tensor, root_pose: Tensor | None = None
+    ) -> tuple[tuple[Tensor, Tensor, Tensor, Tensor], tuple[Tensor, Tensor, Tensor, Tensor]]:
+        """Closed-form jets of :meth:`__call__`, as ``fabrics.kinematic_jets`` returns them:
+        ``((x, J, J q', (dJ/dt) q') of the TCP, (same) of the sphere centres)``, shapes
+        ``(..., 3), (..., 3, 11), (..., 3), (..., 3)`` and ``(..., K, 3), (..., K, 3, 11), ...``.
+        ``(dJ/dt) q' = q'^T (d^2 x / dq^2) q'`` (the true curvature term, sign +1)."""
+        fk, z, o = self._chain_terms(q, [self.ee_link] + list(dict.fromkeys(self.sphere_links)), root_pose)
+        pts = torch.cat([self._tcp_from(fk)[1].unsqueeze(-2), self._sphere_centres(fk)], dim=-2)
+        mask = torch.cat([self._ee_dof_mask.unsqueeze(0), self.sphere_dof_mask], dim=0)
+        jac = self._point_jacobian(z, o, pts, mask)  # (..., 1 + K, 3, 11)
+        vel = (jac @ qd.unsqueeze(-2).unsqueeze(-1)).squeeze(-1)
+        acc = self._jdot_qdot(z, o, pts, mask, qd)
+        ee = (pts[..., 0, :], jac[..., 0, :, :], vel[..., 0, :], acc[..., 0, :])
+        sph = (pts[..., 1:, :], jac[..., 1:, :, :], vel[..., 1:, :], acc[..., 1:, :])
+        return ee, sph
 
     # ------------------------------------------------------------------ joint-order maps
 

@@ -247,3 +247,19 @@ def test_timing_note(capsys) -> None:
     t_sph = best(lambda: kin.sphere_jacobians(q))
     with capsys.disabled():
         print(f"\n[kinematics] N=200 float32: TCP FK+J {t_tcp:.2f} ms, 23 spheres FK+J {t_sph:.2f} ms")
+
+
+def test_fabrics_protocol_jets_match_autodiff(kin64: FetchKinematics) -> None:
+    """``kin.jets`` (closed form) equals the fabric's own forward-mode jets of ``kin(q)``."""
+    fabrics = pytest.importorskip("realize.controllers.fabrics")
+    q = random_q(kin64, 5, seed=11)
+    qd = torch.randn(5, 11, dtype=F64, generator=torch.Generator().manual_seed(12))
+    ours = kin64.jets(q, qd)
+    plain = fabrics.Kinematics(forward=kin64.__call__, body_radii=kin64.body_radii)
+    ref = fabrics.kinematic_jets(plain, q, qd, d=3)
+    for group_ours, group_ref in zip(ours, ref):
+        for a, b in zip(group_ours, group_ref):
+            torch.testing.assert_close(a, b)
+    tcp, centres = kin64(q)
+    torch.testing.assert_close(tcp, kin64.tcp_and_axes(q)[0])
+    torch.testing.assert_close(centres, kin64.collision_spheres(q)[0])
