@@ -132,6 +132,11 @@ class RealizePickPlaceEnv(BaseEnv):
         sx, sy, _ = self.geometry.robot_start
         poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
         super()._load_agent(options, poses if self.n_copies > 1 else poses[0])
+        # The robot's joint controllers compensate gravity (as Fetch's own do); the cube keeps it.
+        for agent in self.agents:
+            for link in agent.robot.get_links():
+                for body in link._objs:
+                    body.disable_gravity = True
 
     @property
     def agents(self) -> list:

@@ -171,6 +171,7 @@ class BatchedScene:
             self._setup_gpu()
         self._base_cmd = torch.zeros(n, 3, device=self.device)
         self._arm_target = torch.zeros(n, len(ARM_JOINTS), device=self.device)
+        self._arm_vel_target = torch.zeros(n, len(ARM_JOINTS), device=self.device)
         self._grip_target = torch.full((n,), GRIPPER_OPEN, device=self.device)
 
     # ------------------------------------------------------------------ backends
@@ -210,6 +211,7 @@ class BatchedScene:
         q = self.whole_body_q()
         self._base_cmd.zero_()
         self._arm_target = q[:, 3:].clone()
+        self._arm_vel_target = torch.zeros_like(self._arm_target)
         self._grip_target.fill_(GRIPPER_OPEN)
         self._apply_targets()
 
@@ -310,9 +312,11 @@ class BatchedScene:
         vy = s * v_robot[:, 0] + c * v_robot[:, 1]
         self.set_base_velocity(torch.stack([vx, vy, v_robot[:, 2]], dim=1))
 
-    def set_arm_targets(self, q_target: torch.Tensor) -> None:
-        """(N, 8) torso + 7 arm joint position targets (rad, m)."""
+    def set_arm_targets(self, q_target: torch.Tensor, qd_target: torch.Tensor | None = None) -> None:
+        """(N, 8) torso + 7 arm joint position targets (rad, m), and optional velocity targets."""
         self._arm_target = q_target.detach().to(self.device, torch.float32)
+        self._arm_vel_target = (torch.zeros_like(self._arm_target) if qd_target is None
+                                else qd_target.detach().to(self.device, torch.float32))
 
     def set_gripper(self, closed: torch.Tensor) -> None:
         """(N,) bool: close (True) or open (False) the gripper."""
@@ -326,17 +330,20 @@ class BatchedScene:
         m = torch.ones(self.n, dtype=torch.bool, device=self.device) if mask is None else mask
         self._base_cmd = torch.where(m[:, None], torch.zeros_like(self._base_cmd), self._base_cmd)
         self._arm_target = torch.where(m[:, None], q[:, 3:], self._arm_target)
+        self._arm_vel_target = torch.where(m[:, None], torch.zeros_like(self._arm_vel_target), self._arm_vel_target)
 
     def _apply_targets(self) -> None:
         base = self._base_cmd.numpy().astype(np.float64) if self.backend == "cpu" else self._base_cmd
         if self.backend == "cpu":
             arm = self._arm_target.numpy().astype(np.float64)
+            arm_v = self._arm_vel_target.numpy().astype(np.float64)
             grip = self._grip_target.numpy().astype(np.float64)
             for c in range(self.n):
                 for j, joint in enumerate(self._base_joints[c]):
                     joint.set_drive_velocity_target(base[c, j])
                 for j, joint in enumerate(self._arm_joints[c]):
                     joint.set_drive_target(arm[c, j])
+                    joint.set_drive_velocity_target(arm_v[c, j])
                 for joint in self._finger_joints[c]:
                     joint.set_drive_target(grip[c])
         else:  # pragma: no cover - CUDA only
@@ -346,6 +353,7 @@ class BatchedScene:
             fin_j = [self._joint_objs[j] for j in FINGER_JOINTS]
             r.set_joint_drive_velocity_targets(base, base_j)
             r.set_joint_drive_targets(self._arm_target, arm_j)
+            r.set_joint_drive_velocity_targets(self._arm_vel_target, arm_j)
             r.set_joint_drive_targets(self._grip_target[:, None].repeat(1, 2), fin_j)
             px = self.u.scene.px
             px.gpu_apply_articulation_target_position()

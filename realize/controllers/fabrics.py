@@ -316,7 +316,9 @@ def fabric_acceleration(
             None: no joint-limit leaves.
         weight: attractor weight gamma, float or (N,); default ``cfg.gamma``.
         obstacle_distance: leaf map ``(points (N,K,d), body_radii (N,K),
-            obstacles (N,M,P)) -> (N,K,M)``.
+            obstacles (N,M,P)) -> (N,K,M)``. If it has a method ``jets(p, Jp, pd,
+            ap, radii, obstacles)`` returning flattened (value, J, velocity,
+            curvature) leaves, that closed form is used instead of forward AD.
         vectorize: vmap the Jacobian over joint directions (else a loop over n).
 
     Returns:
@@ -377,6 +379,8 @@ def fabric_acceleration(
         radii = body_radii.expand(N, point_jets[0].shape[1])
         if obstacle_distance is sphere_distance:
             parts.append(_sphere_jets(*point_jets, radii, obstacles))
+        elif hasattr(obstacle_distance, "jets"):  # closed-form leaf jets of a custom map
+            parts.append(obstacle_distance.jets(*point_jets, radii, obstacles))
         else:
             parts.append(_distance_jets(obstacle_distance, *point_jets, radii, obstacles, vectorize))
     # leaves in one layout: [attractor (d) | collision pairs (K * M, index k * M + m)]
