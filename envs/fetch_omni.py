@@ -33,12 +33,13 @@ TORSO_STIFFNESS, TORSO_DAMPING, TORSO_FORCE = 1e5, 1e4, 1e4
 GRIPPER_STIFFNESS, GRIPPER_DAMPING, GRIPPER_FORCE = 1e3, 1e2, 100.0
 BASE_DAMPING, BASE_FORCE = 1e4, 2e3
 
-# ManiSkill's Fetch "rest" keyframe (arm folded in front, torso up) with the fingers open;
+# ManiSkill's Fetch "rest" keyframe (arm folded in front) with the torso off its upper limit
+# (0.25 of 0.386 m: the fabric's joint-limit leaves are singular at the limit) and fingers open;
 # free of self-contact. Order: ManiSkill Fetch active joints (base x, y, yaw, torso, head pan,
 # shoulder pan, head tilt, shoulder lift, upperarm roll, elbow, forearm roll, wrist flex, wrist
 # roll, r finger, l finger).
 REST_QPOS = np.array(
-    [0, 0, 0, 0.386, 0, -0.370, 0.562, -1.032, 0.695, 0.955, -0.1, 2.077, 0, 0.045, 0.045], dtype=np.float32
+    [0, 0, 0, 0.25, 0, -0.370, 0.562, -1.032, 0.695, 0.955, -0.1, 2.077, 0, 0.045, 0.045], dtype=np.float32
 )
 
 

@@ -2,9 +2,9 @@
 
 What it does: wraps the generic fabric (``realize.controllers.fabrics``) for the Fetch model of
 ``realize.kinematics``:
-  * the forcing term attracts two points of the gripper, the tool centre point (TCP) and a point
-    ``axis_length`` behind it on the approach axis, to a goal position and the point behind it
-    along the goal approach direction; together they pull position AND approach axis;
+  * the forcing term attracts three points of the gripper, the tool centre point (TCP), a point
+    ``axis_length`` behind it on the approach axis and one beside it on the closing axis, to the
+    same points of the goal pose; together they pull position and orientation;
   * collision leaves keep the robot's spheres off the scene's boxes (tables, wall, ramp) and off
     the floor, with a box signed distance; the fingers and the front of the gripper are left out
     of the box leaves (they must reach a cube lying on a table);
@@ -33,6 +33,7 @@ from realize.kinematics import FetchKinematics
 # spheres that may touch a table top while grasping or placing a cube lying on it
 DEFAULT_EXCLUDE = ("finger_r", "finger_l", "gripper_front")
 FLOOR_HALF = 50.0
+LIMIT_MARGIN = 0.02  # rad (m for the torso) between the fabric's joint limits and the URDF's
 
 
 class ControllerConfigError(ValueError):
@@ -47,7 +48,7 @@ class WholeBodyConfig:
     beta_close: float = 6.5  # damping near the goal (reference default)
     beta_distant: float = 0.01  # damping far from the goal
     k_psi: float = 5.0  # attractor potential gain
-    axis_length: float = 0.1  # m, second attracted point behind the TCP
+    axis_length: float = 0.25  # m, orientation points behind / beside the TCP
     collision_lam: float = 0.5
     collision_margin: float = 0.02  # m added to every sphere radius
     collision_exclude: tuple[str, ...] = DEFAULT_EXCLUDE
@@ -166,7 +167,8 @@ class BoxDistance:
 
 
 class _PoseMap:
-    """Fabric kinematics of Fetch with a 6-D 'pose' end effector: [TCP, TCP - L * approach]."""
+    """Fabric kinematics of Fetch with a 9-D 'pose' end effector:
+    [TCP, TCP - L * approach axis, TCP + L * closing axis]."""
 
     def __init__(self, kin: FetchKinematics, axis_length: float, radii: Tensor):
         self.kin = kin
@@ -174,9 +176,12 @@ class _PoseMap:
         self.body_radii = radii
         ee = kin.ee_link
         self._ee = ee
-        self._offsets = torch.stack(
-            [kin.tcp_offset, kin.tcp_offset - torch.tensor([axis_length, 0.0, 0.0], dtype=kin.tcp_offset.dtype)]
-        )
+        L, dt = axis_length, kin.tcp_offset.dtype
+        self._offsets = torch.stack([
+            kin.tcp_offset,
+            kin.tcp_offset - torch.tensor([L, 0.0, 0.0], dtype=dt),  # behind the TCP on the approach axis
+            kin.tcp_offset + torch.tensor([0.0, L, 0.0], dtype=dt),  # beside it on the closing axis
+        ])
 
     def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]:  # pragma: no cover - jets is used
         return self.jets(q, torch.zeros_like(q))[0][0], self.kin(q)[1]
@@ -185,15 +190,15 @@ class _PoseMap:
         k = self.kin
         fk, z, o = k._chain_terms(q, [k.ee_link] + list(dict.fromkeys(k.sphere_links)), None)
         r, p = fk[k.ee_link]
-        ee_pts = (r.unsqueeze(-3) @ self._offsets.to(q).unsqueeze(-1)).squeeze(-1) + p.unsqueeze(-2)  # (N,2,3)
+        ee_pts = (r.unsqueeze(-3) @ self._offsets.to(q).unsqueeze(-1)).squeeze(-1) + p.unsqueeze(-2)  # (N,3,3)
         pts = torch.cat([ee_pts, k._sphere_centres(fk)], dim=-2)
-        mask = torch.cat([k._ee_dof_mask.unsqueeze(0).expand(2, -1), k.sphere_dof_mask], dim=0)
+        mask = torch.cat([k._ee_dof_mask.unsqueeze(0).expand(3, -1), k.sphere_dof_mask], dim=0)
         jac = k._point_jacobian(z, o, pts, mask)
         vel = (jac @ qd.unsqueeze(-2).unsqueeze(-1)).squeeze(-1)
         acc = k._jdot_qdot(z, o, pts, mask, qd)
         n = q.shape[0]
-        ee = (pts[:, :2].reshape(n, 6), jac[:, :2].reshape(n, 6, -1), vel[:, :2].reshape(n, 6), acc[:, :2].reshape(n, 6))
-        sph = (pts[:, 2:], jac[:, 2:], vel[:, 2:], acc[:, 2:])
+        ee = (pts[:, :3].reshape(n, 9), jac[:, :3].reshape(n, 9, -1), vel[:, :3].reshape(n, 9), acc[:, :3].reshape(n, 9))
+        sph = (pts[:, 3:], jac[:, 3:], vel[:, 3:], acc[:, 3:])
         return ee, sph
 
 
@@ -233,19 +238,22 @@ class WholeBodyFabric:
         self.distance = BoxDistance(box_ok, floor_ok)
         self.map = _PoseMap(self.kin, self.cfg.axis_length, radii)
         self.boxes = boxes_tensor(geometry, self.cfg.floor).to(device, dtype)
+        # the joint-limit leaves are singular at the limit: keep the fabric a little inside
         lo, up = self.kin.lower.to(device, dtype), self.kin.upper.to(device, dtype)
-        self.lower, self.upper = lo.clone(), up.clone()
+        self.lower, self.upper = lo + LIMIT_MARGIN, up - LIMIT_MARGIN
+        self._clamp_lo, self._clamp_hi = lo + LIMIT_MARGIN / 2, up - LIMIT_MARGIN / 2
         self.fabric_cfg = self.cfg.fabric()
         self.speed_limit = torch.tensor(
             [self.cfg.max_base_speed] * 2 + [self.cfg.max_yaw_rate] + [self.cfg.max_joint_speed] * 8,
             dtype=dtype, device=device)
 
-    def goal_points(self, position: Tensor, approach: Tensor) -> Tensor:
-        """(N, 6) attractor goal from a TCP goal position and unit approach direction (N, 3)."""
-        return torch.cat([position, position - self.cfg.axis_length * approach], dim=1)
+    def goal_points(self, position: Tensor, approach: Tensor, closing: Tensor) -> Tensor:
+        """(N, 9) attractor goal from a TCP goal position and unit approach / closing axes (N, 3)."""
+        L = self.cfg.axis_length
+        return torch.cat([position, position - L * approach, position + L * closing], dim=1)
 
     def pose_points(self, q: Tensor) -> Tensor:
-        """(N, 6) the two attracted gripper points at q."""
+        """(N, 9) the three attracted gripper points at q."""
         return self.map.jets(q, torch.zeros_like(q))[0][0]
 
     def start(self, q: Tensor, qd: Tensor) -> FabricState:
@@ -253,7 +261,7 @@ class WholeBodyFabric:
 
     def step(self, state: FabricState, q_meas: Tensor, goal: Tensor, weight: Tensor | None = None
              ) -> tuple[FabricState, Tensor]:
-        """Advance the reference one control period towards ``goal`` (N, 6); returns (state, valid).
+        """Advance the reference one control period towards ``goal`` (N, 9); returns (state, valid).
 
         Rows whose reference drifted more than ``resync_tolerance`` from the measured joints
         (``q_meas``, (N, 11)) restart from the measured configuration at rest.
@@ -261,6 +269,7 @@ class WholeBodyFabric:
         q_meas = q_meas.to(self.device, self.dtype)
         drift = (state.q - q_meas).abs().max(dim=1).values > self.cfg.resync_tolerance
         q = torch.where(drift[:, None], q_meas, state.q)
+        q = torch.maximum(torch.minimum(q, self._clamp_hi), self._clamp_lo)
         qd = torch.where(drift[:, None], torch.zeros_like(state.qd), state.qd)
         n = q.shape[0]
         boxes = self.boxes.expand(n, -1, -1)

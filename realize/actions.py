@@ -1,0 +1,348 @@
+"""Action templates (paper eq. 1): parameters, controller, cost and success of each robot skill.
+
+What it does: defines ``move_to`` (A* + PID base tracking, arm static), ``grasp`` and ``place``
+(whole-body fabric to a pre-pose on the parameter's hemisphere, straight approach to the object,
+close / open the gripper, retreat). Each template keeps per-plan state as (N, ...) tensors and
+works on index sets of plans, so N plans in different actions advance together. The cost is 1
+per control step until the action finishes (counted by the rollout); success predicates read
+the simulator (poses, contacts).
+What it doesn't: loop over time or decide which action a plan is in (``realize.rollout``), or
+talk to the simulator directly (it reads and writes the rollout's ``StepContext``).
+
+Adding a template: subclass ``Template``, implement ``accepts``, ``begin``, ``act``, ``check``,
+and register it in ``TEMPLATES``; plans can then name it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import torch
+from torch import Tensor
+
+from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.regions import Annulus, Box, Fixed, Hemisphere, Region
+
+if TYPE_CHECKING:  # pragma: no cover
+    from realize.rollout import StepContext
+
+# failure reasons (index into FAILURES)
+FAILURES = (
+    "",
+    "timeout",
+    "no_path",
+    "grasp_not_held",
+    "cube_dropped",
+    "not_holding",
+    "controller_invalid",
+    "diverged",
+    "place_not_released",
+    "goal_not_reached",
+)
+FAIL = {name: i for i, name in enumerate(FAILURES)}
+
+
+class Template:
+    """Base class of action templates; subclasses keep (N, ...) state tensors."""
+
+    name = "template"
+    n_params = 1
+    param_doc = ""
+
+    def __init__(self, n: int, device: torch.device):
+        self.n, self.device = n, device
+        self.t = torch.zeros(n, dtype=torch.long, device=device)  # steps spent in the action
+
+    @classmethod
+    def accepts(cls, region: Region) -> bool:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
+        """Start the action for plans ``rows`` with parameters (len(rows), d) drawn from
+        ``region``; returns a (len,) failure code (0 = fine) for plans that fail immediately."""
+        raise NotImplementedError
+
+    def act(self, ctx: "StepContext", rows: Tensor) -> None:
+        """Write commands for ``rows`` into ``ctx``."""
+        raise NotImplementedError
+
+    def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """After a step: (done, success, failure code) for ``rows``."""
+        raise NotImplementedError
+
+    def distance(self, ctx: "StepContext", rows: Tensor) -> Tensor:
+        """Distance-to-success proxy (m) for ranking infeasible plans."""
+        return torch.zeros(len(rows), device=self.device)
+
+
+def _rows_f(x: Tensor) -> Tensor:
+    return x.to(torch.float32)
+
+
+class MoveTo(Template):
+    """move_to(loc): A* on the padded occupancy grid, PID waypoint tracking, arm static.
+
+    Success: ``||x_base - x_loc|| <= move_tolerance`` (paper ``in(loc)``). Failure: no path
+    (goal unreachable or outside the map) or timeout.
+    """
+
+    name = "move_to"
+    param_doc = "a 2-D base location (annulus, box or fixed point in R^2)"
+
+    def __init__(self, n: int, device: torch.device):
+        super().__init__(n, device)
+        self.goal = torch.zeros(n, 2, device=device)
+        self.wp = torch.zeros(n, 1, 2, device=device)
+        self.wp_len = torch.ones(n, dtype=torch.long, device=device)
+        self.wp_idx = torch.zeros(n, dtype=torch.long, device=device)
+        self.yaw_hold = torch.zeros(n, device=device)
+        self.prev_err = torch.zeros(n, 2, device=device)
+        self.integ = torch.zeros(n, 2, device=device)
+
+    @classmethod
+    def accepts(cls, region: Region) -> bool:
+        return region.dim == 2 and isinstance(region, (Annulus, Box, Fixed))
+
+    def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
+        cfg = ctx.cfg
+        start = ctx.base[rows, :2]
+        goal = params[:, :2].to(start)
+        res = astar_world(ctx.occupancy, ctx.grid, start, goal)
+        wps = path_to_waypoints(res, ctx.grid, occupied=ctx.occupancy, start_xy=start, goal_xy=goal)
+        pts, lens = wps.points.to(start), wps.lengths.clamp(min=1)
+        # the last waypoint is the parameter itself (A* may have snapped it to a free cell)
+        L = pts.shape[1] + 1
+        full = torch.cat([pts, goal[:, None, :]], dim=1)
+        idx = torch.arange(L, device=self.device)[None]
+        lens = lens + 1
+        last = full.gather(1, (lens - 1)[:, None, None].expand(-1, 1, 2))
+        full = torch.where((idx < lens[:, None])[..., None], full, last)
+        # re-pad into the shared buffer
+        if L > self.wp.shape[1]:
+            pad = self.wp[:, -1:, :].expand(-1, L - self.wp.shape[1], -1)
+            self.wp = torch.cat([self.wp, pad], dim=1)
+        Lb = self.wp.shape[1]
+        if L < Lb:
+            full = torch.cat([full, full[:, -1:, :].expand(-1, Lb - L, -1)], dim=1)
+        self.wp[rows] = full
+        self.wp_len[rows] = lens
+        self.wp_idx[rows] = 0
+        self.goal[rows] = goal
+        self.yaw_hold[rows] = ctx.base[rows, 2]
+        self.prev_err[rows] = 0.0
+        self.integ[rows] = 0.0
+        self.t[rows] = 0
+        ctx.hold_arm(rows)
+        found = res.found.to(self.device)
+        return torch.where(found, 0, FAIL["no_path"])
+
+    def act(self, ctx: "StepContext", rows: Tensor) -> None:
+        cfg = ctx.cfg.pid
+        pos = ctx.base[rows, :2]
+        yaw = ctx.base[rows, 2]
+        wp = self.wp[rows]
+        idx = self.wp_idx[rows]
+        lens = self.wp_len[rows]
+        # advance past waypoints within the switch radius (not the last one)
+        for _ in range(3):
+            tgt = wp.gather(1, idx[:, None, None].expand(-1, 1, 2))[:, 0]
+            near = ((tgt - pos).norm(dim=1) < cfg.switch_radius) & (idx < lens - 1)
+            idx = idx + near.long()
+        self.wp_idx[rows] = idx
+        tgt = wp.gather(1, idx[:, None, None].expand(-1, 1, 2))[:, 0]
+        err = tgt - pos
+        dt = ctx.dt
+        integ = (self.integ[rows] + err * dt).clamp(-cfg.integral_limit, cfg.integral_limit)
+        deriv = (err - self.prev_err[rows]) / dt
+        v = cfg.kp * err + cfg.ki * integ + cfg.kd * deriv
+        speed = v.norm(dim=1, keepdim=True)
+        v = v * torch.clamp(cfg.max_speed / (speed + 1e-9), max=1.0)
+        self.integ[rows] = integ
+        self.prev_err[rows] = err
+        yaw_err = torch.atan2(torch.sin(self.yaw_hold[rows] - yaw), torch.cos(self.yaw_hold[rows] - yaw))
+        w = (cfg.kp_yaw * yaw_err).clamp(-cfg.max_yaw_rate, cfg.max_yaw_rate)
+        # PID output is the world-frame velocity; the omni base takes it directly
+        ctx.base_cmd[rows] = torch.cat([v, w[:, None]], dim=1)
+        self.t[rows] += 1
+
+    def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        dist = (ctx.base[rows, :2] - self.goal[rows]).norm(dim=1)
+        ok = dist <= ctx.cfg.move_tolerance
+        timeout = self.t[rows] >= ctx.steps(ctx.cfg.move_timeout_s)
+        fail = torch.where(timeout & ~ok, FAIL["timeout"], 0)
+        return ok | timeout, ok, fail
+
+    def distance(self, ctx: "StepContext", rows: Tensor) -> Tensor:
+        return (ctx.base[rows, :2] - self.goal[rows]).norm(dim=1)
+
+
+# phases of grasp / place
+APPROACH, DESCEND, GRIP, RETREAT = 0, 1, 2, 3
+
+
+class _Manipulate(Template):
+    """Common phase machine of grasp and place (whole-body fabric to a hemisphere pre-pose)."""
+
+    param_doc = "a hemisphere region (pre-pose on its surface, approach towards its centre)"
+    closes_gripper = True  # gripper command in the GRIP phase
+
+    def __init__(self, n: int, device: torch.device):
+        super().__init__(n, device)
+        self.phase = torch.zeros(n, dtype=torch.long, device=device)
+        self.phase_t = torch.zeros(n, dtype=torch.long, device=device)
+        self.pre = torch.zeros(n, 3, device=device)
+        self.target = torch.zeros(n, 3, device=device)
+        self.approach = torch.zeros(n, 3, device=device)
+        self.closing = torch.zeros(n, 3, device=device)
+
+    @classmethod
+    def accepts(cls, region: Region) -> bool:
+        return isinstance(region, Hemisphere)
+
+    def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
+        centre = torch.tensor(region.center, dtype=torch.float32, device=self.device).expand(len(rows), 3)
+        pre = params[:, :3].to(torch.float32)
+        d = centre - pre
+        approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
+        self.pre[rows] = pre
+        self.approach[rows] = approach
+        self.closing[rows] = self._closing_axis(ctx, rows, approach)
+        self.target[rows] = centre - approach * ctx.cfg.grasp_offset
+        self.phase[rows] = APPROACH
+        self.phase_t[rows] = 0
+        self.t[rows] = 0
+        ctx.start_fabric(rows)
+        return torch.zeros(len(rows), dtype=torch.long, device=self.device)
+
+    def _closing_axis(self, ctx: "StepContext", rows: Tensor, approach: Tensor) -> Tensor:
+        """Closing axis of the goal pose: the cube's face normal (perpendicular to the approach)
+        nearest to the gripper's current closing axis, so the fingers close on two faces."""
+        from realize.scene import quat_to_matrix
+
+        frame = quat_to_matrix(ctx.cube[rows, 3:7])  # (n, 3, 3), columns = cube axes
+        cand = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 6, 3)
+        cand = cand - (cand * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
+        norm = cand.norm(dim=-1)
+        cand = cand / norm.clamp(min=1e-6)[..., None]
+        score = (cand * ctx.closing[rows][:, None, :]).sum(-1) - 2.0 * (norm < 0.7)
+        best = score.argmax(dim=1)
+        return cand[torch.arange(len(rows), device=self.device), best]
+
+    def _goal(self, rows: Tensor) -> Tensor:
+        ph = self.phase[rows]
+        pos = torch.where(((ph == APPROACH) | (ph == RETREAT))[:, None], self.pre[rows], self.target[rows])
+        return pos
+
+    def act(self, ctx: "StepContext", rows: Tensor) -> None:
+        ph = self.phase[rows]
+        # the arm stands still while the fingers close / open (ctx.arm_hold was set on entry)
+        moving = ph != GRIP
+        mr = rows[moving]
+        if len(mr):
+            ctx.fabric_goal(mr, self._goal(mr), self.approach[mr], self.closing[mr])
+        grip = (ph >= GRIP) if self.closes_gripper else (ph < GRIP)
+        ctx.grip_cmd[rows] = grip
+        self.t[rows] += 1
+        self.phase_t[rows] += 1
+
+    def _advance(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor]:
+        """Shared phase transitions; returns (tcp error to current goal, reached-target flag)."""
+        cfg = ctx.cfg
+        tcp = ctx.tcp[rows]
+        ph = self.phase[rows]
+        err = (tcp - self._goal(rows)).norm(dim=1)
+        axis_ok = (ctx.approach[rows] * self.approach[rows]).sum(dim=1) >= math.cos(cfg.axis_tolerance)
+        to_descend = (ph == APPROACH) & (err <= cfg.pregrasp_tolerance) & axis_ok
+        to_grip = (ph == DESCEND) & (err <= cfg.reach_tolerance)
+        new = torch.where(to_descend, DESCEND, torch.where(to_grip, GRIP, ph))
+        changed = new != ph
+        if to_grip.any():
+            ctx.hold_arm(rows[to_grip])
+        self.phase[rows] = new
+        self.phase_t[rows] = torch.where(changed, 0, self.phase_t[rows])
+        return err, to_grip
+
+    def distance(self, ctx: "StepContext", rows: Tensor) -> Tensor:
+        return (ctx.tcp[rows] - self.target[rows]).norm(dim=1)
+
+
+class Grasp(_Manipulate):
+    """grasp(g_p): fabric to the pre-grasp g_p on the hemisphere around the cube, straight in to
+    the cube, close, retreat to g_p.
+
+    Success: the TCP reached the grasp point within ``reach_tolerance`` (paper ``ee_in(g_p)``)
+    AND both fingers press on the cube (contact forces) after the retreat.
+    """
+
+    name = "grasp"
+    closes_gripper = True
+
+    def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        cfg = ctx.cfg
+        err, _ = self._advance(ctx, rows)
+        ph = self.phase[rows]
+        pt = self.phase_t[rows]
+        holds = ctx.holds(rows)
+        gripped = (ph == GRIP) & (pt >= ctx.steps(cfg.grip_s))
+        not_held = gripped & ~holds
+        self.phase[rows] = torch.where(gripped & holds, RETREAT, ph)
+        self.phase_t[rows] = torch.where(gripped & holds, 0, pt)
+        if (gripped & holds).any():
+            ctx.start_fabric(rows[gripped & holds])
+        ph = self.phase[rows]
+        retreated = (ph == RETREAT) & (err <= cfg.pregrasp_tolerance) & (self.phase_t[rows] > 0)
+        dropped = (ph == RETREAT) & ~holds & (self.phase_t[rows] > 2)
+        ok = retreated & holds
+        timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
+        fail = torch.where(not_held, FAIL["grasp_not_held"],
+                           torch.where(dropped, FAIL["cube_dropped"],
+                                       torch.where(timeout & ~ok, FAIL["timeout"], 0)))
+        return ok | (fail > 0), ok, fail
+
+
+class Place(_Manipulate):
+    """place(g_p): while holding the cube, fabric to the pre-place g_p on the hemisphere around
+    the place point, straight in, open the gripper, retreat to g_p.
+
+    Success: the TCP reached the place point within ``reach_tolerance`` (paper ``ee_in(g_p)``),
+    the gripper let go (no finger contact with the cube) and the cube rests (speed below
+    ``rest_speed``).
+    """
+
+    name = "place"
+    closes_gripper = False
+
+    def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
+        code = super().begin(ctx, rows, params, region)
+        held = ctx.holds(rows)
+        return torch.where(held, code, FAIL["not_holding"])
+
+    def act(self, ctx: "StepContext", rows: Tensor) -> None:
+        super().act(ctx, rows)
+        # keep squeezing until the release phase
+        ctx.grip_cmd[rows] = self.phase[rows] < GRIP
+
+    def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        cfg = ctx.cfg
+        err, _ = self._advance(ctx, rows)
+        ph = self.phase[rows]
+        pt = self.phase_t[rows]
+        holds = ctx.holds(rows)
+        dropped = (ph < GRIP) & ~holds & (self.t[rows] > 2)
+        released = (ph == GRIP) & (pt >= ctx.steps(cfg.grip_s))
+        self.phase[rows] = torch.where(released, RETREAT, ph)
+        self.phase_t[rows] = torch.where(released, 0, pt)
+        if released.any():
+            ctx.start_fabric(rows[released])
+        ph = self.phase[rows]
+        resting = ctx.cube_speed[rows] <= cfg.rest_speed
+        retreated = (ph == RETREAT) & (err <= cfg.pregrasp_tolerance) & (self.phase_t[rows] > 0)
+        ok = retreated & ~holds & resting
+        timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
+        fail = torch.where(dropped, FAIL["cube_dropped"], torch.where(timeout & ~ok, FAIL["timeout"], 0))
+        return ok | (fail > 0), ok, fail
+
+
+TEMPLATES: dict[str, type[Template]] = {"move_to": MoveTo, "grasp": Grasp, "place": Place}
