@@ -116,8 +116,8 @@ class GeometryCfg:
     robot_radius: float = 0.32
     exit_low: tuple[float, float] = (1.8, -0.4)
     exit_high: tuple[float, float] = (2.6, 0.4)
-    bounds_low: tuple[float, float] = (-3.0, -2.5)
-    bounds_high: tuple[float, float] = (3.0, 2.5)
+    bounds_low: tuple[float, float] = (-3.0, -3.0)
+    bounds_high: tuple[float, float] = (3.2, 3.0)
     # wall variant: a thin wall across the direct route between the tables
     wall_center: tuple[float, float] = (0.0, 0.0)
     wall_size: tuple[float, float, float] = (1.6, 0.1, 1.0)

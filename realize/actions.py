@@ -23,7 +23,10 @@ import torch
 from torch import Tensor
 
 from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.kinematics import FINGERTIP_REACH
 from realize.regions import Annulus, Box, Fixed, Hemisphere, Region
+
+PAD_HALF_WIDTH = 0.013  # m, half width of the finger pads across the closing axis (fetch.urdf)
 
 if TYPE_CHECKING:  # pragma: no cover
     from realize.rollout import StepContext
@@ -209,12 +212,24 @@ class _Manipulate(Template):
         self.pre[rows] = pre
         self.approach[rows] = approach
         self.closing[rows] = self._closing_axis(ctx, rows, approach)
-        self.target[rows] = centre - approach * ctx.cfg.grasp_offset
+        self.target[rows] = self._target(ctx, centre, approach)
         self.phase[rows] = APPROACH
         self.phase_t[rows] = 0
         self.t[rows] = 0
         ctx.start_fabric(rows)
         return torch.zeros(len(rows), dtype=torch.long, device=self.device)
+
+    def _target(self, ctx: "StepContext", centre: Tensor, approach: Tensor) -> Tensor:
+        """TCP goal: the region centre (the cube's centre), backed off along the approach just
+        enough that the fingertips stay ``grasp_clearance`` above the surface the cube rests on."""
+        cfg, g = ctx.cfg, ctx.scene.geometry
+        support = centre[:, 2] - g.cube_half_size
+        a_z = approach[:, 2].clamp(max=-0.2)  # approaches from below the horizon are not useful
+        tilt = torch.sqrt((1.0 - approach[:, 2] ** 2).clamp(min=0.0))
+        lowest = FINGERTIP_REACH * a_z - PAD_HALF_WIDTH * tilt  # fingertip height below the TCP
+        back = (support + cfg.grasp_clearance - centre[:, 2] - lowest) / (-a_z)
+        back = back.clamp(min=0.0) + cfg.grasp_offset
+        return centre - approach * back[:, None]
 
     def _closing_axis(self, ctx: "StepContext", rows: Tensor, approach: Tensor) -> Tensor:
         """Closing axis of the goal pose: the cube's face normal (perpendicular to the approach)
@@ -226,14 +241,25 @@ class _Manipulate(Template):
         cand = cand - (cand * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
         norm = cand.norm(dim=-1)
         cand = cand / norm.clamp(min=1e-6)[..., None]
-        score = (cand * ctx.closing[rows][:, None, :]).sum(-1) - 2.0 * (norm < 0.7)
+        # most perpendicular to the approach first (a true face normal), then nearest the current axis
+        score = 2.0 * norm + 0.5 * (cand * ctx.closing[rows][:, None, :]).sum(-1)
         best = score.argmax(dim=1)
         return cand[torch.arange(len(rows), device=self.device), best]
 
-    def _goal(self, rows: Tensor) -> Tensor:
+    def _goal(self, rows: Tensor, ctx: "StepContext | None" = None) -> Tensor:
+        """Goal of the current phase. The straight moves in and out (DESCEND, RETREAT) follow a
+        goal that slides along the approach line at ``approach_speed``, so the gripper moves
+        in a straight line instead of swinging (a swing knocks over or drops the cube)."""
         ph = self.phase[rows]
-        pos = torch.where(((ph == APPROACH) | (ph == RETREAT))[:, None], self.pre[rows], self.target[rows])
-        return pos
+        final = torch.where(((ph == APPROACH) | (ph == RETREAT))[:, None], self.pre[rows], self.target[rows])
+        if ctx is None:
+            return final
+        start = torch.where((ph == RETREAT)[:, None], self.target[rows], self.pre[rows])
+        span = (final - start).norm(dim=1).clamp(min=1e-6)
+        frac = (self.phase_t[rows].float() * ctx.dt * ctx.cfg.approach_speed / span).clamp(max=1.0)
+        ramp = start + (final - start) * frac[:, None]
+        straight = (ph == DESCEND) | (ph == RETREAT)
+        return torch.where(straight[:, None], ramp, final)
 
     def act(self, ctx: "StepContext", rows: Tensor) -> None:
         ph = self.phase[rows]
@@ -241,7 +267,7 @@ class _Manipulate(Template):
         moving = ph != GRIP
         mr = rows[moving]
         if len(mr):
-            ctx.fabric_goal(mr, self._goal(mr), self.approach[mr], self.closing[mr])
+            ctx.fabric_goal(mr, self._goal(mr, ctx), self.approach[mr], self.closing[mr])
         grip = (ph >= GRIP) if self.closes_gripper else (ph < GRIP)
         ctx.grip_cmd[rows] = grip
         self.t[rows] += 1
@@ -255,7 +281,11 @@ class _Manipulate(Template):
         err = (tcp - self._goal(rows)).norm(dim=1)
         axis_ok = (ctx.approach[rows] * self.approach[rows]).sum(dim=1) >= math.cos(cfg.axis_tolerance)
         to_descend = (ph == APPROACH) & (err <= cfg.pregrasp_tolerance) & axis_ok
-        to_grip = (ph == DESCEND) & (err <= cfg.reach_tolerance)
+        # close when at the target, or when settled within reach_tolerance of it (the fingers
+        # or the robot's own collision terms may hold the TCP a few mm off)
+        ramp_done = self.phase_t[rows] * ctx.dt * cfg.approach_speed >= (self.pre[rows] - self.target[rows]).norm(dim=1)
+        settled = ramp_done & (self.phase_t[rows] >= self._settle_steps(ctx, rows)) & (err <= cfg.reach_tolerance)
+        to_grip = (ph == DESCEND) & ((err <= cfg.grip_tolerance) | settled)
         new = torch.where(to_descend, DESCEND, torch.where(to_grip, GRIP, ph))
         changed = new != ph
         if to_grip.any():
@@ -263,6 +293,16 @@ class _Manipulate(Template):
         self.phase[rows] = new
         self.phase_t[rows] = torch.where(changed, 0, self.phase_t[rows])
         return err, to_grip
+
+    def _retreated(self, ctx: "StepContext", rows: Tensor, err: Tensor) -> Tensor:
+        """Back at the pre-pose, or most of the way back out along the approach line."""
+        span = (self.pre[rows] - self.target[rows]).norm(dim=1)
+        out = (ctx.tcp[rows] - self.target[rows]).norm(dim=1)
+        return (self.phase_t[rows] > 0) & ((err <= ctx.cfg.pregrasp_tolerance) | (out >= ctx.cfg.retreat_share * span))
+
+    def _settle_steps(self, ctx: "StepContext", rows: Tensor) -> Tensor:
+        ramp = (self.pre[rows] - self.target[rows]).norm(dim=1) / (ctx.cfg.approach_speed * ctx.dt)
+        return ramp.ceil().long() + ctx.steps(ctx.cfg.settle_s)
 
     def distance(self, ctx: "StepContext", rows: Tensor) -> Tensor:
         return (ctx.tcp[rows] - self.target[rows]).norm(dim=1)
@@ -292,7 +332,7 @@ class Grasp(_Manipulate):
         if (gripped & holds).any():
             ctx.start_fabric(rows[gripped & holds])
         ph = self.phase[rows]
-        retreated = (ph == RETREAT) & (err <= cfg.pregrasp_tolerance) & (self.phase_t[rows] > 0)
+        retreated = (ph == RETREAT) & self._retreated(ctx, rows, err)
         dropped = (ph == RETREAT) & ~holds & (self.phase_t[rows] > 2)
         ok = retreated & holds
         timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
@@ -319,6 +359,14 @@ class Place(_Manipulate):
         held = ctx.holds(rows)
         return torch.where(held, code, FAIL["not_holding"])
 
+    def _target(self, ctx: "StepContext", centre: Tensor, approach: Tensor) -> Tensor:
+        """TCP goal that puts the held cube's centre at the region centre (plus a small drop
+        height): the cube sits ``s`` ahead of the TCP along the approach axis, measured now."""
+        rows = ctx.beginning
+        s = ((ctx.cube[rows, :3] - ctx.tcp[rows]) * ctx.approach[rows]).sum(dim=1, keepdim=True)
+        lift = torch.tensor([0.0, 0.0, ctx.cfg.place_drop], device=centre.device)
+        return centre + lift - approach * s
+
     def act(self, ctx: "StepContext", rows: Tensor) -> None:
         super().act(ctx, rows)
         # keep squeezing until the release phase
@@ -338,7 +386,7 @@ class Place(_Manipulate):
             ctx.start_fabric(rows[released])
         ph = self.phase[rows]
         resting = ctx.cube_speed[rows] <= cfg.rest_speed
-        retreated = (ph == RETREAT) & (err <= cfg.pregrasp_tolerance) & (self.phase_t[rows] > 0)
+        retreated = (ph == RETREAT) & self._retreated(ctx, rows, err)
         ok = retreated & ~holds & resting
         timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
         fail = torch.where(dropped, FAIL["cube_dropped"], torch.where(timeout & ~ok, FAIL["timeout"], 0))

@@ -63,16 +63,23 @@ class RolloutConfig:
 
     move_tolerance: float = 0.1  # m, move_to success  ||x_base - x_loc|| <= eps
     move_timeout_s: float = 20.0
-    reach_tolerance: float = 0.015  # m, ee_in(g_p)
+    reach_tolerance: float = 0.015  # m, ee_in(g_p): the TCP settled this close to the grasp point
+    grip_tolerance: float = 0.005  # m, close at once when this close
+    settle_s: float = 0.5  # s after the straight move before a settled TCP counts as arrived
     pregrasp_tolerance: float = 0.03  # m, pre-pose reached
     axis_tolerance: float = 0.1  # rad, approach axis alignment at the pre-pose
-    grasp_offset: float = 0.0  # m, the TCP target lies this far short of the region centre
+    grasp_offset: float = 0.0  # m, extra back-off of the TCP target along the approach
+    grasp_clearance: float = 0.006  # m, fingertips stay this far above the supporting surface
+    place_drop: float = 0.004  # m, the held cube is released this high above its place point
+    retreat_share: float = 0.6  # retreat done once the TCP is this share of the way back out
     grip_s: float = 0.5  # s to close / open the gripper
+    approach_speed: float = 0.15  # m/s of the straight moves in to and out from the object
     rest_speed: float = 0.05  # m/s, the cube counts as resting below this
     manip_timeout_s: float = 15.0
     max_time_s: float = 120.0  # horizon of a whole plan
     record_every: int = 5  # control steps between recorded trajectory samples
     diverge_speed: float = 50.0  # joint speed that marks a plan as diverged
+    base_feedback: float = 3.0  # 1/s, base position feedback onto the fabric's base velocity
     pid: PIDConfig = field(default_factory=PIDConfig)
     astar: AStarConfig = field(default_factory=AStarConfig)
     fabric: WholeBodyConfig = field(default_factory=WholeBodyConfig)
@@ -82,7 +89,7 @@ class RolloutConfig:
             if f.name in ("pid", "astar", "fabric"):
                 continue
             v = getattr(self, f.name)
-            zero_ok = f.name in ("grasp_offset",)
+            zero_ok = f.name in ("grasp_offset", "grasp_clearance", "place_drop")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
                 raise RolloutConfigError(
                     f"{prefix}.{f.name} = {v!r} is invalid: must be a finite number {'>= 0' if zero_ok else '> 0'}")
@@ -220,7 +227,9 @@ class StepContext:
         new, valid = self.fabric.step(st, self.q[rows], goal)
         self.fab_state.q[rows] = new.q
         self.fab_state.qd[rows] = new.qd
-        self.base_cmd[rows] = new.qd[:, :3].float()
+        # the base is velocity-driven: feed back its position error to the fabric's reference
+        base_err = (new.q[:, :3] - self.q[rows, :3].to(new.q)).float()
+        self.base_cmd[rows] = new.qd[:, :3].float() + self.cfg.base_feedback * base_err
         self.arm_cmd[rows] = new.q[:, 3:].float()
         self.arm_vel_cmd[rows] = new.qd[:, 3:].float()
         self.arm_hold[rows] = new.q[:, 3:].float()
@@ -304,6 +313,7 @@ class PlanRealizer:
             spec = task.plan[a]
             tpl = self.templates[spec.template]
             name = spec.params[0]
+            ctx.beginning = rows
             code = tpl.begin(ctx, rows, padded(name, rows), self.layout.regions[name])
             bad = code > 0
             if bad.any():

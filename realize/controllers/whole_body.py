@@ -33,7 +33,7 @@ from realize.kinematics import FetchKinematics
 # spheres that may touch a table top while grasping or placing a cube lying on it
 DEFAULT_EXCLUDE = ("finger_r", "finger_l", "gripper_front")
 FLOOR_HALF = 50.0
-LIMIT_MARGIN = 0.02  # rad (m for the torso) between the fabric's joint limits and the URDF's
+LIMIT_MARGIN = 0.005  # rad (m for the torso): the fabric's state stays this far inside the limits
 
 
 class ControllerConfigError(ValueError):
@@ -238,10 +238,10 @@ class WholeBodyFabric:
         self.distance = BoxDistance(box_ok, floor_ok)
         self.map = _PoseMap(self.kin, self.cfg.axis_length, radii)
         self.boxes = boxes_tensor(geometry, self.cfg.floor).to(device, dtype)
-        # the joint-limit leaves are singular at the limit: keep the fabric a little inside
+        # the joint-limit leaves are singular at the limit: the fabric's state is kept inside it
         lo, up = self.kin.lower.to(device, dtype), self.kin.upper.to(device, dtype)
-        self.lower, self.upper = lo + LIMIT_MARGIN, up - LIMIT_MARGIN
-        self._clamp_lo, self._clamp_hi = lo + LIMIT_MARGIN / 2, up - LIMIT_MARGIN / 2
+        self.lower, self.upper = lo, up
+        self._clamp_lo, self._clamp_hi = lo + LIMIT_MARGIN, up - LIMIT_MARGIN
         self.fabric_cfg = self.cfg.fabric()
         self.speed_limit = torch.tensor(
             [self.cfg.max_base_speed] * 2 + [self.cfg.max_yaw_rate] + [self.cfg.max_joint_speed] * 8,
@@ -281,6 +281,7 @@ class WholeBodyFabric:
         qd_next = qd + self.dt * qdd
         qd_next = torch.maximum(torch.minimum(qd_next, self.speed_limit), -self.speed_limit)
         q_next = q + self.dt * qd_next
+        q_next = torch.maximum(torch.minimum(q_next, self._clamp_hi), self._clamp_lo)
         q_next = torch.where(valid[:, None], q_next, q_meas)
         qd_next = torch.where(valid[:, None], qd_next, torch.zeros_like(qd_next))
         return FabricState(q_next, qd_next), valid
