@@ -1,0 +1,161 @@
+"""Hydra callback: a ``summary.csv`` of every job of a sweep, in the sweep directory.
+
+What it does: after each job (``on_job_end``) it writes ``job_status.json`` into the job's run
+directory (overrides, Hydra's job status, the error if the job raised) and rebuilds
+``<sweep dir>/summary.csv`` from all job directories found so far, merging each job's
+``result.json`` (feasible, best cost, wall time, ...). The rebuild is serialised with a file
+lock and written atomically, so it is correct with jobs finishing in parallel (joblib, submitit)
+and complete even when Hydra stops the sweep after a failed job (its basic sweeper re-raises the
+first failure after the batch and never reaches ``on_multirun_end``). ``on_multirun_end``
+rebuilds it once more.
+
+Columns: ``job, overrides, status, error, feasible, best_cost, wall_time_s,
+iterations_done, interrupted, run_dir``. ``status`` is ``done``, ``failed`` or ``interrupted``.
+What it doesn't: run or retry jobs, or read anything but JSON files (no unpickling).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from hydra.core.utils import JobReturn, JobStatus
+from hydra.types import RunMode
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig, OmegaConf
+
+from realize.results import RESULT_FILE, atomic_write_text, read_json
+
+__all__ = ["SweepSummary", "write_summary", "JOB_STATUS_FILE", "COLUMNS"]
+
+JOB_STATUS_FILE = "job_status.json"
+COLUMNS = (
+    "job",
+    "overrides",
+    "status",
+    "error",
+    "feasible",
+    "best_cost",
+    "wall_time_s",
+    "iterations_done",
+    "interrupted",
+    "run_dir",
+)
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    s = " ".join(str(text).split())
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
+def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
+    job_dir = status_file.parent
+    st = read_json(status_file) or {}
+    res = read_json(job_dir / RESULT_FILE) or {}
+    status = st.get("status", "failed")
+    error = res.get("error") or st.get("error") or ""
+    if status == "done" and res.get("status") == "failed":
+        status = "failed"
+    if status == "done" and res.get("interrupted"):
+        status = "interrupted"
+    try:
+        rel = str(job_dir.relative_to(sweep_dir))
+    except ValueError:
+        rel = str(job_dir)
+    return {
+        "job": st.get("job_num", ""),
+        "overrides": " ".join(st.get("overrides", [])),
+        "status": status,
+        "error": _one_line(error) if error else "",
+        "feasible": res.get("feasible", ""),
+        "best_cost": "" if res.get("best_cost") is None else res.get("best_cost"),
+        "wall_time_s": "" if res.get("wall_time_s") is None else round(float(res["wall_time_s"]), 3),
+        "iterations_done": res.get("iterations_done", ""),
+        "interrupted": res.get("interrupted", ""),
+        "run_dir": rel,
+    }
+
+
+def write_summary(sweep_dir: Path | str, filename: str = "summary.csv") -> Path:
+    """Rebuild ``<sweep_dir>/<filename>`` from the ``job_status.json`` files under it."""
+    sweep_dir = Path(sweep_dir)
+    rows = [_row(p, sweep_dir) for p in sweep_dir.rglob(JOB_STATUS_FILE)]
+
+    def order(r: dict[str, Any]) -> tuple[int, str]:
+        j = r["job"]
+        return (int(j) if isinstance(j, int) or str(j).isdigit() else 1 << 30, str(r["run_dir"]))
+
+    rows.sort(key=order)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(COLUMNS), lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow(r)
+    out = sweep_dir / filename
+    atomic_write_text(out, buf.getvalue())
+    return out
+
+
+class _Lock:
+    """An exclusive ``flock`` on a file in the sweep directory (no-op where unsupported)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd: int | None = None
+
+    def __enter__(self) -> _Lock:
+        try:
+            import fcntl
+
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            fcntl.flock(self.fd, fcntl.LOCK_EX)
+        except (ImportError, OSError):
+            self.fd = None
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.fd is not None:
+            import fcntl
+
+            fcntl.flock(self.fd, fcntl.LOCK_UN)
+            os.close(self.fd)
+
+
+class SweepSummary(Callback):
+    """Hydra callback writing ``summary.csv`` in the sweep directory (see module docstring)."""
+
+    def __init__(self, filename: str = "summary.csv") -> None:
+        self.filename = filename
+
+    def _update(self, sweep_dir: Path) -> None:
+        with _Lock(sweep_dir / f".{self.filename}.lock"):
+            write_summary(sweep_dir, self.filename)
+
+    def on_job_end(self, config: DictConfig, job_return: JobReturn, **kwargs: Any) -> None:
+        hydra = config.get("hydra")
+        if hydra is None or hydra.get("mode") != RunMode.MULTIRUN:
+            return
+        job_dir = Path(str(hydra.runtime.output_dir))
+        ok = job_return.status == JobStatus.COMPLETED
+        error = ""
+        if not ok:
+            err = job_return._return_value  # the exception (reading .return_value would re-raise)
+            error = f"{type(err).__name__}: {err}" if err is not None else "unknown error"
+        status = {
+            "job_num": int(hydra.job.num) if hydra.job.get("num") is not None else None,
+            "overrides": [str(o) for o in (job_return.overrides or [])],
+            "status": "done" if ok else "failed",
+            "error": error,
+        }
+        atomic_write_text(job_dir / JOB_STATUS_FILE, json.dumps(status, indent=2) + "\n")
+        self._update(Path(str(hydra.sweep.dir)))
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        sweep_dir = Path(str(OmegaConf.select(config, "hydra.sweep.dir")))
+        if sweep_dir.is_dir():
+            self._update(sweep_dir)

@@ -1,0 +1,457 @@
+"""The ``realize`` command: config validation at the edge, results on disk, interrupt and resume,
+sweeps with their summary table. Runs the real simulator with tiny budgets (4 plans, short
+horizon); bad-input cases check that no simulator is built."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from hydra import compose, initialize_config_dir
+
+import realize.scene
+from realize.app import CONFIG_DIR, preflight, run
+from realize.results import (
+    CHECKPOINT_FILE,
+    HISTORY_FILE,
+    RESULT_FILE,
+    CheckpointError,
+    History,
+    load_checkpoint,
+    load_history,
+)
+from realize.run_config import ConfigError, build_run_spec
+from realize.sweep_summary import COLUMNS, JOB_STATUS_FILE, write_summary
+
+REPO = CONFIG_DIR.parent
+PY = sys.executable
+# 4 plans, 2 elites, short horizon: every plan gets through at least the first move_to
+TINY_D = {
+    "ce.n_envs": 4,
+    "ce.n_elite": 2,
+    "ce.iterations": 2,
+    "controller.max_time_s": 6,
+    "logging.progress": "false",
+    "logging.rerun": "false",
+}
+TINY = [f"{k}={v}" for k, v in TINY_D.items()]
+
+
+def tiny(**changes: object) -> list[str]:
+    """TINY with some keys changed (``ce__iterations=1`` -> ``ce.iterations=1``)."""
+    d = dict(TINY_D)
+    d.update({k.replace("__", "."): v for k, v in changes.items()})
+    return [f"{k}={v}" for k, v in d.items()]
+
+
+def tiny_with(extra: list[str]) -> list[str]:
+    """TINY with ``extra`` overrides replacing TINY's value of the same key."""
+    keys = {e.split("=", 1)[0].lstrip("+~") for e in extra}
+    return [o for o in TINY if o.split("=", 1)[0] not in keys] + extra
+
+
+def cfg_of(overrides: list[str], hydra_cfg: bool = False):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test"):
+        return compose(config_name="config", overrides=overrides, return_hydra_config=hydra_cfg)
+
+
+def plain(overrides: list[str]) -> dict:
+    from omegaconf import OmegaConf
+
+    d = OmegaConf.to_container(cfg_of(overrides), resolve=True)
+    assert isinstance(d, dict)
+    return d
+
+
+def realize_cmd(*args: str, cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([PY, "-m", "realize", *args], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.fixture
+def no_sim(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail the test if anything builds a simulator."""
+
+    def boom(*a, **k):
+        raise AssertionError("a simulator was built for an invalid config")
+
+    monkeypatch.setattr(realize.scene, "BatchedScene", boom)
+
+
+# --------------------------------------------------------------------------------------------
+# config tree
+# --------------------------------------------------------------------------------------------
+
+
+def test_default_config_validates_without_simulating(no_sim: None) -> None:
+    spec = build_run_spec(plain([]))
+    assert spec.ce.n_samples == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
+    assert spec.task.describe() == "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
+    assert spec.task.layout.names == ["Table1", "Cube_g", "Table2", "Cube_p", "Exit"]
+    assert spec.sim.sim_freq == 60 and spec.sim.solver_position_iterations == 4
+    assert spec.n_envs_max == 200
+
+
+def test_experiment_presets() -> None:
+    seed = build_run_spec(plain(["experiment=seed_paper"]))
+    assert (seed.ce.n_samples, seed.ce.n_elite, seed.ce.iterations) == (200, 10, 10)
+    journal = build_run_spec(plain(["experiment=journal", "scene=wall"]))
+    assert journal.ce.schedule == "linear"
+    assert journal.ce.n_samples_at(0) == 3000 and journal.ce.n_samples_at(19) == 300
+    assert (journal.ce.n_elite, journal.ce.iterations) == (50, 20)
+    assert journal.n_envs_max == 3000
+    assert journal.geometry.variant == "wall" and journal.geometry.extras[0].name == "wall"
+    assert build_run_spec(plain(["scene=ramp"])).geometry.extras[0].name == "ramp"
+
+
+def test_controller_yaml_mirrors_rollout_defaults() -> None:
+    from realize.rollout import RolloutConfig
+
+    want = json.loads(json.dumps(asdict(RolloutConfig())))  # tuples -> lists
+    got = yaml.safe_load((CONFIG_DIR / "controller" / "default.yaml").read_text())
+    assert got == want, "configs/controller/default.yaml is stale: run scripts/sync_controller_config.py"
+
+
+def test_sim_yaml_keys_are_sim_settings_fields() -> None:
+    from dataclasses import fields
+
+    got = yaml.safe_load((CONFIG_DIR / "sim" / "default.yaml").read_text())
+    assert set(got) == {f.name for f in fields(realize.scene.SimSettings)}
+
+
+@pytest.mark.parametrize(
+    "launcher, target",
+    [
+        ("basic", "BasicLauncher"),
+        ("joblib", "JoblibLauncher"),
+        ("submitit_local", "LocalLauncher"),
+        ("submitit_slurm", "SlurmLauncher"),
+        ("slurm", "SlurmLauncher"),
+    ],
+)
+def test_launchers_resolve(launcher: str, target: str) -> None:
+    cfg = cfg_of([f"hydra/launcher={launcher}"], hydra_cfg=True)
+    assert cfg.hydra.launcher._target_.endswith(target)
+    assert any(cb._target_ == "realize.sweep_summary.SweepSummary" for cb in cfg.hydra.callbacks.values())
+
+
+# --------------------------------------------------------------------------------------------
+# bad input: one clear message naming the key/file, nothing simulated
+# --------------------------------------------------------------------------------------------
+
+BAD = [
+    (["ce.n_envs=4", "ce.n_elite=5"], ["ce.n_elite = 5", "ce.n_envs = 4"]),
+    (["ce.iterations=0"], ["ce.iterations = 0"]),
+    (["ce.schedule=linear"], ["ce.n_envs_end"]),
+    (["ce.fallback=magic"], ["ce.fallback", "magic"]),
+    (["+ce.n_samples=3"], ["ce", "n_samples"]),
+    (["+task.foo=1"], ["task", "foo"]),
+    (["task.params.Cube_g.radius=-0.1"], ["params.Cube_g", "radius"]),
+    (["task.params.Table1.r_min=2.0"], ["params.Table1", "r_min"]),
+    (["task.params.Exit.type=triangle"], ["params.Exit", "triangle"]),
+    (['task.plan=["move_to(Table1)","grasp(Nowhere)"]'], ["plan[1]", "Nowhere"]),
+    (['task.plan=["fly(Table1)"]'], ["plan[0]", "fly"]),
+    (['task.plan=["grasp(Table1)"]'], ["plan[0]", "Table1", "grasp"]),
+    (["task.goal.cube_on=table9"], ["goal.cube_on", "table9"]),
+    (["task.planner.enabled=true", "task.planner.domain=missing_domain.pddl"], ["missing_domain.pddl"]),
+    (["sim.sim_freq=50"], ["sim.sim_freq = 50"]),
+    (["sim.backend=tpu"], ["sim.backend", "tpu"]),
+    (["sim.solver_position_iterations=0"], ["sim.solver_position_iterations = 0"]),
+    (["scene.variant=moon"], ["scene.variant", "moon"]),
+    (["scene.robot_start=[0.0,1.2,0.0]"], ["scene.robot_start", "table1"]),
+    (["controller.pid.kp=-1"], ["controller.pid", "kp", "-1"]),
+    (["controller.max_time_s=0"], ["controller.max_time_s"]),
+    (["device=gpu"], ["device", "gpu"]),
+    (["seed=-1"], ["seed = -1"]),
+    (["logging.rrd=../elsewhere.rrd"], ["logging.rrd"]),
+    (["task_file=no/such/task.yaml"], ["task_file", "no/such/task.yaml"]),
+]
+
+
+@pytest.mark.parametrize("overrides, needles", BAD, ids=[" ".join(o) for o, _ in BAD])
+def test_bad_config_fails_before_simulation(overrides: list[str], needles: list[str], tmp_path: Path,
+                                             no_sim: None) -> None:
+    t0 = time.perf_counter()
+    with pytest.raises(ConfigError) as ei:
+        run(cfg_of(tiny_with(overrides)), tmp_path)
+    msg = str(ei.value)
+    assert "\n" not in msg
+    for n in needles:
+        assert n in msg, f"{n!r} not in {msg!r}"
+    assert time.perf_counter() - t0 < 30
+    # the failure is on disk for sweeps and post-mortems
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert res["status"] == "failed" and res["error"] == msg and res["simulated"] is False
+    assert not (tmp_path / CHECKPOINT_FILE).exists() and not (tmp_path / HISTORY_FILE).exists()
+
+
+def test_malformed_yaml_task_file(tmp_path: Path, no_sim: None) -> None:
+    bad = tmp_path / "my_task.yaml"
+    bad.write_text("params:\n  Table1: {type: annulus, center: [0, 1.2]\nplan: [move_to(Table1)]\n")
+    with pytest.raises(ConfigError) as ei:
+        run(cfg_of(TINY + [f"task_file={bad}"]), tmp_path / "run")
+    assert str(bad) in str(ei.value) and "not valid YAML" in str(ei.value) and "line" in str(ei.value)
+
+
+def test_task_file_errors_name_the_file(tmp_path: Path, no_sim: None) -> None:
+    task = yaml.safe_load((CONFIG_DIR / "task" / "pick_place.yaml").read_text())
+    task["params"]["Cube_p"]["polar_max"] = 4.0
+    path = tmp_path / "polar.yaml"
+    path.write_text(yaml.safe_dump(task))
+    with pytest.raises(ConfigError) as ei:
+        run(cfg_of(TINY + [f"task_file={path}"]), tmp_path / "run")
+    assert f"{path}:params.Cube_p" in str(ei.value) and "polar_max" in str(ei.value)
+
+
+def test_resume_dir_that_is_not_a_run(tmp_path: Path, no_sim: None) -> None:
+    with pytest.raises(ConfigError, match=r"resume: .* is not a realize run directory \(no checkpoint.json\)"):
+        run(cfg_of(TINY + [f"resume={tmp_path}"]), tmp_path / "run")
+    with pytest.raises(ConfigError, match="is not a realize run directory"):
+        preflight([f"resume={tmp_path}"])
+
+
+def test_resume_with_corrupt_checkpoint(tmp_path: Path, no_sim: None) -> None:
+    (tmp_path / CHECKPOINT_FILE).write_text("{not json")
+    with pytest.raises(ConfigError, match=r"checkpoint.json is not valid JSON"):
+        run(cfg_of(TINY + [f"resume={tmp_path}"]), tmp_path / "run")
+    (tmp_path / CHECKPOINT_FILE).write_text(json.dumps({"format": "something-else"}))
+    with pytest.raises(CheckpointError, match="not a realize checkpoint"):
+        load_checkpoint(tmp_path)
+
+
+@pytest.mark.parametrize(
+    "args, needles",
+    [
+        (["experiment=foo"], ["experiment=foo", "seed_paper", "journal"]),
+        (["task=nope"], ["task=nope", "pick_place"]),
+        (["-m", "ce=seed_paper,bogus"], ["ce=bogus"]),
+        (["ce.foo=1"], ["ce.foo"]),
+        (["ce.n_envs=[1"], ["ce.n_envs=[1"]),
+    ],
+)
+def test_preflight_errors(args: list[str], needles: list[str]) -> None:
+    with pytest.raises(ConfigError) as ei:
+        preflight(args)
+    for n in needles:
+        assert n in str(ei.value)
+
+
+def test_cli_bad_input_exit_code_and_one_line(tmp_path: Path) -> None:
+    for args, needle in ((["experiment=foo"], "experiment=foo"),
+                         (["ce.n_envs=4", "ce.n_elite=9", f"hydra.run.dir={tmp_path / 'r'}"], "ce.n_elite = 9")):
+        p = realize_cmd(*args, cwd=tmp_path, timeout=120)
+        assert p.returncode == 2, p.stderr
+        err = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
+        assert len(err) == 1 and needle in err[0], p.stderr
+        assert "Traceback" not in p.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# real runs (tiny budgets)
+# --------------------------------------------------------------------------------------------
+
+RESULT_KEYS = {
+    "status", "interrupted", "feasible", "best_cost", "best_params", "success_per_iter", "best_cost_per_iter",
+    "elite_per_iter", "wall_time_s", "config", "versions", "seed", "plan", "iterations_done", "final_mean",
+    "final_std",
+}
+
+
+def test_tiny_run_writes_results(tmp_path: Path) -> None:
+    out = run(cfg_of(tiny(logging__rerun="true") + ["seed=3"]), tmp_path)
+    assert out.status == "done" and out.iterations_done == 2 and out.exit_code == 0
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert RESULT_KEYS <= set(res)
+    assert res["status"] == "done" and res["interrupted"] is False and res["seed"] == 3
+    assert len(res["success_per_iter"]) == len(res["best_cost_per_iter"]) == len(res["elite_per_iter"]) == 2
+    assert set(res["best_params"]) == {"Table1", "Cube_g", "Table2", "Cube_p", "Exit"}
+    assert set(res["best_params"]["Cube_g"]) == {"x", "y", "z"}
+    assert res["config"]["ce"]["n_envs"] == 4 and res["plan"].startswith("move_to(Table1)")
+    assert {"torch", "mani_skill", "sapien", "numpy", "realize"} <= set(res["versions"])
+    assert res["wall_time_s"] > 0
+    with np.load(tmp_path / HISTORY_FILE, allow_pickle=False) as h:
+        assert h["Z_000"].shape == (4, 12) and h["cost_001"].shape == (4,)
+        assert h["feasible_000"].dtype == bool and h["mean"].shape == (2, 12)
+        assert np.isnan(h["mean"]).sum() == 0  # refit after every iteration (fallback: progress)
+        assert list(h["column_names"][:2]) == ["Table1.x", "Table1.y"]
+        assert h["action_success_000"].shape == (4, 5)
+    ck = load_checkpoint(tmp_path)
+    assert ck.iteration == 2 and len(ck.records) == 2
+    rrd = tmp_path / "realize.rrd"
+    assert rrd.is_file() and rrd.stat().st_size > 0
+
+
+def _compare(a: Path, b: Path) -> None:
+    ra, rb = (json.loads((d / RESULT_FILE).read_text()) for d in (a, b))
+    for k in ("best_z", "best_cost", "feasible", "best_iteration", "success_per_iter", "best_cost_per_iter",
+              "n_feasible_per_iter", "elite_per_iter", "final_mean", "final_std", "iterations_done"):
+        assert ra[k] == rb[k], k
+    with np.load(a / HISTORY_FILE, allow_pickle=False) as ha, np.load(b / HISTORY_FILE, allow_pickle=False) as hb:
+        assert sorted(ha.files) == sorted(hb.files)
+        for k in ha.files:
+            np.testing.assert_array_equal(ha[k], hb[k], err_msg=k)
+
+
+RESUME = tiny(ce__iterations=3) + ["seed=7"]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("uninterrupted")
+    run(cfg_of(RESUME), d)
+    return d
+
+
+def test_interrupt_after_iteration_2_then_resume(tmp_path: Path, uninterrupted: Path) -> None:
+    def stop(i: int) -> None:
+        if i == 1:  # iterations 0 and 1 are on disk
+            raise KeyboardInterrupt
+
+    out = run(cfg_of(RESUME), tmp_path, after_iteration=stop)
+    assert out.status == "interrupted" and out.exit_code == 130 and out.iterations_done == 2
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert res["interrupted"] is True and res["iterations_done"] == 2 and "SIGINT" in res["error"]
+    assert load_checkpoint(tmp_path).iteration == 2 and len(load_history(tmp_path / HISTORY_FILE)) == 2
+
+    other = tmp_path.parent / (tmp_path.name + "_hydra_dir")
+    done = run(cfg_of(["logging.progress=false", f"resume={tmp_path}"]), other)
+    assert done.status == "done" and done.run_dir == tmp_path and done.iterations_done == 3
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert res["interrupted"] is False and res["segments"] == 2 and res["resumed_from_iteration"] == 2
+    _compare(uninterrupted, tmp_path)
+
+
+def test_resume_refuses_changed_settings(uninterrupted: Path, no_sim: None) -> None:
+    before = (uninterrupted / RESULT_FILE).read_text()
+    with pytest.raises(ConfigError, match=r"drop the override\(s\) \['ce.n_elite=3'\]"):
+        # as from the command line, where the resumed run's Hydra dir is the run dir itself
+        run(cfg_of([f"resume={uninterrupted}"]), uninterrupted,
+            cli_overrides=[f"resume={uninterrupted}", "ce.n_elite=3"])
+    assert (uninterrupted / RESULT_FILE).read_text() == before  # the run's result is untouched
+
+
+def test_sigint_subprocess_then_resume(tmp_path: Path, uninterrupted: Path) -> None:
+    run_dir = tmp_path / "run"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([PY, "-m", "realize", *RESUME, f"hydra.run.dir={run_dir}"], cwd=tmp_path, env=env,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 180
+    while time.time() < deadline and p.poll() is None:
+        try:
+            if json.loads((run_dir / CHECKPOINT_FILE).read_text())["iteration"] >= 1:
+                break
+        except (OSError, ValueError, KeyError):
+            pass
+        time.sleep(0.05)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    res = json.loads((run_dir / RESULT_FILE).read_text())
+    if res["iterations_done"] < 3:  # the signal arrived during the run
+        assert p.returncode == 130, err
+        assert res["interrupted"] is True and res["status"] == "interrupted"
+        r = realize_cmd(f"resume={run_dir}", "logging.progress=false", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    _compare(uninterrupted, run_dir)
+
+
+def _read_summary(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    assert rows and set(rows[0]) == set(COLUMNS)
+    return rows
+
+
+def test_multirun_2x2_basic_launcher_summary(tmp_path: Path) -> None:
+    sweep = tmp_path / "sweep"
+    p = realize_cmd("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,2"), "seed=0,1",
+                    f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    rows = _read_summary(sweep / "summary.csv")
+    assert len(rows) == 4 and {r["status"] for r in rows} == {"done"}
+    assert [r["job"] for r in rows] == ["0", "1", "2", "3"]
+    combos = {(o.split("ce.n_elite=")[1].split()[0], o.split("seed=")[1].split()[0])
+              for o in (r["overrides"] for r in rows)}
+    assert combos == {("1", "0"), ("1", "1"), ("2", "0"), ("2", "1")}
+    for r in rows:
+        assert r["feasible"] in ("True", "False") and float(r["wall_time_s"]) > 0
+        assert (sweep / r["run_dir"] / RESULT_FILE).is_file()
+
+
+def test_sweep_with_a_failing_job(tmp_path: Path) -> None:
+    sweep = tmp_path / "sweep"
+    p = realize_cmd("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,9,2"),
+                    f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    assert p.returncode != 0  # the sweep reports the failure ...
+    assert "ce.n_elite = 9" in p.stderr and "Traceback" not in p.stderr
+    rows = _read_summary(sweep / "summary.csv")  # ... and every job is in the table
+    status = {r["overrides"].split("ce.n_elite=")[1].split()[0]: r for r in rows}
+    assert [status[k]["status"] for k in ("1", "9", "2")] == ["done", "failed", "done"]
+    assert "ce.n_elite = 9" in status["9"]["error"] and "ce.n_envs = 4" in status["9"]["error"]
+    assert (sweep / status["9"]["run_dir"] / "error.txt").is_file()
+
+
+def test_joblib_launcher_sweep(tmp_path: Path) -> None:
+    sweep = tmp_path / "sweep"
+    p = realize_cmd("-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
+                    *tiny(ce__iterations=1, controller__max_time_s=3), "seed=0,1", f"hydra.sweep.dir={sweep}",
+                    cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    rows = _read_summary(sweep / "summary.csv")
+    assert len(rows) == 2 and {r["status"] for r in rows} == {"done"}
+
+
+def test_submitit_local_sweep(tmp_path: Path) -> None:
+    sweep = tmp_path / "sweep"
+    p = realize_cmd("-m", "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5",
+                    *tiny(ce__iterations=1, controller__max_time_s=3), "seed=0,1", f"hydra.sweep.dir={sweep}",
+                    cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    rows = _read_summary(sweep / "summary.csv")
+    assert len(rows) == 2 and {r["status"] for r in rows} == {"done"}
+
+
+# --------------------------------------------------------------------------------------------
+# files (no simulator)
+# --------------------------------------------------------------------------------------------
+
+
+def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
+    h = History(["a.x", "a.y"])
+    for i in range(3):
+        h.append({"Z": np.full((2 + i, 2), float(i)), "cost": np.arange(2 + i, dtype=float)},
+                 n_samples=2 + i, success_share=0.5, best_cost=float("inf") if i == 0 else 10.0 - i,
+                 mean=None if i == 0 else np.ones(2), std=None if i == 0 else np.ones(2))
+    h.save(tmp_path / HISTORY_FILE)
+    back = load_history(tmp_path / HISTORY_FILE, keep=2)
+    assert len(back) == 2 and back.column_names == ["a.x", "a.y"]
+    np.testing.assert_array_equal(back.arrays()["Z_001"], np.ones((3, 2)))
+    assert np.isnan(back.arrays()["mean"][0]).all()
+    bad = History(["x"])
+    bad.append({"bad": np.array([object()])}, n_samples=1, success_share=0, best_cost=0, mean=None, std=None)
+    with pytest.raises(TypeError, match="object"):
+        bad.save(tmp_path / "x.npz")
+
+
+def test_summary_lists_jobs_without_results(tmp_path: Path) -> None:
+    for num, (status, err) in enumerate([("done", ""), ("failed", "RuntimeError: boom")]):
+        d = tmp_path / str(num)
+        d.mkdir()
+        (d / JOB_STATUS_FILE).write_text(json.dumps({"job_num": num, "overrides": [f"seed={num}"],
+                                                     "status": status, "error": err}))
+    (tmp_path / "0" / RESULT_FILE).write_text(json.dumps({"status": "done", "feasible": True, "best_cost": 412.0,
+                                                          "wall_time_s": 12.5, "iterations_done": 10}))
+    rows = _read_summary(write_summary(tmp_path))
+    assert [r["status"] for r in rows] == ["done", "failed"]
+    assert rows[0]["best_cost"] == "412.0" and rows[0]["feasible"] == "True"
+    assert rows[1]["error"] == "RuntimeError: boom"
