@@ -16,13 +16,14 @@ and register it in ``TEMPLATES``; plans can then name it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import fields
 from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
 
 from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.controllers.pid import PIDState, pid_init, pid_step
 from realize.kinematics import FINGERTIP_REACH
 from realize.regions import Annulus, Box, Fixed, Hemisphere, Region
 
@@ -80,15 +81,13 @@ class Template:
         return torch.zeros(len(rows), device=self.device)
 
 
-def _rows_f(x: Tensor) -> Tensor:
-    return x.to(torch.float32)
-
-
 class MoveTo(Template):
     """move_to(loc): A* on the padded occupancy grid, PID waypoint tracking, arm static.
 
     Success: ``||x_base - x_loc|| <= move_tolerance`` (paper ``in(loc)``). Failure: no path
-    (goal unreachable or outside the map) or timeout.
+    (goal unreachable or outside the map) or timeout. The last waypoint is the parameter itself,
+    even where A* had to snap it to a free cell of the padded grid: the padding is a planning
+    margin, the simulator decides whether the robot fits there.
     """
 
     name = "move_to"
@@ -99,75 +98,52 @@ class MoveTo(Template):
         self.goal = torch.zeros(n, 2, device=device)
         self.wp = torch.zeros(n, 1, 2, device=device)
         self.wp_len = torch.ones(n, dtype=torch.long, device=device)
-        self.wp_idx = torch.zeros(n, dtype=torch.long, device=device)
-        self.yaw_hold = torch.zeros(n, device=device)
-        self.prev_err = torch.zeros(n, 2, device=device)
-        self.integ = torch.zeros(n, 2, device=device)
+        z2, z1 = torch.zeros(n, 2, device=device), torch.zeros(n, device=device)
+        self.pid = PIDState(index=torch.zeros(n, dtype=torch.long, device=device), yaw_ref=z1.clone(),
+                            integral=z2.clone(), prev_error=z2.clone(), yaw_integral=z1.clone(),
+                            prev_yaw_error=z1.clone(), has_prev=torch.zeros(n, dtype=torch.bool, device=device),
+                            prev_cmd=torch.zeros(n, 3, device=device))
 
     @classmethod
     def accepts(cls, region: Region) -> bool:
         return region.dim == 2 and isinstance(region, (Annulus, Box, Fixed))
 
+    def _store(self, rows: Tensor, st: PIDState) -> None:
+        for f in fields(PIDState):
+            getattr(self.pid, f.name)[rows] = getattr(st, f.name).to(getattr(self.pid, f.name).dtype)
+
+    def _rows(self, rows: Tensor) -> PIDState:
+        return PIDState(**{f.name: getattr(self.pid, f.name)[rows] for f in fields(PIDState)})
+
     def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
-        cfg = ctx.cfg
         start = ctx.base[rows, :2]
         goal = params[:, :2].to(start)
         res = astar_world(ctx.occupancy, ctx.grid, start, goal)
         wps = path_to_waypoints(res, ctx.grid, occupied=ctx.occupancy, start_xy=start, goal_xy=goal)
-        pts, lens = wps.points.to(start), wps.lengths.clamp(min=1)
-        # the last waypoint is the parameter itself (A* may have snapped it to a free cell)
-        L = pts.shape[1] + 1
+        pts, lens = wps.points.to(start), wps.lengths
+        # append the parameter itself as the final waypoint
         full = torch.cat([pts, goal[:, None, :]], dim=1)
-        idx = torch.arange(L, device=self.device)[None]
+        idx = torch.arange(full.shape[1], device=self.device)[None]
+        full = torch.where((idx < lens[:, None] + 1)[..., None], full,
+                           goal[:, None, :].expand_as(full))
         lens = lens + 1
-        last = full.gather(1, (lens - 1)[:, None, None].expand(-1, 1, 2))
-        full = torch.where((idx < lens[:, None])[..., None], full, last)
-        # re-pad into the shared buffer
-        if L > self.wp.shape[1]:
-            pad = self.wp[:, -1:, :].expand(-1, L - self.wp.shape[1], -1)
-            self.wp = torch.cat([self.wp, pad], dim=1)
-        Lb = self.wp.shape[1]
-        if L < Lb:
+        L, Lb = full.shape[1], self.wp.shape[1]
+        if L > Lb:
+            self.wp = torch.cat([self.wp, self.wp[:, -1:, :].expand(-1, L - Lb, -1)], dim=1)
+        elif L < Lb:
             full = torch.cat([full, full[:, -1:, :].expand(-1, Lb - L, -1)], dim=1)
         self.wp[rows] = full
         self.wp_len[rows] = lens
-        self.wp_idx[rows] = 0
         self.goal[rows] = goal
-        self.yaw_hold[rows] = ctx.base[rows, 2]
-        self.prev_err[rows] = 0.0
-        self.integ[rows] = 0.0
+        self._store(rows, pid_init(ctx.cfg.pid, ctx.base[rows], self.wp[rows], lens))
         self.t[rows] = 0
         ctx.hold_arm(rows)
-        found = res.found.to(self.device)
-        return torch.where(found, 0, FAIL["no_path"])
+        return torch.where(res.found.to(self.device), 0, FAIL["no_path"])
 
     def act(self, ctx: "StepContext", rows: Tensor) -> None:
-        cfg = ctx.cfg.pid
-        pos = ctx.base[rows, :2]
-        yaw = ctx.base[rows, 2]
-        wp = self.wp[rows]
-        idx = self.wp_idx[rows]
-        lens = self.wp_len[rows]
-        # advance past waypoints within the switch radius (not the last one)
-        for _ in range(3):
-            tgt = wp.gather(1, idx[:, None, None].expand(-1, 1, 2))[:, 0]
-            near = ((tgt - pos).norm(dim=1) < cfg.switch_radius) & (idx < lens - 1)
-            idx = idx + near.long()
-        self.wp_idx[rows] = idx
-        tgt = wp.gather(1, idx[:, None, None].expand(-1, 1, 2))[:, 0]
-        err = tgt - pos
-        dt = ctx.dt
-        integ = (self.integ[rows] + err * dt).clamp(-cfg.integral_limit, cfg.integral_limit)
-        deriv = (err - self.prev_err[rows]) / dt
-        v = cfg.kp * err + cfg.ki * integ + cfg.kd * deriv
-        speed = v.norm(dim=1, keepdim=True)
-        v = v * torch.clamp(cfg.max_speed / (speed + 1e-9), max=1.0)
-        self.integ[rows] = integ
-        self.prev_err[rows] = err
-        yaw_err = torch.atan2(torch.sin(self.yaw_hold[rows] - yaw), torch.cos(self.yaw_hold[rows] - yaw))
-        w = (cfg.kp_yaw * yaw_err).clamp(-cfg.max_yaw_rate, cfg.max_yaw_rate)
-        # PID output is the world-frame velocity; the omni base takes it directly
-        ctx.base_cmd[rows] = torch.cat([v, w[:, None]], dim=1)
+        out = pid_step(ctx.cfg.pid, self._rows(rows), ctx.base[rows], self.wp[rows], self.wp_len[rows], ctx.dt)
+        self._store(rows, out.state)
+        ctx.base_cmd[rows] = robot_to_world(out.cmd, ctx.base[rows, 2])
         self.t[rows] += 1
 
     def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -179,6 +155,12 @@ class MoveTo(Template):
 
     def distance(self, ctx: "StepContext", rows: Tensor) -> Tensor:
         return (ctx.base[rows, :2] - self.goal[rows]).norm(dim=1)
+
+
+def robot_to_world(cmd: Tensor, yaw: Tensor) -> Tensor:
+    """(n, 3) robot-frame (forward, left, yaw rate) -> world-frame (vx, vy, yaw rate)."""
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    return torch.stack([c * cmd[:, 0] - s * cmd[:, 1], s * cmd[:, 0] + c * cmd[:, 1], cmd[:, 2]], dim=1)
 
 
 # phases of grasp / place

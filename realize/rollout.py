@@ -24,6 +24,7 @@ from torch import Tensor
 
 from realize.actions import FAIL, FAILURES, TEMPLATES, Template
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
+from realize.controllers.pid import PIDConfig
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
 from realize.cross_entropy import EvalResult
 from realize.regions import Box
@@ -33,20 +34,6 @@ from realize.task import TaskSpec
 
 class RolloutConfigError(ValueError):
     """A controller / rollout setting is invalid; the message names the key."""
-
-
-@dataclass
-class PIDConfig:
-    """Base waypoint tracking (Hydra ``controller.pid``)."""
-
-    kp: float = 1.5
-    ki: float = 0.0
-    kd: float = 0.05
-    integral_limit: float = 0.5
-    kp_yaw: float = 1.5
-    max_speed: float = 0.6  # m/s
-    max_yaw_rate: float = 1.0  # rad/s
-    switch_radius: float = 0.25  # m, advance to the next waypoint inside this radius
 
 
 @dataclass
@@ -80,27 +67,26 @@ class RolloutConfig:
     record_every: int = 5  # control steps between recorded trajectory samples
     diverge_speed: float = 50.0  # joint speed that marks a plan as diverged
     base_feedback: float = 3.0  # 1/s, base position feedback onto the fabric's base velocity
+    freeze_finished: bool = True  # put robots of finished / failed plans to sleep (saves physics)
     pid: PIDConfig = field(default_factory=PIDConfig)
     astar: AStarConfig = field(default_factory=AStarConfig)
     fabric: WholeBodyConfig = field(default_factory=WholeBodyConfig)
 
     def validate(self, prefix: str = "controller") -> None:
         for f in fields(self):
-            if f.name in ("pid", "astar", "fabric"):
+            if f.name in ("pid", "astar", "fabric", "freeze_finished"):
                 continue
             v = getattr(self, f.name)
             zero_ok = f.name in ("grasp_offset", "grasp_clearance", "place_drop")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
                 raise RolloutConfigError(
                     f"{prefix}.{f.name} = {v!r} is invalid: must be a finite number {'>= 0' if zero_ok else '> 0'}")
-        for sub in ("pid", "astar"):
-            obj = getattr(self, sub)
-            for f in fields(obj):
-                v = getattr(obj, f.name)
-                lo_ok = v >= 0 if f.name in ("ki", "kd", "padding") else v > 0
-                if not (isinstance(v, (int, float)) and math.isfinite(v) and lo_ok):
-                    raise RolloutConfigError(f"{prefix}.{sub}.{f.name} = {v!r} is invalid: must be a finite number "
-                                             f"{'>= 0' if f.name in ('ki', 'kd', 'padding') else '> 0'}")
+        for f in fields(self.astar):
+            v = getattr(self.astar, f.name)
+            lo_ok = v >= 0 if f.name == "padding" else v > 0
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and lo_ok):
+                raise RolloutConfigError(f"{prefix}.astar.{f.name} = {v!r} is invalid: must be a finite number "
+                                         f"{'>= 0' if f.name == 'padding' else '> 0'}")
         self.fabric.validate(f"{prefix}.fabric")
 
     @classmethod
@@ -120,7 +106,10 @@ class RolloutConfig:
                 sbad = set(v or {}) - sk
                 if sbad:
                     raise RolloutConfigError(f"{prefix}.{k}: unknown keys {sorted(sbad)}; allowed: {sorted(sk)}")
-                kw[k] = sub(**dict(v or {}))
+                try:
+                    kw[k] = sub(**dict(v or {}))
+                except ValueError as e:  # PIDConfig validates itself and names the field
+                    raise RolloutConfigError(f"{prefix}.{k}: {e}") from None
             else:
                 kw[k] = v
         cfg = cls(**kw)
@@ -340,6 +329,8 @@ class PlanRealizer:
             scene.set_base_velocity(ctx.base_cmd)
             scene.set_arm_targets(ctx.arm_cmd, ctx.arm_vel_cmd)
             scene.set_gripper(ctx.grip_cmd)
+            if cfg.freeze_finished:
+                scene.freeze(~running)
             # ---- physics
             scene.step()
             step += 1

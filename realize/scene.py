@@ -56,9 +56,9 @@ class SimSettings:
     """Physics settings (the Hydra ``sim`` group). Every field is a config key."""
 
     backend: str = "auto"  # auto | cpu | gpu
-    sim_freq: int = 100
+    sim_freq: int = 60
     control_freq: int = 20
-    solver_position_iterations: int = 15
+    solver_position_iterations: int = 10
     solver_velocity_iterations: int = 1
     cpu_workers: int | None = None  # None: from the core count
     grasp_min_force: float = 0.5  # N, per finger, for "holds the cube"
@@ -173,6 +173,7 @@ class BatchedScene:
         self._arm_target = torch.zeros(n, len(ARM_JOINTS), device=self.device)
         self._arm_vel_target = torch.zeros(n, len(ARM_JOINTS), device=self.device)
         self._grip_target = torch.full((n,), GRIPPER_OPEN, device=self.device)
+        self._frozen = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     # ------------------------------------------------------------------ backends
     def _setup_cpu(self) -> None:
@@ -208,6 +209,10 @@ class BatchedScene:
     def reset(self, seed: int = 0, randomize: bool = False) -> None:
         """Put every copy back in the task's initial state (same state for all unless randomize)."""
         self.env.reset(seed=seed, options=dict(randomize=randomize))
+        self._frozen.zero_()
+        if self.backend == "cpu":
+            for art in self._arts:
+                art.root.wake_up()
         q = self.whole_body_q()
         self._base_cmd.zero_()
         self._arm_target = q[:, 3:].clone()
@@ -332,13 +337,33 @@ class BatchedScene:
         self._arm_target = torch.where(m[:, None], q[:, 3:], self._arm_target)
         self._arm_vel_target = torch.where(m[:, None], torch.zeros_like(self._arm_vel_target), self._arm_vel_target)
 
+    def freeze(self, mask: torch.Tensor) -> None:
+        """Stop simulating the robots of the masked copies (finished or failed plans): zero their
+        velocities and put them to sleep until the next reset. On CPU a sleeping articulation
+        costs almost nothing; on GPU this only holds them still."""
+        new = mask.to(self.device, torch.bool) & ~self._frozen
+        if not bool(new.any()):
+            return
+        self._frozen |= new
+        idx = torch.nonzero(new).flatten().tolist()
+        self._base_cmd[new] = 0.0
+        if self.backend == "cpu":
+            for c in idx:
+                art = self._arts[c]
+                art.set_qvel(np.zeros(art.dof, dtype=np.float32))
+                art.root.put_to_sleep()
+
+    @property
+    def frozen(self) -> torch.Tensor:
+        return self._frozen.clone()
+
     def _apply_targets(self) -> None:
         base = self._base_cmd.numpy().astype(np.float64) if self.backend == "cpu" else self._base_cmd
         if self.backend == "cpu":
             arm = self._arm_target.numpy().astype(np.float64)
             arm_v = self._arm_vel_target.numpy().astype(np.float64)
             grip = self._grip_target.numpy().astype(np.float64)
-            for c in range(self.n):
+            for c in torch.nonzero(~self._frozen).flatten().tolist():  # writing wakes a sleeping robot
                 for j, joint in enumerate(self._base_joints[c]):
                     joint.set_drive_velocity_target(base[c, j])
                 for j, joint in enumerate(self._arm_joints[c]):
