@@ -122,7 +122,7 @@ class GeometryCfg:
     wall_center: tuple[float, float] = (0.0, 0.0)
     wall_size: tuple[float, float, float] = (1.6, 0.1, 1.0)
     # ramp variant: a tilted plank from above table1's height down onto table2's edge
-    ramp_center: tuple[float, float] = (0.0, 0.0)
+    ramp_center: tuple[float, float] = (0.0, -0.4)  # low end on table 2's near edge (y = -0.9)
     ramp_length: float = 1.0
     ramp_width: float = 0.4
     ramp_drop: float = 0.25
@@ -221,7 +221,6 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
                 yaw=-math.pi / 2 * (1 if t1.center[1] > t2.center[1] else -1), pitch=pitch,
                 color=(0.55, 0.55, 0.6, 1.0))
         )
-        # legs under the high end so it is a physical structure, not a floating plank
     sx, sy, syaw = cfg.robot_start
     for b in tables + extras:
         if b.contains_xy(sx, sy, margin=cfg.robot_radius):
