@@ -10,8 +10,9 @@ What it does:
     largest batch of the CE schedule), the ``PlanRealizer`` and the ``CrossEntropyOptimizer``
     are built and iterated. After every iteration ``history.npz``, ``checkpoint.json`` and
     ``result.json`` are written atomically (in that order: the checkpoint is the commit point),
-    a tqdm bar shows the success share and best cost, and the rerun logger (if present and
-    ``logging.rerun``) logs the iteration;
+    a tqdm bar shows the success share and best cost, the rerun logger (if present and
+    ``logging.rerun``) logs the iteration, and with ``logging.record`` the sample trajectories
+    go to ``trajectories_iter{k}.npz`` (``realize.figures`` format, with ``scene.json``);
   * ``resume=<run dir>`` continues that run in its own directory from its checkpoint with its
     saved config; on CPU the final result equals that of an uninterrupted run;
   * SIGINT/SIGTERM: the iteration in flight is dropped, ``result.json`` is rewritten with
@@ -423,6 +424,7 @@ def _iterate(
             log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n, scene.backend,
                      extra["setup_time_s"])
             rr_logger = _make_rerun_logger(spec, run_dir, start_it)
+            figure_files = _figure_files(spec, run_dir)
             bar = tqdm(total=spec.ce.iterations, initial=start_it, desc="CE", unit="it", dynamic_ncols=True,
                        disable=not spec.logging.progress, file=sys.stderr)
             while not opt.done:
@@ -430,7 +432,7 @@ def _iterate(
                 # the distribution this batch is drawn from (None: uniform over the regions)
                 drawn_from = (None, None) if cur_state is None else (cur_state.mean, cur_state.std)
                 t_eval = time.perf_counter()
-                res = realizer.rollout(Z, record=spec.logging.record and rr_logger is not None)
+                res = realizer.rollout(Z, record=spec.logging.record)
                 t_eval = time.perf_counter() - t_eval
                 rec = opt.tell(res.to_eval())
                 rec.eval_time = t_eval
@@ -464,6 +466,8 @@ def _iterate(
                 write_result("running")
                 if rr_logger is not None:
                     rr_logger = _log_rerun(rr_logger, rec, res, *drawn_from)
+                if figure_files is not None and res.traj_base is not None:
+                    figure_files = _save_trajectories(figure_files, run_dir, rec, res)
                 bar.set_postfix_str(
                     f"success {rec.success_share:.0%}, best cost "
                     + (f"{rec.best_cost:.0f}" if math.isfinite(rec.best_cost) else "-")
@@ -495,6 +499,34 @@ def _iterate(
     outcome = RunOutcome(run_dir, status, feasible, best, len(records), wall(), exit_code)
     _report(outcome, spec)
     return outcome
+
+
+def _figure_files(spec: RunSpec, run_dir: Path) -> Any:
+    """``realize.figures`` (scene.json now, trajectories_iter{k}.npz per iteration), if present."""
+    try:
+        from realize import figures
+    except ImportError as e:
+        log.warning("realize.figures is not available (%s); no scene.json / trajectory files", e)
+        return None
+    try:
+        figures.save_scene(run_dir, spec.task.layout, spec.geometry, padding=spec.rollout.astar.padding)
+    except Exception as e:  # figure inputs must not cost the search
+        log.warning("writing scene.json failed (%s: %s)", type(e).__name__, e)
+        return None
+    return figures
+
+
+def _save_trajectories(figures: Any, run_dir: Path, rec: Any, res: Any) -> Any:
+    top = int(rec.elite_idx[0]) if rec.elite_idx.numel() else -1
+    best = top if top >= 0 and bool(rec.feasible[top]) else -1
+    try:
+        figures.save_trajectories(run_dir, rec.iteration, res.traj_base, res.traj_ee, res.feasible, best,
+                                  Z=rec.Z, cost=res.cost, progress=res.progress, traj_t=res.traj_t)
+        return figures
+    except Exception as e:
+        log.warning("saving trajectories of iteration %d failed (%s: %s); stops", rec.iteration,
+                    type(e).__name__, e)
+        return None
 
 
 def _log_rerun(rr_logger: Any, rec: Any, res: Any, mean: Any, std: Any) -> Any:

@@ -18,6 +18,7 @@ plans per iteration) and ``ce.n_envs_end`` (last iteration, linear schedule); th
 from __future__ import annotations
 
 import math
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -122,21 +123,36 @@ class LoggingSettings:
         return out
 
 
+def _typed(v: Any, hint: Any, key: str) -> Any:
+    """Check/convert ``v`` against a simple annotation (int, float, str, bool, X | None)."""
+    args = typing.get_args(hint)
+    if args and type(None) in args:
+        if v is None:
+            return None
+        hint = next(a for a in args if a is not type(None))
+    if hint is bool:
+        return _bool(v, key)
+    if hint is int:
+        return _int(v, key)
+    if hint is float:
+        return _float(v, key)
+    if hint is str:
+        return _str(v, key)
+    return v
+
+
+def dataclass_from_dict(cls: type, d: Mapping[str, Any], prefix: str) -> Any:
+    """``cls(**d)`` for a flat dataclass of simple fields, unknown keys and wrong types refused."""
+    d = _mapping(d, prefix)
+    _unknown(d, [f.name for f in fields(cls)], prefix)
+    hints = typing.get_type_hints(cls)
+    return cls(**{k: _typed(v, hints.get(k), f"{prefix}.{k}") for k, v in d.items()})
+
+
 def sim_from_dict(d: Mapping[str, Any], prefix: str = "sim") -> SimSettings:
     from realize.scene import SimSettings
 
-    d = _mapping(d, prefix)
-    _unknown(d, [f.name for f in fields(SimSettings)], prefix)
-    s = SimSettings()
-    if "backend" in d:
-        s.backend = _str(d["backend"], f"{prefix}.backend")
-    for k in ("sim_freq", "control_freq", "solver_position_iterations", "solver_velocity_iterations"):
-        if k in d:
-            setattr(s, k, _int(d[k], f"{prefix}.{k}"))
-    if d.get("cpu_workers") is not None:
-        s.cpu_workers = _int(d["cpu_workers"], f"{prefix}.cpu_workers")
-    if "grasp_min_force" in d:
-        s.grasp_min_force = _float(d["grasp_min_force"], f"{prefix}.grasp_min_force")
+    s = dataclass_from_dict(SimSettings, d, prefix)
     try:
         s.validate()
     except ValueError as e:

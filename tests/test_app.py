@@ -99,7 +99,7 @@ def test_default_config_validates_without_simulating(no_sim: None) -> None:
     assert spec.ce.n_samples == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
     assert spec.task.describe() == "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
     assert spec.task.layout.names == ["Table1", "Cube_g", "Table2", "Cube_p", "Exit"]
-    assert spec.sim.sim_freq == 60 and spec.sim.solver_position_iterations == 4
+    assert asdict(spec.sim) == asdict(realize.scene.SimSettings())  # the yaml spells out the defaults
     assert spec.n_envs_max == 200
 
 
@@ -113,6 +113,11 @@ def test_experiment_presets() -> None:
     assert journal.n_envs_max == 3000
     assert journal.geometry.variant == "wall" and journal.geometry.extras[0].name == "wall"
     assert build_run_spec(plain(["scene=ramp"])).geometry.extras[0].name == "ramp"
+
+
+def test_plan_from_pddl_matches_the_yaml_plan(no_sim: None) -> None:
+    spec = build_run_spec(plain(["task.planner.enabled=true", "task.plan=null"]))
+    assert spec.task.describe() == build_run_spec(plain([])).task.describe()
 
 
 def test_controller_yaml_mirrors_rollout_defaults() -> None:
@@ -168,6 +173,7 @@ BAD = [
     (["sim.sim_freq=50"], ["sim.sim_freq = 50"]),
     (["sim.backend=tpu"], ["sim.backend", "tpu"]),
     (["sim.solver_position_iterations=0"], ["sim.solver_position_iterations = 0"]),
+    (["sim.control_freq=fast"], ["sim.control_freq", "fast", "integer"]),
     (["scene.variant=moon"], ["scene.variant", "moon"]),
     (["scene.robot_start=[0.0,1.2,0.0]"], ["scene.robot_start", "table1"]),
     (["controller.pid.kp=-1"], ["controller.pid", "kp", "-1"]),
@@ -290,6 +296,14 @@ def test_tiny_run_writes_results(tmp_path: Path) -> None:
     assert ck.iteration == 2 and len(ck.records) == 2
     rrd = tmp_path / "realize.rrd"
     assert rrd.is_file() and rrd.stat().st_size > 0
+    from realize.rerun_log import read_rrd_summary
+
+    rr = read_rrd_summary(rrd)
+    assert rr["iterations"] == [0, 1]
+    assert [rr["scalars"]["/stats/success/share"][i] for i in (0, 1)] == res["success_per_iter"]
+    assert (tmp_path / "scene.json").is_file()
+    with np.load(tmp_path / "trajectories_iter1.npz", allow_pickle=False) as tr:
+        assert tr["traj_base"].shape[0] == 4 and tr["traj_base"].shape[2] == 2
 
 
 def _compare(a: Path, b: Path) -> None:
@@ -330,6 +344,20 @@ def test_interrupt_after_iteration_2_then_resume(tmp_path: Path, uninterrupted: 
     res = json.loads((tmp_path / RESULT_FILE).read_text())
     assert res["interrupted"] is False and res["segments"] == 2 and res["resumed_from_iteration"] == 2
     _compare(uninterrupted, tmp_path)
+
+
+def test_sigterm_marks_the_run_interrupted(tmp_path: Path) -> None:
+    def term(i: int) -> None:
+        if i == 0:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    before = signal.getsignal(signal.SIGTERM)
+    out = run(cfg_of(tiny(ce__iterations=3)), tmp_path, after_iteration=term)
+    assert out.status == "interrupted" and out.exit_code == 143 and out.iterations_done == 1
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert res["interrupted"] is True and "SIGTERM" in res["error"]
+    assert load_checkpoint(tmp_path).iteration == 1
+    assert signal.getsignal(signal.SIGTERM) == before  # handlers restored
 
 
 def test_resume_refuses_changed_settings(uninterrupted: Path, no_sim: None) -> None:
@@ -455,3 +483,26 @@ def test_summary_lists_jobs_without_results(tmp_path: Path) -> None:
     assert [r["status"] for r in rows] == ["done", "failed"]
     assert rows[0]["best_cost"] == "412.0" and rows[0]["feasible"] == "True"
     assert rows[1]["error"] == "RuntimeError: boom"
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="BatchedScene.reset leaves PhysX contact caches of the previous rollout "
+                   "(the cube's), so a rollout in a fresh scene differs from one in a used scene by ~1e-3 m; "
+                   "remove this marker once reset is history-free")
+def test_resume_equals_uninterrupted_with_feasible_plans(tmp_path: Path) -> None:
+    """The full horizon (plans succeed, elites ranked by cost): interrupt after iteration 2,
+    resume in a fresh scene, same result as without the interruption."""
+    over = ["ce.n_envs=8", "ce.n_elite=3", "ce.iterations=3", "seed=1", "logging.progress=false",
+            "logging.rerun=false", "logging.record=false"]
+    ref = tmp_path / "ref"
+    run(cfg_of(over), ref)
+
+    def stop(i: int) -> None:
+        if i == 1:
+            raise KeyboardInterrupt
+
+    cut = tmp_path / "cut"
+    assert run(cfg_of(over), cut, after_iteration=stop).interrupted
+    run(cfg_of(["logging.progress=false", f"resume={cut}"]), tmp_path / "hydra_dir")
+    _compare(ref, cut)
+    assert json.loads((ref / RESULT_FILE).read_text())["feasible"]
