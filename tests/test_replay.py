@@ -1,0 +1,167 @@
+"""Replay, video and validation replicas from a run directory (CPU simulator).
+
+The run directory is made by hand: the composed default config (the seed task) and a plan
+vector known to reach the goal, written as ``result.json`` in the app's format. No CE search
+runs here, so the tests take seconds per rollout rather than a whole run.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from realize.app import CONFIG_DIR
+from realize.replay import (
+    HookedScene,
+    ReplayError,
+    build_replay_spec,
+    cube_friction,
+    load_run,
+    replay,
+    set_cube_friction,
+    validate,
+)
+from realize.results import RESULT_FILE, atomic_write_json
+from realize.run_config import build_run_spec
+from realize.scene import SimSettings
+
+# a plan of the seed task that reaches the goal with the default configs
+FEASIBLE_Z = [-0.85, 1.2, 0.0, 1.2, 0.8925, -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
+SAVED_COST = 491.0  # what a one-copy CPU rollout of FEASIBLE_Z gave when these tests were written
+SIM = SimSettings(backend="cpu")
+
+
+def _config(overrides: list[str]) -> dict:
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test_replay"):
+        cfg = compose(config_name="config", overrides=overrides)
+    d = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(d, dict)
+    return d
+
+
+def _write_run(run_dir: Path, overrides: list[str] = (), z: list[float] = FEASIBLE_Z) -> Path:
+    config = _config(list(overrides))
+    spec = build_run_spec(config)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(run_dir / RESULT_FILE, {
+        "status": "done", "feasible": True, "best_cost": SAVED_COST, "best_z": z,
+        "columns": list(spec.task.layout.column_names),
+        "n_envs_scene": 1, "backend": "cpu", "config": config,
+    })
+    return run_dir
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _write_run(tmp_path_factory.mktemp("run") / "seed")
+
+
+def test_load_run_and_spec(run_dir: Path) -> None:
+    run = load_run(run_dir)
+    assert run.best_z == FEASIBLE_Z and run.best_cost == SAVED_COST and run.n_envs_scene == 1
+    spec = build_replay_spec(run)
+    assert spec.sim.backend == "cpu" and spec.task.layout.dim == len(FEASIBLE_Z)
+
+
+def test_bad_run_dirs(tmp_path: Path) -> None:
+    with pytest.raises(ReplayError, match="not found"):
+        load_run(tmp_path)
+    (tmp_path / RESULT_FILE).write_text(json.dumps({"config": {}, "best_z": None}))
+    with pytest.raises(ReplayError, match="best_z"):
+        load_run(tmp_path)
+    for script in ("replay", "validate"):  # the command lines say so and exit 2
+        assert _script(script).main([str(tmp_path)]) == 2
+
+
+def _script(name: str):
+    import importlib.util
+
+    path = CONFIG_DIR.parent / "scripts" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"_script_{name}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_replay_reaches_the_goal(run_dir: Path) -> None:
+    rep = replay(run_dir)
+    assert rep.feasible, rep.failure
+    assert rep.failure == "" and rep.backend == "cpu" and rep.video is None
+    assert rep.cost_diff == rep.cost - SAVED_COST and rep.matches == (rep.cost == SAVED_COST)
+    assert 300 < rep.cost < 1000
+
+
+def test_hooked_scene_reports_steps() -> None:
+    seen: list[int] = []
+    with HookedScene(1, sim=SIM, on_step=seen.append, every=2) as s:
+        s.reset()
+        for _ in range(5):
+            s.step()
+        assert seen == [0, 2, 4] and s.step_count == 5
+
+
+def test_randomized_reset_and_friction_per_copy() -> None:
+    with HookedScene(3, sim=SIM, randomize=True) as s:
+        s.reset(seed=7)
+        cube_a, base_a = s.cube_pose(), s.base_pose()
+        s.reset(seed=7)
+        assert torch.equal(s.cube_pose(), cube_a) and torch.equal(s.base_pose(), base_a)  # seeded
+        g = s.geometry
+        nominal = torch.tensor(g.cube_pos[:2], dtype=torch.float32)
+        off = (cube_a[:, :2] - nominal).abs()
+        assert (off.max(dim=1).values > 1e-4).all() and (off <= s.u.cube_xy_noise + 1e-4).all()
+        assert len({round(float(v), 5) for v in cube_a[:, 0]}) == 3  # each copy drew its own
+        start_off = (base_a[:, :2] - torch.tensor(g.robot_start[:2])).abs()
+        assert (start_off <= s.u.robot_xy_noise + 1e-4).all() and (start_off.max(dim=1).values > 1e-4).all()
+
+        mu = set_cube_friction(s, [0.2, 1.0, 1.0])
+        assert np.allclose(cube_friction(s), np.stack([mu, mu], axis=1))
+        assert np.allclose(mu, g.cube_friction * np.array([0.2, 1.0, 1.0]))
+        with pytest.raises(ValueError):
+            set_cube_friction(s, [1.0, 1.0])
+        # the same shove slides the slippery cube further along the table
+        s.reset(seed=7)
+        start = s.cube_pose()[:, :2]
+        for c in range(2):
+            s.push_cube(c, (0.0, 0.6, 0.0))
+        for _ in range(10):
+            s.step()
+        slid = (s.cube_pose()[:, :2] - start).norm(dim=1)
+        assert slid[0] > slid[1] + 0.01
+
+
+def test_validation_writes_result_json(run_dir: Path) -> None:
+    rep = validate(run_dir, replicas=4, seed=3, friction_range=(0.8, 1.2))
+    doc = json.loads((run_dir / RESULT_FILE).read_text())
+    v = doc["validation"]
+    assert v["replicas"] == 4 and v["seed"] == 3 and 0.0 <= v["success_share"] <= 1.0
+    assert v["success_share"] == rep.success_share
+    assert sum(v["failures"].values()) == round(4 * (1 - v["success_share"]))
+    assert all(0.8 <= f / doc["config"]["scene"]["cube_friction"] <= 1.2 for f in v["friction"])
+    assert doc["best_z"] == FEASIBLE_Z and doc["config"]["seed"] == 0  # the rest is kept
+    assert rep.success_share > 0  # seed 3 gave 3 of 4 when written; the key matters here
+
+
+def test_video_is_written_and_shows_the_scene(tmp_path: Path) -> None:
+    import imageio.v2 as imageio
+
+    # a 3 s horizon: the rollout is cut (infeasible) but the video covers the start of the plan
+    d = _write_run(tmp_path / "short", ["controller.max_time_s=3"])
+    out = tmp_path / "v" / "best.mp4"
+    rep = replay(d, out, fps=10, every=3, width=160, height=120, hold_s=0.5)
+    v = rep.video
+    assert v is not None and out.is_file() and v.bytes == out.stat().st_size > 1000
+    assert (v.width, v.height) == (160, 120)
+    assert v.frames == 1 + 60 // 3 + 5 and v.seconds == pytest.approx(v.frames / 10)
+    reader = imageio.get_reader(str(out))
+    frames = np.stack(list(reader.iter_data()))  # list(reader) trips on its unknown length
+    reader.close()
+    assert frames.shape == (v.frames, 120, 160, 3)
+    assert frames.std(axis=(1, 2, 3)).min() > 10  # not blank
+    assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5  # the robot moved
