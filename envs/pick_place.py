@@ -124,7 +124,8 @@ class RealizePickPlaceEnv(BaseEnv):
         g = self.geometry
         cx = (g.bounds_low[0] + g.bounds_high[0]) / 2
         cy = (g.bounds_low[1] + g.bounds_high[1]) / 2
-        pose = sapien_utils.look_at(eye=[cx - 4.2, cy - 4.2, 4.0], target=[cx, cy, 0.4])
+        # from beyond table 2's side, high: start, both tables and the exit stay in frame
+        pose = sapien_utils.look_at(eye=[cx + 0.2, cy - 3.6, 3.5], target=[cx + 0.2, cy + 0.1, 0.3])
         return CameraConfig("render_camera", pose=pose, width=512, height=512, fov=1.0, near=0.01, far=100)
 
     # ------------------------------------------------------------------ building

@@ -152,7 +152,7 @@ class BatchedScene:
             # PhysX's worker threads and torch's intra-op threads fight over the same cores; the
             # per-step tensors here are small, so torch runs single-threaded on the CPU backend
             # (measured: a 16-plan rollout took 12x longer with torch's default thread pool).
-            if workers > 0 and self.sim.torch_threads_cpu is not None:
+            if self.sim.torch_threads_cpu is not None:
                 torch.set_num_threads(self.sim.torch_threads_cpu)
             self.env = gym.make("RealizePickPlace-v1", n_copies=n, sim_backend="physx_cpu", cpu_workers=workers, **common)
             self.device = torch.device("cpu")
