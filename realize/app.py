@@ -605,6 +605,8 @@ def preflight(args: list[str]) -> list[str]:
             raise ConfigError(f"cannot parse the override {a!r}: {msg}") from None
     resume_dir: str | None = None
     has_run_dir = False
+    # config dirs added through hydra.searchpath may hold more group options than configs/ does
+    check_groups = not any(o.key_or_group.startswith("hydra.searchpath") for o in parsed)
     for o in parsed:
         key = o.key_or_group
         if key == "hydra.run.dir":
@@ -612,7 +614,7 @@ def preflight(args: list[str]) -> list[str]:
         if o.is_delete():
             continue
         values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
-        if key in CONFIG_GROUPS and o.package is None:
+        if check_groups and key in CONFIG_GROUPS and o.package is None:
             options = _group_options(key)
             for v in values:
                 if v not in options and v != "null":

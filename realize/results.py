@@ -44,7 +44,9 @@ __all__ = [
     "load_checkpoint",
     "load_history",
     "package_versions",
+    "read_json",
     "save_checkpoint",
+    "series",
 ]
 
 RESULT_FILE = "result.json"

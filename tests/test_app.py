@@ -210,6 +210,15 @@ def test_malformed_yaml_task_file(tmp_path: Path, no_sim: None) -> None:
     assert str(bad) in str(ei.value) and "not valid YAML" in str(ei.value) and "line" in str(ei.value)
 
 
+def test_malformed_yaml_in_a_config_group(tmp_path: Path) -> None:
+    (tmp_path / "task").mkdir()
+    bad = tmp_path / "task" / "broken.yaml"
+    bad.write_text("params:\n  Table1: {type: annulus, center: [0, 1.2]\nplan: [move_to(Table1)]\n")
+    with pytest.raises(ConfigError) as ei:
+        preflight([f"hydra.searchpath=[file://{tmp_path}]", "task=broken"])
+    assert str(bad) in str(ei.value) and "line 2" in str(ei.value) and "\n" not in str(ei.value)
+
+
 def test_task_file_errors_name_the_file(tmp_path: Path, no_sim: None) -> None:
     task = yaml.safe_load((CONFIG_DIR / "task" / "pick_place.yaml").read_text())
     task["params"]["Cube_p"]["polar_max"] = 4.0
