@@ -124,8 +124,7 @@ class MoveTo(Template):
         # append the parameter itself as the final waypoint
         full = torch.cat([pts, goal[:, None, :]], dim=1)
         idx = torch.arange(full.shape[1], device=self.device)[None]
-        full = torch.where((idx < lens[:, None] + 1)[..., None], full,
-                           goal[:, None, :].expand_as(full))
+        full = torch.where((idx < lens[:, None])[..., None], full, goal[:, None, :].expand_as(full))
         lens = lens + 1
         L, Lb = full.shape[1], self.wp.shape[1]
         if L > Lb:

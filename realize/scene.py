@@ -213,9 +213,24 @@ class BatchedScene:
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: int = 0, randomize: bool = False) -> None:
-        """Put every copy back in the task's initial state (same state for all unless randomize)."""
-        self.env.reset(seed=seed, options=dict(randomize=randomize))
+        """Put every copy back in the task's initial state (same state for all unless randomize).
+
+        On CPU the reset is history-free: PhysX keeps contact caches of shape pairs that touched
+        in the previous rollout, so first every cube is parked far above its copy and one
+        physics step is taken (its pairs are dropped), then the task is reset again. A rollout
+        in a used scene then equals one in a fresh scene bit for bit.
+        """
         self._frozen.zero_()
+        if self.backend == "cpu":
+            self.env.reset(seed=seed, options=dict(randomize=randomize))
+            for art in self._arts:
+                art.root.wake_up()
+            for c, body in enumerate(self._cube_bodies):
+                body.set_linear_velocity(np.zeros(3, dtype=np.float32))
+                body.set_angular_velocity(np.zeros(3, dtype=np.float32))
+                body.entity.set_pose(sapien.Pose(p=[float(self.u.offsets[c][0]), float(self.u.offsets[c][1]), 50.0]))
+            self.u.scene.px.step()
+        self.env.reset(seed=seed, options=dict(randomize=randomize))
         if self.backend == "cpu":
             for art in self._arts:
                 art.root.wake_up()
@@ -356,6 +371,8 @@ class BatchedScene:
         if self.backend == "cpu":
             for c in idx:
                 art = self._arts[c]
+                for joint in self._base_joints[c]:  # a sleeping robot keeps its last targets
+                    joint.set_drive_velocity_target(0.0)
                 art.set_qvel(np.zeros(art.dof, dtype=np.float32))
                 art.root.put_to_sleep()
 

@@ -495,9 +495,6 @@ def test_summary_lists_jobs_without_results(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="BatchedScene.reset leaves PhysX contact caches of the previous rollout "
-                   "(the cube's), so a rollout in a fresh scene differs from one in a used scene by ~1e-3 m; "
-                   "remove this marker once reset is history-free")
 def test_resume_equals_uninterrupted_with_feasible_plans(tmp_path: Path) -> None:
     """The full horizon (plans succeed, elites ranked by cost): interrupt after iteration 2,
     resume in a fresh scene, same result as without the interruption."""

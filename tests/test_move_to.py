@@ -34,10 +34,6 @@ FIT_MARGIN = 0.05  # m: goals where the robot's disc clears every footprint by t
 TRACK_SLACK = 0.02  # m: the simulated base may cut a corner of the A* path by this much
 N_PLANS = 12
 
-SNAP_BUG = (
-    "actions.MoveTo.begin appends the goal after the padded waypoints: torch.where(idx < lens + 1, ...) "
-    "keeps one padding copy of the last A* waypoint as the final waypoint, so a plan whose goal A* "
-    "snapped (inside the padding) stops at the snapped cell; the fix is idx < lens")
 
 
 def footprint_clearance(xy: torch.Tensor, geometry: SceneGeometry) -> torch.Tensor:
@@ -99,7 +95,7 @@ def _check_paths(res: RolloutResult, geometry: SceneGeometry) -> float:
     return worst
 
 
-@pytest.mark.parametrize("zone", ["clear", pytest.param("padded", marks=pytest.mark.xfail(strict=True, reason=SNAP_BUG))])
+@pytest.mark.parametrize("zone", ["clear", "padded"])
 def test_move_to_table2_annulus_from_the_start(wall_scene: BatchedScene, zone: str) -> None:
     """move_to(Table2) from the start pose to points all around table 2 (also behind it)."""
     g = torch.Generator().manual_seed(0)

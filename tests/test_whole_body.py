@@ -141,12 +141,6 @@ def test_box_distance_signs_on_known_points(wb: WholeBodyFabric) -> None:
 # ----------------------------------------------------------------------------- (b) gradients
 
 
-def _finite_limits(wb: WholeBodyFabric) -> tuple[torch.Tensor, torch.Tensor]:
-    far = torch.full_like(wb.lower, 1e3)
-    return (torch.where(torch.isfinite(wb.lower), wb.lower, -far),
-            torch.where(torch.isfinite(wb.upper), wb.upper, far))
-
-
 def _gradcheck_fabric(wb: WholeBodyFabric, lower: torch.Tensor, upper: torch.Tensor) -> bool:
     N = 2
     q, qd = _states_near_table1(N, seed=3)
@@ -169,19 +163,14 @@ def _gradcheck_fabric(wb: WholeBodyFabric, lower: torch.Tensor, upper: torch.Ten
 
 def test_gradcheck_fetch_fabric_q_and_goal(wb: WholeBodyFabric) -> None:
     """gradcheck through the fabric acceleration with Fetch's pose map, box leaves (tables, a
-    yawed+pitched ramp, floor) and the joint limits, w.r.t. q and the goal. The continuous
-    joints (yaw, rolls) get far finite limits here: see the xfail test below."""
-    lower, upper = _finite_limits(wb)
-    assert _gradcheck_fabric(wb, lower, upper)
+    yawed+pitched ramp, floor) and the real joint limits (+-inf for yaw and the rolls),
+    w.r.t. q and the goal."""
+    assert _gradcheck_fabric(wb, wb.lower, wb.upper)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "fabrics.fabric_acceleration: the joint-limit leaf of an infinite limit (Fetch's yaw and "
-    "roll joints) is 0 forward but its backward gives 0 * inf = NaN (x ** (exp + 1) at x = inf)"))
 def test_gradients_through_step_are_finite(wb: WholeBodyFabric) -> None:
     """Backward through ``WholeBodyFabric.step`` itself (limits as it passes them, +-inf for
-    the continuous joints): gradients w.r.t. the reference state and the goal are finite. Once
-    this passes, the gradcheck above can drop its finite stand-in limits."""
+    the continuous joints): gradients w.r.t. the reference state and the goal are finite."""
     q, qd = _states_near_table1(3, seed=3)
     q.requires_grad_(True)
     goal = _goals(wb, 3, seed=4).requires_grad_(True)

@@ -411,9 +411,12 @@ def fabric_acceleration(
         f_le = f_le + torch.einsum("nli,nl->ni", Jc, m * a + f_le_x)
     if lower is not None and upper is not None:
         # x = q - lower (J = +1) and x = upper - q (J = -1); linear maps, a = 0
-        for sign, x in ((1.0, q - lo), (-1.0, up - q)):
+        for sign, x, lim in ((1.0, q - lo, lo), (-1.0, up - q, up)):
+            # an infinite limit has no leaf; keep x finite so gradients stay finite too
+            fin = torch.isfinite(lim)
+            x = torch.where(fin, x, torch.ones_like(x))
             xd = sign * qd
-            s = _one_sided(xd)
+            s = _one_sided(xd) * fin.to(dtype)
             h = -cfg.limit_lam / x ** cfg.limit_exp * xd ** 2
             m = 2.0 * cfg.limit_metric_lam / x ** cfg.limit_metric_exp * s
             f_le_x = (-cfg.limit_metric_exp * cfg.limit_metric_lam
