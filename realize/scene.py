@@ -216,24 +216,19 @@ class BatchedScene:
         """Put every copy back in the task's initial state (same state for all unless randomize).
 
         On CPU the reset is history-free: PhysX keeps contact caches of shape pairs that touched
-        in the previous rollout, so first every cube is parked far above its copy and one
-        physics step is taken (its pairs are dropped), then the task is reset again. A rollout
-        in a used scene then equals one in a fresh scene bit for bit.
+        in the previous rollout, so every cube is taken out of the scene and put back in (which
+        drops its pairs). A rollout in a used scene then equals one in a fresh scene bit for bit.
         """
         self._frozen.zero_()
-        if self.backend == "cpu":
-            self.env.reset(seed=seed, options=dict(randomize=randomize))
-            for art in self._arts:
-                art.root.wake_up()
-            for c, body in enumerate(self._cube_bodies):
-                body.set_linear_velocity(np.zeros(3, dtype=np.float32))
-                body.set_angular_velocity(np.zeros(3, dtype=np.float32))
-                body.entity.set_pose(sapien.Pose(p=[float(self.u.offsets[c][0]), float(self.u.offsets[c][1]), 50.0]))
-            self.u.scene.px.step()
         self.env.reset(seed=seed, options=dict(randomize=randomize))
         if self.backend == "cpu":
             for art in self._arts:
                 art.root.wake_up()
+            for body in self._cube_bodies:
+                entity = body.entity
+                scene = entity.scene
+                scene.remove_entity(entity)
+                scene.add_entity(entity)
         q = self.whole_body_q()
         self._base_cmd.zero_()
         self._arm_target = q[:, 3:].clone()
