@@ -28,18 +28,10 @@ import torch
 
 from envs.geometry import GeometryCfg, SceneGeometry
 from envs.fetch_omni import REST_QPOS
+from realize.kinematics import WHOLE_BODY_JOINT_NAMES
 
-BASE_JOINTS = ("root_x_axis_joint", "root_y_axis_joint", "root_z_rotation_joint")
-ARM_JOINTS = (
-    "torso_lift_joint",
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "upperarm_roll_joint",
-    "elbow_flex_joint",
-    "forearm_roll_joint",
-    "wrist_flex_joint",
-    "wrist_roll_joint",
-)
+BASE_JOINTS = WHOLE_BODY_JOINT_NAMES[:3]  # x, y, yaw
+ARM_JOINTS = WHOLE_BODY_JOINT_NAMES[3:]  # torso + 7 arm joints
 WHOLE_BODY_JOINTS = BASE_JOINTS + ARM_JOINTS
 FINGER_JOINTS = ("l_gripper_finger_joint", "r_gripper_finger_joint")
 FINGER_LINKS = ("l_gripper_finger_link", "r_gripper_finger_link")
