@@ -275,6 +275,14 @@ class _Manipulate(Template):
         self.phase_t[rows] = torch.where(changed, 0, self.phase_t[rows])
         return err, to_grip
 
+    def _grip_step(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """Advance the shared phases; returns (TCP error, phase, steps in phase, holds, and
+        whether the gripper has had ``grip_s`` to close / open)."""
+        err, _ = self._advance(ctx, rows)
+        ph, pt = self.phase[rows], self.phase_t[rows]
+        done = (ph == GRIP) & (pt >= ctx.steps(ctx.cfg.grip_s))
+        return err, ph, pt, ctx.holds(rows), done
+
     def _retreated(self, ctx: "StepContext", rows: Tensor, err: Tensor) -> Tensor:
         """Back at the pre-pose, or most of the way back out along the approach line."""
         span = (self.pre[rows] - self.target[rows]).norm(dim=1)
@@ -302,11 +310,7 @@ class Grasp(_Manipulate):
 
     def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         cfg = ctx.cfg
-        err, _ = self._advance(ctx, rows)
-        ph = self.phase[rows]
-        pt = self.phase_t[rows]
-        holds = ctx.holds(rows)
-        gripped = (ph == GRIP) & (pt >= ctx.steps(cfg.grip_s))
+        err, ph, pt, holds, gripped = self._grip_step(ctx, rows)
         not_held = gripped & ~holds
         self.phase[rows] = torch.where(gripped & holds, RETREAT, ph)
         self.phase_t[rows] = torch.where(gripped & holds, 0, pt)
@@ -355,12 +359,8 @@ class Place(_Manipulate):
 
     def check(self, ctx: "StepContext", rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         cfg = ctx.cfg
-        err, _ = self._advance(ctx, rows)
-        ph = self.phase[rows]
-        pt = self.phase_t[rows]
-        holds = ctx.holds(rows)
+        err, ph, pt, holds, released = self._grip_step(ctx, rows)
         dropped = (ph < GRIP) & ~holds & (self.t[rows] > 2)
-        released = (ph == GRIP) & (pt >= ctx.steps(cfg.grip_s))
         self.phase[rows] = torch.where(released, RETREAT, ph)
         self.phase_t[rows] = torch.where(released, 0, pt)
         if released.any():
