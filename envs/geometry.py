@@ -33,6 +33,7 @@ class Box:
     yaw: float = 0.0
     pitch: float = 0.0
     color: tuple[float, float, float, float] = (0.45, 0.32, 0.22, 1.0)
+    friction: float | None = None  # surface friction (static = dynamic); None: the simulator default
 
     @property
     def top_z(self) -> float:
@@ -121,11 +122,14 @@ class GeometryCfg:
     # wall variant: a thin wall across the direct route between the tables
     wall_center: tuple[float, float] = (0.0, 0.0)
     wall_size: tuple[float, float, float] = (1.6, 0.1, 1.0)
-    # ramp variant: a tilted plank from above table1's height down onto table2's edge
-    ramp_center: tuple[float, float] = (0.0, -0.4)  # low end on table 2's near edge (y = -0.9)
-    ramp_length: float = 1.0
+    # ramp variant: a slippery tilted plank between the tables whose low end rests on table2's
+    # near edge, so a cube released above it slides onto table2 (30 deg; PhysX averages the two
+    # frictions: (cube 1.0 + ramp 0.0) / 2 = 0.5 < tan 30 deg = 0.58)
+    ramp_center: tuple[float, float] = (0.0, -0.63)  # low end 3 cm over table 2's near edge
+    ramp_length: float = 0.7
     ramp_width: float = 0.4
-    ramp_drop: float = 0.25
+    ramp_drop: float = 0.35
+    ramp_friction: float = 0.0
 
 
 def _err(key: str, value: Any, allowed: str) -> GeometryError:
@@ -208,6 +212,10 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
     elif cfg.variant == "ramp":
         if cfg.ramp_length <= 0 or cfg.ramp_width <= 0:
             raise _err("ramp_length", (cfg.ramp_length, cfg.ramp_width), "length and width must be > 0")
+        if not 0 < cfg.ramp_drop < cfg.ramp_length:
+            raise _err("ramp_drop", cfg.ramp_drop, f"must be > 0 and < ramp_length ({cfg.ramp_length})")
+        if cfg.ramp_friction < 0:
+            raise _err("ramp_friction", cfg.ramp_friction, "must be >= 0")
         # The ramp runs along y from table1's side (high end) to table2's side (low end).
         t2 = tables[1]
         low_z = 2 * t2.half_size[2] + 0.01
@@ -219,7 +227,7 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
             Box("ramp", (cfg.ramp_center[0], cfg.ramp_center[1], (low_z + high_z) / 2),
                 (cfg.ramp_length / 2, cfg.ramp_width / 2, thick / 2),
                 yaw=-math.pi / 2 * (1 if t1.center[1] > t2.center[1] else -1), pitch=pitch,
-                color=(0.55, 0.55, 0.6, 1.0))
+                color=(0.55, 0.55, 0.6, 1.0), friction=cfg.ramp_friction)
         )
     sx, sy, syaw = cfg.robot_start
     for b in tables + extras:

@@ -146,7 +146,8 @@ class RealizePickPlaceEnv(BaseEnv):
 
     def _build_box(self, box: Box, offset: np.ndarray, copy: int):
         b = self.scene.create_actor_builder()
-        b.add_box_collision(half_size=list(box.half_size))
+        mat = None if box.friction is None else sapien.physx.PhysxMaterial(box.friction, box.friction, 0.0)
+        b.add_box_collision(half_size=list(box.half_size), material=mat)
         b.add_box_visual(half_size=list(box.half_size), material=sapien.render.RenderMaterial(base_color=list(box.color)))
         b.initial_pose = sapien.Pose(
             p=[box.center[0] + offset[0], box.center[1] + offset[1], box.center[2]],

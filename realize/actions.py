@@ -185,9 +185,18 @@ class _Manipulate(Template):
     def accepts(cls, region: Region) -> bool:
         return isinstance(region, Hemisphere)
 
+    def _centre_and_pre(self, ctx: "StepContext", params: Tensor, region: Region) -> tuple[Tensor, Tensor]:
+        """(object point, pre-pose) of the action: a hemisphere parameter is the pre-pose around
+        the region's fixed centre; a 3-D box parameter (place only) is the point itself, reached
+        straight down from ``place_pre_height`` above it."""
+        p = params[:, :3].to(torch.float32)
+        if isinstance(region, Hemisphere):
+            return torch.tensor(region.center, dtype=torch.float32, device=self.device).expand(len(p), 3), p
+        up = torch.tensor([0.0, 0.0, ctx.cfg.place_pre_height], device=self.device)
+        return p, p + up
+
     def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
-        centre = torch.tensor(region.center, dtype=torch.float32, device=self.device).expand(len(rows), 3)
-        pre = params[:, :3].to(torch.float32)
+        centre, pre = self._centre_and_pre(ctx, params, region)
         d = centre - pre
         approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
         self.pre[rows] = pre
@@ -331,13 +340,24 @@ class Place(_Manipulate):
     """place(g_p): while holding the cube, fabric to the pre-place g_p on the hemisphere around
     the place point, straight in, open the gripper, retreat to g_p.
 
+    Or, with a 3-D box region, place(p): the parameter is the release point p of the cube's
+    centre itself (approached top-down from ``place_pre_height`` above). The point need not be
+    on a surface: a cube released in the air falls, or slides down a ramp, and the action
+    succeeds once it rests; the plan's goal decides whether it came to rest where it should.
+
     Success: the TCP reached the place point within ``reach_tolerance`` (paper ``ee_in(g_p)``),
     the gripper let go (no finger contact with the cube) and the cube rests (speed below
     ``rest_speed``).
     """
 
     name = "place"
+    param_doc = ("a hemisphere region (pre-pose on its surface, approach towards its centre) or a 3-D box "
+                 "of release points (approached top-down)")
     closes_gripper = False
+
+    @classmethod
+    def accepts(cls, region: Region) -> bool:
+        return isinstance(region, Hemisphere) or (isinstance(region, Box) and region.dim == 3)
 
     def begin(self, ctx: "StepContext", rows: Tensor, params: Tensor, region: Region) -> Tensor:
         code = super().begin(ctx, rows, params, region)

@@ -58,6 +58,7 @@ class RolloutConfig:
     grasp_offset: float = 0.0  # m, extra back-off of the TCP target along the approach
     grasp_clearance: float = 0.006  # m, fingertips stay this far above the supporting surface
     place_drop: float = 0.004  # m, the held cube is released this high above its place point
+    place_pre_height: float = 0.12  # m, pre-place above a release point (place with a 3-D box region)
     retreat_share: float = 0.6  # retreat done once the TCP is this share of the way back out
     grip_s: float = 0.5  # s to close / open the gripper
     approach_speed: float = 0.15  # m/s of the straight moves in to and out from the object

@@ -412,6 +412,24 @@ class BatchedScene:
             v[copy] = torch.tensor(velocity, device=self.device)
             self._cube.set_linear_velocity(v)
 
+    def place_cube(self, positions: torch.Tensor) -> None:
+        """Teleport every copy's cube to ``positions`` (N, 3) in its copy's local frame, axis-aligned
+        and at rest (tests and what-if checks: where does a cube dropped here end up?)."""
+        p = torch.as_tensor(positions, dtype=torch.float32).reshape(self.n, 3).cpu()
+        if self.backend == "cpu":
+            for c, body in enumerate(self._cube_bodies):
+                xyz = p[c].numpy() + np.array([*self._offsets[c].tolist(), 0.0], dtype=np.float32)
+                body.entity.set_pose(sapien.Pose(xyz))
+                body.set_linear_velocity(np.zeros(3, dtype=np.float32))
+                body.set_angular_velocity(np.zeros(3, dtype=np.float32))
+        else:  # pragma: no cover - CUDA only
+            pose = self._cube.pose.raw_pose.clone()
+            pose[:, :3] = p.to(self.device)  # every GPU sub-scene has its own frame
+            pose[:, 3:] = torch.tensor([1.0, 0.0, 0.0, 0.0], device=self.device)
+            self._cube.set_pose(pose)
+            self._cube.set_linear_velocity(torch.zeros(self.n, 3, device=self.device))
+            self._cube.set_angular_velocity(torch.zeros(self.n, 3, device=self.device))
+
     # ------------------------------------------------------------------ rendering
     def render(self) -> np.ndarray:
         """(H, W, 3) uint8 frame of copy 0 from the task's render camera."""

@@ -385,3 +385,12 @@ def test_wrong_z_shape(spec: RunSpec, scene3: BatchedScene, shape: tuple[int, ..
     else:
         assert "Z must be (M, 12)" in msg and str(tuple(shape)) in msg
     assert counter.calls == 0  # nothing simulated
+
+
+def test_place_takes_a_box_of_release_points_grasp_does_not() -> None:
+    from realize.actions import Grasp, Place
+    from realize.regions import Box as BoxRegion
+
+    box3 = BoxRegion([-0.1, -1.4, 0.76], [0.1, -0.1, 1.15])
+    assert Place.accepts(box3) and not Grasp.accepts(box3)
+    assert not Place.accepts(BoxRegion([0.0, 0.0], [1.0, 1.0]))

@@ -129,3 +129,30 @@ def test_gpu_backend_matches_shapes() -> None:  # pragma: no cover - GPU machine
         _drive(s, 10)
         assert s.whole_body_q().shape == (16, 11) and s.whole_body_q().device.type == "cuda"
         assert s.cube_pose().shape == (16, 7)
+
+
+def test_ramp_slides_a_released_cube_onto_table2() -> None:
+    """Physical fact behind the ramp scenario: a cube let go anywhere above the slippery ramp
+    comes to rest on table 2; one let go above the floor beside the ramp does not."""
+    over_ramp = [(0.0, -0.4, 1.12), (0.1, -0.6, 1.0), (-0.1, -0.85, 0.88)]
+    beside = [(0.6, -0.6, 0.9)]
+    with BatchedScene(4, geometry=dict(variant="ramp"), sim=SIM) as s:
+        s.reset()
+        s.place_cube(torch.tensor(over_ramp + beside))
+        for _ in range(60):
+            s.step()
+        p = s.cube_pose()[:, :3]
+        t2 = s.geometry.table("table2")
+        top = 2 * t2.half_size[2] + s.geometry.cube_half_size
+        on_t2 = ((p[:, 0] - t2.center[0]).abs() <= t2.half_size[0]) & ((p[:, 1] - t2.center[1]).abs() <= t2.half_size[1])
+        on_t2 &= (p[:, 2] - top).abs() < 0.01
+        assert on_t2.tolist() == [True, True, True, False]
+        assert float(s.cube_velocity()[:3, :3].norm(dim=1).max()) < 0.05
+
+
+@pytest.mark.parametrize("key, value", [("ramp_drop", 0.8), ("ramp_friction", -0.1)])
+def test_bad_ramp_names_the_key(key: str, value: float) -> None:
+    from envs.geometry import build_geometry, geometry_cfg_from_dict
+
+    with pytest.raises(GeometryError, match=key):
+        build_geometry(geometry_cfg_from_dict({"variant": "ramp", key: value}))
