@@ -196,6 +196,8 @@ def _result_doc(
         "iteration_time_s": series(records, "wall_time"),
         "final_mean": None if state is None or state.mean is None else state.mean.tolist(),
         "final_std": None if state is None or state.std is None else state.std.tolist(),
+        # mixture weights (ce.n_modes > 1; final_mean/final_std are then k lists of D)
+        "final_weights": None if state is None or state.weights is None else state.weights.tolist(),
         "wall_time_s": wall_time_s,
         "seed": spec.seed,
         "task": {"name": spec.task.name, "source": spec.task.source},
@@ -430,7 +432,8 @@ def _iterate(
             while not opt.done:
                 Z = opt.ask()
                 # the distribution this batch is drawn from (None: uniform over the regions)
-                drawn_from = (None, None) if cur_state is None else (cur_state.mean, cur_state.std)
+                drawn_from = (None, None, None) if cur_state is None else (cur_state.mean, cur_state.std,
+                                                                              cur_state.weights)
                 t_eval = time.perf_counter()
                 res = realizer.rollout(Z, record=spec.logging.record)
                 t_eval = time.perf_counter() - t_eval
@@ -454,6 +457,7 @@ def _iterate(
                     best_cost=rec.best_cost,
                     mean=rec.mean,
                     std=rec.std,
+                    weights=rec.weights,
                 )
                 new_records = records + [json_safe(rec.summary())]
                 history.save(run_dir / HISTORY_FILE)
@@ -517,7 +521,7 @@ def _figure_files(spec: RunSpec, run_dir: Path) -> Any:
 
 
 def _save_trajectories(figures: Any, run_dir: Path, rec: Any, res: Any) -> Any:
-    top = int(rec.elite_idx[0]) if rec.elite_idx.numel() else -1
+    top = int(rec.best_idx) if rec.elite_idx.numel() else -1  # best_idx: elite_idx[0] unless kNN-reordered
     best = top if top >= 0 and bool(rec.feasible[top]) else -1
     try:
         figures.save_trajectories(run_dir, rec.iteration, res.traj_base, res.traj_ee, res.feasible, best,
@@ -529,9 +533,9 @@ def _save_trajectories(figures: Any, run_dir: Path, rec: Any, res: Any) -> Any:
         return None
 
 
-def _log_rerun(rr_logger: Any, rec: Any, res: Any, mean: Any, std: Any) -> Any:
+def _log_rerun(rr_logger: Any, rec: Any, res: Any, mean: Any, std: Any, weights: Any = None) -> Any:
     try:
-        rr_logger.log_iteration(rec, res, mean, std)
+        rr_logger.log_iteration(rec, res, mean, std, weights)
         return rr_logger
     except Exception as e:  # a logging bug must not cost the search
         log.warning("rerun logging failed at iteration %d (%s: %s); logging stops", rec.iteration,

@@ -13,6 +13,23 @@ a progress score per row), so it runs and is tested without a simulator.
   ``min_std`` and optionally smoothed with ``alpha`` (1 = paper, no smoothing).
 * It stops after ``iterations`` or, if ``converge_std`` is set, once every std is below it.
 
+Two multimodal/robust options, both off by default (the defaults take exactly the code paths
+and random draws of the single-Gaussian search, bit for bit):
+
+* ``n_modes = k > 1``: the distribution is a mixture of ``k`` diagonal normals (``mean``/``std``
+  ``(k, D)``, ``weights`` ``(k,)``). The refit clusters the elites by k-means (k-means++ seeds
+  drawn from the CE generator) in the normalised parameter space (each column divided by its
+  region's bounding-box width), fits one normal per cluster and sets the weights to the
+  clusters' (rank-weighted) shares. New clusters are matched to the previous modes by the
+  smallest total distance of their means, so ``alpha`` smooths each mode with its predecessor.
+  A mode whose cluster is empty (fewer distinct elites than modes) keeps its parameters with
+  weight 0. Each batch gives mode ``j`` ``round(weights[j] * N)`` rows (largest remainder).
+* ``knn_robust = k > 0``: feasible samples are ranked for the elite set by the mean cost of
+  their ``k`` nearest samples of the batch (normalised space, the sample itself included), an
+  infeasible neighbour counting as ``failure_cost`` (``CEConfig.failure_cost``, else
+  ``EvalResult.failure_cost``: the rollout's horizon cost). Infeasible samples keep the
+  progress order of the fallback. The reported best sample is still the best single sample.
+
 Bookkeeping (sampling, ranking, refits, history) runs on the CPU in ``CEConfig.dtype`` with one
 ``torch.Generator`` seeded from the config, so the same seed gives bit-identical samples on any
 machine; only the Z handed to ``evaluate`` is moved to the caller's device. The whole optimizer
@@ -21,13 +38,13 @@ state (``CEState``) round-trips through plain JSON (``to_dict``/``from_dict``) f
 Angles (a hemisphere yaw column) are treated as plain reals: the Gaussian does not wrap, and
 ``project`` wraps/clamps its draws; keep yaw ranges away from the +-pi seam if that matters.
 
-Not here: simulation, plan semantics, logging backends, multi-modal fits (``n_modes > 1``) and
-robust kNN re-scoring (``knn_robust > 0``); their config keys exist and are validated but only the
-defaults are accepted for now.
+Not here: simulation, plan semantics, logging backends, full-covariance normals, mixtures whose
+number of modes changes during a run.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -48,6 +65,9 @@ __all__ = [
     "CrossEntropyOptimizer",
     "optimize",
     "rank_samples",
+    "kmeans",
+    "knn_mean",
+    "mode_counts",
     "FALLBACKS",
     "SCHEDULES",
 ]
@@ -80,6 +100,12 @@ class CEConfig:
     Sample counts: ``schedule="constant"`` uses ``n_samples`` every iteration; ``"linear"`` goes
     from ``n_samples`` at iteration 0 to ``n_samples_end`` at iteration ``iterations - 1``
     (rounded), as the journal version's 3000 -> 300.
+
+    Multimodal / robust options (off by default, see the module docstring): ``n_modes`` (>= 1,
+    <= ``n_elite``) normals in a mixture; ``knn_robust`` (0 = off, else the neighbourhood size,
+    <= the samples of every iteration) ranks feasible elites by their neighbourhood's mean cost;
+    ``failure_cost`` (null or a number) is what an infeasible neighbour costs there (null: the
+    evaluator's ``EvalResult.failure_cost``, e.g. the rollout's horizon in control steps).
     """
 
     n_samples: int = 200
@@ -97,6 +123,7 @@ class CEConfig:
     rank_weighted: bool = False
     n_modes: int = 1
     knn_robust: int = 0
+    failure_cost: float | None = None
     dtype: str = "float64"
     keep_samples: bool = True
 
@@ -161,10 +188,22 @@ class CEConfig:
             raise ValueError(f"{prefix}.rank_weighted must be true or false, got {self.rank_weighted!r}")
         if not isinstance(self.keep_samples, bool):
             raise ValueError(f"{prefix}.keep_samples must be true or false, got {self.keep_samples!r}")
-        if self.n_modes != 1:
-            raise ValueError(f"{prefix}.n_modes: only 1 (a single Gaussian) is implemented, got {self.n_modes}")
-        if self.knn_robust != 0:
-            raise ValueError(f"{prefix}.knn_robust: robust kNN scoring is not implemented yet (use 0), got {self.knn_robust}")
+        if self.n_modes < 1:
+            raise ValueError(f"{prefix}.n_modes must be >= 1 (1 = a single Gaussian), got {self.n_modes}")
+        if self.n_modes > self.n_elite:
+            raise ValueError(
+                f"{prefix}.n_modes ({self.n_modes}) must be <= {prefix}.n_elite ({self.n_elite}): "
+                "each mode is fitted to a cluster of elites"
+            )
+        if self.knn_robust < 0:
+            raise ValueError(f"{prefix}.knn_robust must be >= 0 (0 = off), got {self.knn_robust}")
+        if self.knn_robust > n_min:
+            raise ValueError(
+                f"{prefix}.knn_robust ({self.knn_robust}) must be <= the number of samples at every iteration "
+                f"(only {n_min} at iteration {i_min})"
+            )
+        if self.failure_cost is not None and not is_num(self.failure_cost):
+            raise ValueError(f"{prefix}.failure_cost must be a finite number or null, got {self.failure_cost!r}")
         if self.dtype not in _DTYPES:
             raise ValueError(f"{prefix}.dtype must be one of {list(_DTYPES)}, got {self.dtype!r}")
 
@@ -194,7 +233,8 @@ class CEConfig:
             default = f.default
             setattr(obj, f.name, d.get(f.name, default))
         # YAML may give floats for integer keys (1e3): accept exact integers
-        for key in ("n_samples", "n_elite", "iterations", "n_samples_end", "min_feasible_refit", "seed"):
+        for key in ("n_samples", "n_elite", "iterations", "n_samples_end", "min_feasible_refit", "seed",
+                    "n_modes", "knn_robust"):
             v = getattr(obj, key)
             if isinstance(v, float) and v.is_integer():
                 setattr(obj, key, int(v))
@@ -218,12 +258,15 @@ class EvalResult:
     ``progress`` (N,) float, higher is closer to success (e.g. actions completed); ``distance``
     (N,) float, lower is closer to success (tie-break for equal progress). ``progress`` and
     ``distance`` are only used to rank infeasible samples and may be ``None``.
+    ``failure_cost`` is what an infeasible sample costs for robust kNN scoring (e.g. the
+    rollout's horizon); only read with ``knn_robust > 0`` and no ``CEConfig.failure_cost``.
     """
 
     cost: Tensor
     feasible: Tensor
     progress: Tensor | None = None
     distance: Tensor | None = None
+    failure_cost: float | None = None
 
     def to_cpu(self, n: int, dtype: torch.dtype) -> EvalResult:
         """Validate shapes against ``n`` and return a CPU copy in ``dtype`` (bool feasibility)."""
@@ -241,6 +284,7 @@ class EvalResult:
             feasible=vec(self.feasible, "feasible", torch.bool),
             progress=None if self.progress is None else vec(self.progress, "progress", dtype),
             distance=None if self.distance is None else vec(self.distance, "distance", dtype),
+            failure_cost=self.failure_cost,
         )
 
 
@@ -275,6 +319,105 @@ def _sort_key(feasible: bool, cost: float, progress: float, distance: float) -> 
 
 
 # --------------------------------------------------------------------------------------------
+# multimodal and robust helpers (batch-first, CPU, deterministic given the generator)
+# --------------------------------------------------------------------------------------------
+
+
+def _sq_dist(X: Tensor, C: Tensor) -> Tensor:
+    """``(m, c)`` exact squared Euclidean distances (no matmul shortcut: ties stay ties)."""
+    return ((X[:, None, :] - C[None, :, :]) ** 2).sum(-1)
+
+
+def kmeans(X: Tensor, k: int, generator: torch.Generator, max_iter: int = 100) -> tuple[Tensor, int]:
+    """Cluster the rows of ``X (m, D)`` into at most ``k`` groups; returns ``(labels (m,), c)``.
+
+    k-means++ seeding draws from ``generator`` (the first centre uniformly, each further one with
+    probability proportional to the squared distance to the nearest centre), then Lloyd steps
+    until the labels stop changing. Seeding stops early when every row coincides with a centre
+    (fewer distinct rows than ``k``), so ``c <= min(k, m)`` and labels lie in ``[0, c)``. A
+    centre that loses all its rows stays where it was. Ties go to the lower centre index.
+    """
+    m = X.shape[0]
+    if m == 0:
+        return torch.zeros(0, dtype=torch.long), 0
+    first = int(torch.randint(m, (1,), generator=generator))
+    centers = [X[first]]
+    d2 = _sq_dist(X, X[first][None])[:, 0]
+    while len(centers) < k:
+        total = float(d2.sum())
+        if not total > 0.0:
+            break
+        u = torch.rand(1, generator=generator, dtype=X.dtype) * total
+        i = int(torch.searchsorted(torch.cumsum(d2, 0), u, right=True).clamp(max=m - 1))
+        if not float(d2[i]) > 0.0:  # rounding at the very end of the cumulative sum
+            i = int(torch.nonzero(d2 > 0).flatten()[-1])
+        centers.append(X[i])
+        d2 = torch.minimum(d2, _sq_dist(X, X[i][None])[:, 0])
+    C = torch.stack(centers)
+    c = C.shape[0]
+    labels = _sq_dist(X, C).argmin(1)
+    for _ in range(max_iter):
+        onehot = torch.nn.functional.one_hot(labels, c).to(X.dtype)  # (m, c)
+        count = onehot.sum(0)
+        sums = onehot.T @ X
+        C = torch.where(count[:, None] > 0, sums / count.clamp_min(1.0)[:, None], C)
+        new = _sq_dist(X, C).argmin(1)
+        if torch.equal(new, labels):
+            break
+        labels = new
+    return labels, c
+
+
+def knn_mean(X: Tensor, values: Tensor, k: int) -> Tensor:
+    """``(N,)``: the mean of ``values`` over each row's ``k`` nearest rows of ``X (N, D)``,
+    the row itself always included (its own distance is set below every other)."""
+    n = X.shape[0]
+    k = min(k, n)
+    d = torch.cdist(X, X)
+    d.diagonal().fill_(-1.0)
+    idx = torch.topk(d, k, dim=1, largest=False, sorted=True).indices  # (N, k)
+    return values[idx].mean(1)
+
+
+def mode_counts(weights: Tensor, n: int) -> Tensor:
+    """``(k,)`` long, summing to ``n``: ``floor(w * n)`` per mode plus one row for each of the
+    largest remainders (ties to the lower index). ``weights`` need not be normalised."""
+    w = weights.clamp_min(0.0)
+    w = w / w.sum() if float(w.sum()) > 0 else torch.full_like(w, 1.0 / w.numel())
+    exact = w * n
+    counts = torch.floor(exact).to(torch.long)
+    rest = n - int(counts.sum())
+    if rest > 0:
+        frac = exact - counts.to(exact.dtype)
+        order = torch.sort(-frac, stable=True).indices
+        counts[order[:rest]] += 1
+    return counts
+
+
+def _match_modes(new: Tensor, old: Tensor) -> list[int]:
+    """For each row of ``new (c, D)`` a distinct row of ``old (k, D)``, c <= k, minimising the
+    summed distance: exhaustive for k <= 6, else greedy by increasing pair distance."""
+    c, k = new.shape[0], old.shape[0]
+    d = torch.cdist(new, old)
+    if k <= 6:
+        best: tuple[float, tuple[int, ...]] | None = None
+        for perm in itertools.permutations(range(k), c):
+            tot = float(sum(d[i, j] for i, j in enumerate(perm)))
+            if best is None or tot < best[0]:
+                best = (tot, perm)
+        assert best is not None
+        return list(best[1])
+    out = [-1] * c
+    used: set[int] = set()
+    for flat in torch.sort(d.flatten(), stable=True).indices.tolist():
+        i, j = divmod(flat, k)
+        if out[i] < 0 and j not in used:
+            out[i] = j
+            used.add(j)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
 # state, records, result
 # --------------------------------------------------------------------------------------------
 
@@ -300,7 +443,9 @@ class CEState:
     ``None`` while the distribution is still the uniform one over the regions. ``best_*`` is the
     best sample of all completed iterations (feasible first; see ``rank_samples``).
     ``init_mean``/``init_std`` are the moments of the last uniform batch (the "previous"
-    distribution for the first smoothed refit).
+    distribution for the first smoothed refit). With ``n_modes = k > 1`` ``mean``/``std`` are
+    ``(k, D)`` and ``weights`` ``(k,)`` holds the mixture weights; it is ``None`` otherwise (and
+    left out of ``to_dict``, so single-mode checkpoints read as before).
     """
 
     iteration: int
@@ -316,10 +461,11 @@ class CEState:
     best_distance: float = math.inf
     best_iteration: int = -1
     converged: bool = False
+    weights: Tensor | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (lists, numbers, strings for inf/nan; the RNG state as a byte list)."""
-        return {
+        d = {
             "iteration": self.iteration,
             "rng_state": self.rng_state.to(torch.uint8).tolist(),
             "mean": _t2l(self.mean),
@@ -334,6 +480,9 @@ class CEState:
             "best_iteration": self.best_iteration,
             "converged": self.converged,
         }
+        if self.weights is not None:
+            d["weights"] = _t2l(self.weights)
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], dtype: torch.dtype = torch.float64) -> CEState:
@@ -354,6 +503,7 @@ class CEState:
             best_distance=_j2f(d.get("best_distance", math.inf)),
             best_iteration=int(d.get("best_iteration", -1)),
             converged=bool(d.get("converged", False)),
+            weights=t(d.get("weights")),
         )
 
     def copy(self) -> CEState:
@@ -374,6 +524,7 @@ class CEState:
             best_distance=self.best_distance,
             best_iteration=self.best_iteration,
             converged=self.converged,
+            weights=c(self.weights),
         )
 
 
@@ -390,6 +541,11 @@ class IterationRecord:
     ``best_cost`` is the best feasible cost of all iterations so far (inf if none; never
     increases); ``iteration_best_cost`` the best feasible cost of this batch. Elite cost stats
     are over the feasible elites (NaN if none). Times in seconds.
+
+    With ``n_modes > 1`` ``mean``/``std`` are ``(k, D)`` and ``weights`` ``(k,)`` (else
+    ``None``). ``best_idx`` is the batch's best single sample (feasible by cost, else the
+    fallback order), which with ``knn_robust`` need not be ``elite_idx[0]``; ``robust_cost`` (N,)
+    is the kNN score used to rank the feasible elites (``None`` when ``knn_robust`` is 0).
     """
 
     iteration: int
@@ -414,10 +570,13 @@ class IterationRecord:
     eval_time: float
     wall_time: float
     converged: bool
+    weights: Tensor | None = None
+    best_idx: int = -1
+    robust_cost: Tensor | None = None
 
     def summary(self) -> dict[str, Any]:
         """Scalars and the distribution as plain Python values (for JSON/CSV logs)."""
-        return {
+        out = {
             "iteration": self.iteration,
             "n_samples": self.n_samples,
             "sampled_from": self.sampled_from,
@@ -436,6 +595,9 @@ class IterationRecord:
             "wall_time": self.wall_time,
             "converged": self.converged,
         }
+        if self.weights is not None:
+            out["weights"] = _t2l(self.weights)
+        return out
 
 
 @dataclass
@@ -445,7 +607,7 @@ class CEResult:
     ``best_z`` (D,) with ``best_params`` its per-parameter split; ``best_feasible`` is False
     only when no sample was ever feasible (then ``best_z`` is the top-ranked infeasible one).
     ``history`` holds the iterations run by *this* call (a resumed run starts at its
-    ``state.iteration``).
+    ``state.iteration``). ``mean``/``std``/``weights`` as in ``CEState``.
     """
 
     best_z: Tensor
@@ -458,6 +620,7 @@ class CEResult:
     converged: bool
     history: list[IterationRecord] = field(default_factory=list)
     state: CEState | None = None
+    weights: Tensor | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -500,17 +663,34 @@ class CrossEntropyOptimizer:
             self._gen.set_state(self._state.rng_state)
         self._pending: tuple[Tensor, str, float] | None = None
         self._eval_time = math.nan  # set by run() around evaluate
+        # normalised space for clustering and kNN: each column over its region's bounding box
+        low, high = layout.bounds()
+        width = high - low
+        self._norm_low = low.to(self.dtype)
+        self._norm_scale = torch.where(width > 0, width, torch.ones_like(width)).to(self.dtype)
+
+    def normalize(self, Z: Tensor) -> Tensor:
+        """``(N, D)`` rows mapped to the normalised space (each column's region box -> [0, 1])."""
+        return (Z - self._norm_low) / self._norm_scale
 
     def _check_state(self, s: CEState) -> CEState:
-        D = self.layout.dim
-        for name in ("mean", "std", "init_mean", "init_std", "best_z"):
+        D, k = self.layout.dim, self.config.n_modes
+        for name in ("mean", "std", "init_mean", "init_std", "best_z", "weights"):
             v = getattr(s, name)
             if v is not None:
-                if v.shape != (D,):
-                    raise ValueError(f"state.{name}: expected shape ({D},) for this layout, got {tuple(v.shape)}")
+                want = (k,) if name == "weights" else (k, D) if name in ("mean", "std") and k > 1 else (D,)
+                if v.shape != want:
+                    raise ValueError(
+                        f"state.{name}: expected shape {want} for this layout and ce.n_modes = {k}, "
+                        f"got {tuple(v.shape)}"
+                    )
                 setattr(s, name, v.to(dtype=self.dtype, device="cpu"))
         if (s.mean is None) != (s.std is None):
             raise ValueError("state: mean and std must both be set or both be null")
+        if k == 1 and s.weights is not None:
+            raise ValueError("state.weights: only a mixture (ce.n_modes > 1) has weights")
+        if k > 1 and (s.mean is None) != (s.weights is None):
+            raise ValueError(f"state: a mixture (ce.n_modes = {k}) needs mean, std and weights together")
         if s.iteration < 0:
             raise ValueError(f"state.iteration must be >= 0, got {s.iteration}")
         return s
@@ -550,7 +730,14 @@ class CrossEntropyOptimizer:
         n = Z.shape[0]
         r = result.to_cpu(n, self.dtype)
         order = rank_samples(r.cost, r.feasible, r.progress, r.distance)
+        best_order = order  # the true best single sample comes first here
         n_feas = int(r.feasible.sum())
+        robust = None
+        if cfg.knn_robust > 0:
+            robust = self._robust_cost(Z, r)
+            # feasible rows by their neighbourhood cost, infeasible rows keep the fallback order
+            key = torch.where(r.feasible, robust, torch.zeros_like(robust))
+            order = _stable_argsort((~r.feasible).to(torch.int8), _stable_argsort(key, order))
 
         # -- choose elites and refit
         if n_feas >= cfg.n_elite:
@@ -565,7 +752,9 @@ class CrossEntropyOptimizer:
         if source == "uniform":
             s.init_mean = Z.mean(0)
             s.init_std = Z.std(0, correction=0)
-        if refit != "kept":
+        if refit != "kept" and cfg.n_modes > 1:
+            self._refit_mixture(Z[elite])
+        elif refit != "kept":
             new_mean, new_std = self._fit(Z[elite])
             a = cfg.alpha
             if a < 1.0:
@@ -579,7 +768,7 @@ class CrossEntropyOptimizer:
                 s.converged = True
 
         # -- best of all iterations
-        top = int(order[0])
+        top = int(best_order[0])
         cand = _sort_key(
             bool(r.feasible[top]),
             float(r.cost[top]),
@@ -619,6 +808,9 @@ class CrossEntropyOptimizer:
             eval_time=t_eval,
             wall_time=time.perf_counter() - t0,
             converged=s.converged,
+            weights=None if s.weights is None else s.weights.clone(),
+            best_idx=top,
+            robust_cost=robust,
         )
         s.iteration += 1
         s.rng_state = self._gen.get_state()
@@ -655,6 +847,7 @@ class CrossEntropyOptimizer:
             converged=s.converged,
             history=history or [],
             state=self.state,
+            weights=None if s.weights is None else s.weights.clone(),
         )
 
     # ---- internals ---------------------------------------------------------------------
@@ -666,24 +859,85 @@ class CrossEntropyOptimizer:
         n_u = int(round(self.config.uniform_share * n))
         n_g = n - n_u
         eps = torch.randn(n_g, self.layout.dim, generator=g, dtype=self.dtype)
-        Z = self.layout.project(s.mean + s.std * eps)
+        if s.weights is None:
+            Z = self.layout.project(s.mean + s.std * eps)
+        else:  # mixture: rows of mode 0 first, then mode 1, ...
+            mode = torch.repeat_interleave(torch.arange(s.weights.numel()), mode_counts(s.weights, n_g))
+            Z = self.layout.project(s.mean[mode] + s.std[mode] * eps)
         if n_u:
             Z = torch.cat([Z, self.layout.sample_uniform(n_u, g, self.dtype)], dim=0)
         return Z, "gaussian"
 
-    def _fit(self, Ze: Tensor) -> tuple[Tensor, Tensor]:
-        """Mean and population std of the elite rows (best first), optionally rank-weighted
-        with the CMA-ES log weights ``w_i ~ log(k + 1/2) - log(i)``, i = 1..k."""
-        k = Ze.shape[0]
+    def _elite_weights(self, k: int) -> Tensor:
+        """``(k,)`` normalised weights of the elites (best first): equal, or the CMA-ES log
+        weights ``w_i ~ log(k + 1/2) - log(i)``, i = 1..k, with ``rank_weighted``."""
         if self.config.rank_weighted and k > 1:
-            i = torch.arange(1, k + 1, dtype=Ze.dtype)
+            i = torch.arange(1, k + 1, dtype=self.dtype)
             w = math.log(k + 0.5) - torch.log(i)
         else:
-            w = torch.ones(k, dtype=Ze.dtype)
-        w = w / w.sum()
+            w = torch.ones(k, dtype=self.dtype)
+        return w / w.sum()
+
+    def _fit(self, Ze: Tensor) -> tuple[Tensor, Tensor]:
+        """Mean and population std of the elite rows (best first), optionally rank-weighted."""
+        w = self._elite_weights(Ze.shape[0])
         mean = (w[:, None] * Ze).sum(0)
         var = (w[:, None] * (Ze - mean) ** 2).sum(0)
         return mean, var.sqrt()
+
+    def _robust_cost(self, Z: Tensor, r: EvalResult) -> Tensor:
+        """``(N,)`` mean cost of each row's ``knn_robust`` nearest rows (itself included);
+        infeasible or non-finite costs count as the failure cost (only needed when there are any)."""
+        ok = r.feasible & torch.isfinite(r.cost)
+        fail = self.config.failure_cost if self.config.failure_cost is not None else r.failure_cost
+        if fail is None or not math.isfinite(float(fail)):
+            if not bool(ok.all()):
+                raise ValueError(
+                    f"ce.knn_robust = {self.config.knn_robust} needs the cost of a failed plan: set ce.failure_cost "
+                    "or return EvalResult.failure_cost from the evaluator"
+                )
+            fail = 0.0  # unused
+        c = torch.where(ok, r.cost, torch.full_like(r.cost, float(fail)))
+        return knn_mean(self.normalize(Z), c, self.config.knn_robust)
+
+    def _refit_mixture(self, Ze: Tensor) -> None:
+        """Refit the k-mode mixture from the elite rows (best first); updates the state."""
+        cfg, s = self.config, self._state
+        k, D = cfg.n_modes, self.layout.dim
+        if s.mean is None:  # first refit: every mode's predecessor is the uniform batch
+            assert s.init_mean is not None and s.init_std is not None
+            old_mean = s.init_mean.expand(k, D).clone()
+            old_std = s.init_std.expand(k, D).clone()
+            old_w = torch.full((k,), 1.0 / k, dtype=self.dtype)
+        else:
+            assert s.std is not None and s.weights is not None
+            old_mean, old_std, old_w = s.mean, s.std, s.weights
+        w = self._elite_weights(Ze.shape[0])
+        X = self.normalize(Ze)
+        labels, c = kmeans(X, k, self._gen)
+        onehot = torch.nn.functional.one_hot(labels, c).to(self.dtype) * w[:, None]  # (m, c)
+        mass = onehot.sum(0)
+        keep = torch.nonzero(mass > 0).flatten()  # clusters with elites, in label order
+        onehot, mass = onehot[:, keep], mass[keep]
+        c_mean = (onehot.T @ Ze) / mass[:, None]
+        c_var = (onehot[:, :, None] * (Ze[:, None, :] - c_mean[None]) ** 2).sum(0) / mass[:, None]  # (c, D)
+        if s.mean is None:
+            slot = list(range(keep.numel()))
+        else:
+            slot = _match_modes(self.normalize(c_mean), self.normalize(old_mean))
+        new_mean, new_std, new_w = old_mean.clone(), old_std.clone(), torch.zeros(k, dtype=self.dtype)
+        for ci, j in enumerate(slot):
+            new_mean[j], new_std[j], new_w[j] = c_mean[ci], c_var[ci].sqrt(), mass[ci]
+        a = cfg.alpha
+        if a < 1.0:
+            new_mean = a * new_mean + (1 - a) * old_mean
+            new_std = a * new_std + (1 - a) * old_std
+            new_w = a * new_w + (1 - a) * old_w
+        s.mean, s.std, s.weights = new_mean, new_std.clamp_min(cfg.min_std), new_w / new_w.sum()
+        if cfg.converge_std is not None:
+            live = s.weights > 0
+            if float(s.std[live].max()) < cfg.converge_std:
+                s.converged = True
 
 
 def optimize(

@@ -29,6 +29,8 @@ the distribution *after* each iteration's refit (NaN while still uniform), and p
 ``i`` (3-digit zero padded) ``Z_{i:03d}`` (N_i, D), ``cost_{i:03d}``, ``feasible_{i:03d}``
 (N_i,), ``elite_idx_{i:03d}`` (K,). The sampling distribution of iteration ``i`` is therefore
 ``mean[i-1]``/``std[i-1]``; iteration 0 (uniform) is shown with the moments of ``Z_000``.
+For a mixture (``ce.n_modes > 1``) ``mean``/``std`` hold its heaviest mode, which is what
+fig3 draws (the other modes are in ``mode_mean``/``mode_std``/``mode_weight``, unused here).
 
 ``scene.json`` (write it with ``save_scene``): ``{"layout": ParamLayout.to_dict(),
 "geometry": dataclasses.asdict(SceneGeometry), "padding": float}``. Without it the scene is

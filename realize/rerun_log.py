@@ -282,11 +282,13 @@ class RerunLogger:
         rollout: RolloutResult | None = None,
         mean: Any = None,
         std: Any = None,
+        weights: Any = None,
     ) -> None:
         """Log one CE iteration at ``ce_iteration = record.iteration``.
 
         ``mean``/``std`` (D,) are the distribution this iteration's samples were drawn from
-        (i.e. the previous record's ``mean``/``std``). ``None`` (the uniform iteration 0) logs
+        (i.e. the previous record's ``mean``/``std``); a mixture passes (k, D) and its
+        ``weights`` (k,), and every mode with a positive weight gets its own ellipse. ``None`` (the uniform iteration 0) logs
         the moments of the samples ``record.Z`` instead (what ``CEState.init_mean``/``init_std``
         hold). ``rollout`` (optional) adds the base trajectories, the best plan's paths and
         failure reasons; without trajectories those entities are cleared for this iteration.
@@ -308,24 +310,25 @@ class RerunLogger:
                 progress = to_numpy(rollout.progress, np.float64)
         colors = success_colors(feasible, progress, n_actions)
         elite = to_numpy(record.elite_idx, np.int64).reshape(-1)
-        best = self._best_index(elite, cost, feasible)
+        best = self._best_index(elite, cost, feasible, int(getattr(record, "best_idx", -1)))
 
         mean_np = to_numpy(mean, np.float64)
         std_np = to_numpy(std, np.float64)
+        weights_np = to_numpy(weights, np.float64)
         if (mean_np is None or std_np is None) and Z is not None:
-            mean_np, std_np = Z.mean(axis=0), Z.std(axis=0)
+            mean_np, std_np, weights_np = Z.mean(axis=0), Z.std(axis=0), None
         self._log_scalars(record, rollout)
-        self._log_distributions(it, Z, colors, elite, mean_np, std_np)
+        self._log_distributions(it, Z, colors, elite, mean_np, std_np, weights_np)
         self._log_samples(Z, colors, best)
         self._log_trajectories(rollout, feasible, best, cost)
         self._log_text(record, rollout)
 
     @staticmethod
-    def _best_index(elite: np.ndarray, cost: np.ndarray, feasible: np.ndarray) -> int:
-        """The iteration's best sample: the first elite (elites are ranked best first), else the
-        lowest-cost feasible sample, else -1."""
+    def _best_index(elite: np.ndarray, cost: np.ndarray, feasible: np.ndarray, best_idx: int = -1) -> int:
+        """The iteration's best sample: with elites, the record's ``best_idx`` (the first elite
+        unless robust kNN scoring reordered them), else the lowest-cost feasible sample, else -1."""
         if elite.size:
-            return int(elite[0])
+            return best_idx if best_idx >= 0 else int(elite[0])
         if feasible.any():
             return int(np.where(feasible, np.nan_to_num(cost, nan=np.inf), np.inf).argmin())
         return -1
@@ -349,24 +352,39 @@ class RerunLogger:
         elite: np.ndarray,
         mean: np.ndarray | None,
         std: np.ndarray | None,
+        weights: np.ndarray | None = None,
     ) -> None:
         rec = self.rec
+        modes: list[tuple[np.ndarray, np.ndarray]] = []
+        labels = [f"it {it}"]
+        if mean is not None and std is not None and mean.ndim == 2:
+            w = np.ones(mean.shape[0]) if weights is None else weights
+            live = [j for j in range(mean.shape[0]) if w[j] > 0]
+            modes = [(mean[j], std[j]) for j in live]
+            labels = [f"it {it} mode {j} ({w[j]:.0%})" for j in live]
+        elif mean is not None and std is not None:
+            modes = [(mean, std)]
         n_it = self.n_iterations or max(10, it + 1)
         radii = None
         if Z is not None:
             radii = np.full(Z.shape[0], 0.012, dtype=np.float32)
             radii[elite[elite < Z.shape[0]]] = 0.03
         for p in self.params:
-            if mean is not None and std is not None:
-                c, h = ellipse_params(self.layout, p, mean, std)
+            if modes:
+                cs, hs = [], []
+                for m_, s_ in modes:
+                    c, h = ellipse_params(self.layout, p, m_, s_)
+                    cs.append(c)
+                    hs.append(h)
                 hist = self._history[p]
-                hist.append((it, c, h))
+                hist.extend((it, c, h) for c, h in zip(cs, hs))
                 its = np.array([k for k, _, _ in hist])
                 cols = iteration_colors(its, n_it)
+                col = tuple(cols[-1]) + (255,)
                 rec.log(
                     _param_path(ENTITY_DIST, p, "sigma2"),
-                    rr.Ellipses2D(centers=[c], half_sizes=[h], colors=[tuple(cols[-1]) + (255,)],
-                                  line_radii=0.012, labels=[f"it {it}"], draw_order=30.0),
+                    rr.Ellipses2D(centers=cs, half_sizes=hs, colors=[col] * len(cs),
+                                  line_radii=0.012, labels=labels, draw_order=30.0),
                 )
                 rec.log(
                     _param_path(ENTITY_DIST, p, "history"),
@@ -375,7 +393,7 @@ class RerunLogger:
                                   colors=cols, line_radii=0.006, draw_order=29.0),
                 )
                 rec.log(_param_path(ENTITY_DIST, p, "mean"),
-                        rr.Points2D([c], colors=[tuple(cols[-1]) + (255,)], radii=0.025, draw_order=31.0))
+                        rr.Points2D(cs, colors=[col] * len(cs), radii=0.025, draw_order=31.0))
             else:
                 for leaf in ("sigma2", "mean"):
                     rec.log(_param_path(ENTITY_DIST, p, leaf), rr.Clear(recursive=False))

@@ -156,6 +156,9 @@ class History:
     ``action_success_i`` (N, A), ``goal_i``, ``steps_i`` (N,). Stacked over iterations:
     ``iteration``, ``n_samples``, ``success_share``, ``best_cost`` (inf if none), ``mean``/``std``
     (I, D; NaN while the distribution is still uniform). ``column_names`` (D,) names Z's columns.
+    A mixture (``ce.n_modes = k > 1``) keeps its heaviest mode in ``mean``/``std`` (so readers of
+    (I, D) arrays work unchanged) and all modes in ``mode_mean``/``mode_std`` (I, k, D) and
+    ``mode_weight`` (I, k); those three arrays exist only for mixture runs.
     The sample count may change between iterations (linear schedule), hence one array per
     iteration rather than one (I, N, D) block.
     """
@@ -165,6 +168,7 @@ class History:
     scalars: list[dict[str, float]] = field(default_factory=list)
     mean: list[np.ndarray] = field(default_factory=list)
     std: list[np.ndarray] = field(default_factory=list)
+    modes: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.per_iter)
@@ -178,13 +182,23 @@ class History:
         best_cost: float,
         mean: Any | None,
         std: Any | None,
+        weights: Any | None = None,
     ) -> None:
+        """``mean``/``std`` (D,), or (k, D) with ``weights`` (k,) for a mixture."""
         d = len(self.column_names)
         row = {k: _np(v) for k, v in arrays.items() if v is not None}
         self.per_iter.append(row)
         self.scalars.append(
             {"n_samples": float(n_samples), "success_share": float(success_share), "best_cost": float(best_cost)}
         )
+        modes = None
+        if mean is not None and std is not None and _np(mean).ndim == 2:
+            m, s = _np(mean).astype(np.float64), _np(std).astype(np.float64)
+            w = np.full(m.shape[0], 1.0 / m.shape[0]) if weights is None else _np(weights).astype(np.float64)
+            modes = (m, s, w)
+            top = int(np.argmax(w))
+            mean, std = m[top], s[top]
+        self.modes.append(modes)
         self.mean.append(np.full(d, np.nan) if mean is None else _np(mean).astype(np.float64))
         self.std.append(np.full(d, np.nan) if std is None else _np(std).astype(np.float64))
 
@@ -200,6 +214,14 @@ class History:
             "mean": np.stack(self.mean) if n_it else np.zeros((0, d)),
             "std": np.stack(self.std) if n_it else np.zeros((0, d)),
         }
+        known = [m for m in self.modes if m is not None]
+        if known:
+            k = known[0][0].shape[0]
+            nan_modes = (np.full((k, d), np.nan), np.full((k, d), np.nan), np.full(k, np.nan))
+            full = [nan_modes if m is None else m for m in self.modes]
+            out["mode_mean"] = np.stack([m[0] for m in full])
+            out["mode_std"] = np.stack([m[1] for m in full])
+            out["mode_weight"] = np.stack([m[2] for m in full])
         for i, row in enumerate(self.per_iter):
             for k, v in row.items():
                 out[f"{k}_{i:03d}"] = v
@@ -229,6 +251,11 @@ class History:
             )
             h.mean.append(np.asarray(arrays["mean"][i], dtype=np.float64))
             h.std.append(np.asarray(arrays["std"][i], dtype=np.float64))
+            modes = None
+            if "mode_weight" in arrays and np.isfinite(arrays["mode_weight"][i]).all():
+                modes = tuple(np.asarray(arrays[key][i], dtype=np.float64)
+                              for key in ("mode_mean", "mode_std", "mode_weight"))
+            h.modes.append(modes)  # type: ignore[arg-type]
         return h
 
 

@@ -136,10 +136,12 @@ class RolloutResult:
     traj_cube: Tensor | None = None  # (N, T, 3)
     wall_time_s: float = 0.0
     sim_steps: int = 0
+    horizon_cost: float = math.nan  # cost of a plan cut by the horizon: max steps + final cost
 
     def to_eval(self) -> EvalResult:
         return EvalResult(cost=self.cost.double(), feasible=self.feasible, progress=self.progress.double(),
-                          distance=self.distance.double())
+                          distance=self.distance.double(),
+                          failure_cost=self.horizon_cost if math.isfinite(self.horizon_cost) else None)
 
 
 class StepContext:
@@ -404,6 +406,7 @@ class PlanRealizer:
             cost=cost[:m].cpu(), feasible=feasible[:m].cpu(), action_success=success[:m].cpu(),
             goal=goal[:m].cpu(), steps=steps[:m].cpu(), progress=progress[:m].cpu(),
             distance=distance[:m].cpu(), failure=failure, wall_time_s=time.perf_counter() - t0, sim_steps=step,
+            horizon_cost=float(max_steps) + float(task.final_cost),
         )
         if record and rec_t:
             res.traj_t = torch.tensor(rec_t)

@@ -115,6 +115,23 @@ def test_experiment_presets() -> None:
     assert build_run_spec(plain(["scene=ramp"])).geometry.extras[0].name == "ramp"
 
 
+def test_ramp_ablation_sweep_composes() -> None:
+    """Every setting of the ramp ablation sweep builds a valid run spec (no simulation)."""
+    import itertools
+
+    params = cfg_of(["experiment=ramp_ablation"], hydra_cfg=True).hydra.sweeper.params
+    assert set(params) == {"ce.n_modes", "ce.uniform_share", "ce.rank_weighted", "ce.knn_robust", "seed"}
+    grid = [[f"{k}={v}" for v in str(vals).split(",")] for k, vals in params.items()]
+    assert len(list(itertools.product(*grid))) == 32
+    for combo in itertools.product(*grid):
+        spec = build_run_spec(plain(["experiment=ramp_ablation", *combo]))
+        assert spec.geometry.variant == "ramp" and spec.ce.n_samples == 32
+    spec = build_run_spec(plain(["experiment=ramp_ablation", "ce.n_modes=2", "ce.knn_robust=5"]))
+    assert (spec.ce.n_modes, spec.ce.knn_robust, spec.ce.failure_cost) == (2, 5, None)
+    with pytest.raises(ConfigError, match=r"ce\.n_modes \(5\) must be <= ce\.n_elite \(4\)"):
+        build_run_spec(plain(["experiment=ramp_ablation", "ce.n_modes=5"]))
+
+
 def test_plan_from_pddl_matches_the_yaml_plan(no_sim: None) -> None:
     spec = build_run_spec(plain(["task.planner.enabled=true", "task.plan=null"]))
     assert spec.task.describe() == build_run_spec(plain([])).task.describe()
@@ -474,6 +491,19 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     assert len(back) == 2 and back.column_names == ["a.x", "a.y"]
     np.testing.assert_array_equal(back.arrays()["Z_001"], np.ones((3, 2)))
     assert np.isnan(back.arrays()["mean"][0]).all()
+    # a mixture: the heaviest mode in mean/std (I, D), every mode in mode_* (I, k, D)
+    mix = History(["a.x", "a.y"])
+    mix.append({"cost": np.zeros(2)}, n_samples=2, success_share=0.0, best_cost=float("inf"), mean=None, std=None)
+    mix.append({"cost": np.zeros(2)}, n_samples=2, success_share=1.0, best_cost=1.0,
+               mean=np.array([[0.0, 0.0], [5.0, 5.0]]), std=np.array([[1.0, 1.0], [2.0, 2.0]]),
+               weights=np.array([0.25, 0.75]))
+    mix.save(tmp_path / "mix.npz")
+    a = load_history(tmp_path / "mix.npz").arrays()
+    np.testing.assert_array_equal(a["mean"][1], [5.0, 5.0])
+    np.testing.assert_array_equal(a["std"][1], [2.0, 2.0])
+    assert a["mode_mean"].shape == (2, 2, 2) and np.isnan(a["mode_mean"][0]).all()
+    np.testing.assert_array_equal(a["mode_weight"][1], [0.25, 0.75])
+    assert "mode_mean" not in back.arrays()  # single-mode runs keep the old file layout
     bad = History(["x"])
     bad.append({"bad": np.array([object()])}, n_samples=1, success_share=0, best_cost=0, mean=None, std=None)
     with pytest.raises(TypeError, match="object"):

@@ -128,6 +128,23 @@ def test_without_rollout_or_samples_and_infinite_costs(tmp_path, synthetic):
     assert S["counts"]["/world/samples/Table1"][1] == rec1.n_samples
 
 
+def test_mixture_logs_one_ellipse_per_live_mode(tmp_path, synthetic):
+    """A k-mode distribution (ce.n_modes > 1): (k, D) mean/std and weights; a mode of weight 0
+    (never sampled) gets no ellipse."""
+    rec = synthetic.records[1]
+    m, s = synthetic.sampling[1]
+    mean = torch.stack([m, m + 0.1, m - 0.1])
+    std = torch.stack([s, 0.5 * s, s])
+    path = tmp_path / "mix.rrd"
+    with RerunLogger(path, synthetic.layout, synthetic.geometry, blueprint=False) as lg:
+        lg.log_iteration(rec, None, mean, std, torch.tensor([0.7, 0.3, 0.0]))
+    S = read_rrd_summary(path)
+    e = S["ellipses"]["/distributions/Table1/sigma2"][1]
+    sl = synthetic.layout.slices["Table1"]
+    np.testing.assert_allclose(np.asarray(e["centers"]), mean[:2, sl].numpy(), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(e["half_sizes"]), 2 * std[:2, sl].numpy(), rtol=1e-5)
+
+
 def test_trajectory_cap_and_nan_padding(tmp_path, synthetic):
     rec, ro = synthetic.records[2], synthetic.rollouts[2]
     base = ro.traj_base.clone()
