@@ -207,3 +207,26 @@ def test_script_fig4_launches_runs_then_plots(tmp_path, monkeypatch):
     # a failing app: reported, nothing to plot
     assert fig4.main(["--runs", "1", "--root", str(tmp_path / "bad"), "--module", "_fake_app",
                       "--experiment", "broken"]) == 1
+
+
+def test_ramp_modes_classifies_release_points(tmp_path) -> None:
+    """scripts/ramp_modes.py: a release point over the ramp is a slide, over table 2 a carry."""
+    import csv
+    import json
+
+    from scripts.ramp_modes import main
+
+    plan = "move_to(Table1), grasp(Cube_g), move_to(Drop), place(Cube_p), move_to(Exit)"
+    runs = {"s0": (0.0, -0.6, 500.0, True), "s1": (0.05, -1.2, 540.0, True), "s2": (0.0, 0.0, None, False)}
+    for name, (x, y, cost, ok) in runs.items():
+        d = tmp_path / name
+        d.mkdir()
+        doc = {"feasible": ok, "best_cost": cost, "seed": int(name[1]), "plan": plan,
+               "best_params": {"Cube_p": {"x": x, "y": y, "z": 1.0}} if ok else None,
+               "success_per_iter": [0.1, 0.5], "config": {"scene": {"variant": "ramp"}, "ce": {}}}
+        (d / "result.json").write_text(json.dumps(doc))
+    assert main([str(tmp_path), "--out", str(tmp_path / "m.csv")]) == 0
+    modes = {r["run"].rsplit("/", 1)[-1]: r["mode"] for r in csv.DictReader((tmp_path / "m.csv").open())}
+    assert modes == {"s0": "slide", "s1": "carry", "s2": "none"}
+    summ = list(csv.DictReader((tmp_path / "m_summary.csv").open()))
+    assert {(r["mode"], r["runs"]) for r in summ} == {("slide", "1"), ("carry", "1"), ("none", "1")}
