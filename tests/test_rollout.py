@@ -394,3 +394,27 @@ def test_place_takes_a_box_of_release_points_grasp_does_not() -> None:
     box3 = BoxRegion([-0.1, -1.4, 0.76], [0.1, -0.1, 1.15])
     assert Place.accepts(box3) and not Grasp.accepts(box3)
     assert not Place.accepts(BoxRegion([0.0, 0.0], [1.0, 1.0]))
+
+
+# wide-region ramp task (configs/experiment/ramp.yaml), two plans found by CE (ramp study, seed 0):
+# columns: Table1.x, Table1.y, Cube_g.x, Cube_g.y, Cube_g.z, Drop.x, Drop.y,
+#          Cube_p.x, Cube_p.y, Cube_p.z, Exit.x, Exit.y
+RAMP_SLIDE = [-0.734, 1.046, -0.047, 1.177, 0.883, -0.379, -0.049, 0.024, -0.459, 1.037, 2.454, 0.176]
+RAMP_CARRY = [-0.893, 1.843, 0.067, 1.219, 0.875, 0.755, -0.459, 0.064, -1.005, 0.881, 2.106, 0.023]
+
+
+def test_ramp_slide_and_carry_both_put_the_cube_on_table2() -> None:
+    """The journal's ramp scenario, both modes: released over the ramp (y = -0.46, 45 cm short of
+    table 2) the cube slides down onto table 2; carried, it is set down on table 2's edge. Read
+    back from the simulator's cube pose at the end, not from the state machine."""
+    spec = build_run_spec(compose_config("experiment=ramp"))
+    with BatchedScene(2, spec.geometry_cfg, spec.sim) as scene:
+        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=0)
+        res = realizer.rollout(torch.tensor([RAMP_SLIDE, RAMP_CARRY], dtype=torch.float64))
+        cube = scene.cube_pose()[:, :3]
+    assert res.feasible.tolist() == [True, True], res.failure
+    t2 = scene.geometry.table("table2")
+    assert ((cube[:, 1] - t2.center[1]).abs() <= t2.half_size[1]).all()
+    assert ((cube[:, 2] - (2 * t2.half_size[2] + scene.geometry.cube_half_size)).abs() < 0.01).all()
+    ramp = next(b for b in scene.geometry.obstacles if b.name == "ramp")
+    assert ramp.contains_xy(RAMP_SLIDE[7], RAMP_SLIDE[8]) and not t2.contains_xy(RAMP_SLIDE[7], RAMP_SLIDE[8])
