@@ -163,3 +163,19 @@ def test_topk_interrupted_in_round_0(tmp_path: Path) -> None:
     assert [c["iterations"] for c in res["candidates"]] == [1, 0] and res["spent_samples"] == 4
     assert res["candidates"][1]["best_params"] is None
     assert (tmp_path / CHECKPOINT_FILE).is_file()
+
+
+def test_candidate_0_equals_a_single_plan_run_in_the_shared_scene(topk_run: Path, tmp_path: Path) -> None:
+    """Candidate 0 (the planner's first plan, the run's seed) draws the samples of a single-plan
+    run; its second iteration runs after candidate 1 used the same scene, and still gives the
+    single-plan run's numbers bit for bit (CPU resets are history-free)."""
+    res = json.loads((topk_run / RESULT_FILE).read_text())
+    assert res["winner"]["index"] == 0 and res["candidates"][0]["iterations"] == 2  # seed 2: c0, c1, c0
+    assert load_checkpoint(topk_run).records[1]["candidate"] == 1
+    single = tmp_path / "single"
+    run(cfg_of(tiny_with(["task.planner.enabled=true", "ce.iterations=2", "seed=2"])), single)
+    with np.load(topk_run / "history_c0.npz", allow_pickle=False) as a, \
+            np.load(single / "history.npz", allow_pickle=False) as b:
+        for k in ("Z_000", "Z_001", "cost_000", "cost_001", "feasible_001", "progress_001", "distance_001",
+                  "action_success_001", "steps_001"):
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
