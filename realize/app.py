@@ -13,8 +13,14 @@ What it does:
     a tqdm bar shows the success share and best cost, the rerun logger (if present and
     ``logging.rerun``) logs the iteration, and with ``logging.record`` the sample trajectories
     go to ``trajectories_iter{k}.npz`` (``realize.figures`` format, with ``scene.json``);
+  * with ``task.planner.top_k > 1`` the run is successive halving over the planner's k best
+    plans in one shared budget (``realize.candidates``; ``_iterate_halving``): per-candidate
+    ``history_c{i}.npz`` and ``<rrd stem>_c{i}.rrd``, and ``result.json`` gains ``candidates``,
+    ``winner`` and ``budget`` while its top-level best_* describe the leading candidate (the
+    winner once decided), so single-plan readers keep working. No figure trajectory files;
   * ``resume=<run dir>`` continues that run in its own directory from its checkpoint with its
-    saved config; on CPU the final result equals that of an uninterrupted run;
+    saved config; on CPU the final result equals that of an uninterrupted run. Top-k runs
+    cannot be resumed yet (a clear ``ConfigError``);
   * SIGINT/SIGTERM: the iteration in flight is dropped, ``result.json`` is rewritten with
     ``interrupted: true`` (the last complete iteration stays on disk) and the exit code is
     130/143. Any other failure is written to ``result.json`` and ``error.txt`` and re-raised.
@@ -67,6 +73,11 @@ CONFIG_DIR = REPO_ROOT / "configs"
 CONFIG_GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "experiment")
 EXIT_CONFIG = 2
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
+HALVING_KIND = "successive_halving"  # checkpoint ce_state "kind" of a top-k run
+_NO_HALVING_RESUME = (
+    "resume: {run_dir} is a top-k run (task.planner.top_k > 1); resuming one is not supported yet "
+    "(its checkpoint records every candidate's CE state, but nothing reads it back): start a new run"
+)
 # overrides a resumed run accepts (everything else comes from the run's saved config)
 RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "hydra.")
 
@@ -139,15 +150,15 @@ def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequenc
 # --------------------------------------------------------------------------------------------
 
 
-def _best_params(spec: RunSpec, best_z: Any) -> dict[str, dict[str, float]] | None:
+def _best_params(task: Any, best_z: Any) -> dict[str, dict[str, float]] | None:
     if best_z is None:
         return None
     import torch
 
     z = torch.as_tensor(best_z, dtype=torch.float64).reshape(1, -1)
     out: dict[str, dict[str, float]] = {}
-    for name, part in spec.task.layout.split(z).items():
-        coords = spec.task.layout.regions[name].coord_names
+    for name, part in task.layout.split(z).items():
+        coords = task.layout.regions[name].coord_names
         out[name] = {c: float(v) for c, v in zip(coords, part[0].tolist())}
     return out
 
@@ -162,7 +173,10 @@ def _result_doc(
     wall_time_s: float,
     error: str | None = None,
     extra: Mapping[str, Any] | None = None,
+    task: Any = None,
 ) -> dict[str, Any]:
+    """The result document; ``task`` (default ``spec.task``) is the plan ``state`` searched over."""
+    task = spec.task if task is None else task
     best_feasible = bool(state.best_feasible) if state is not None else False
     best_cost = float(state.best_cost) if (state is not None and best_feasible) else None
     doc: dict[str, Any] = {
@@ -172,9 +186,9 @@ def _result_doc(
         "feasible": best_feasible,
         "best_cost": best_cost,
         "best_iteration": state.best_iteration if state is not None and state.best_z is not None else None,
-        "best_params": _best_params(spec, None if state is None else state.best_z),
+        "best_params": _best_params(task, None if state is None else state.best_z),
         "best_z": None if state is None or state.best_z is None else state.best_z.tolist(),
-        "columns": spec.task.layout.column_names,
+        "columns": task.layout.column_names,
         "iterations_done": len(records),
         "iterations": spec.ce.iterations,
         "converged": bool(state.converged) if state is not None else False,
@@ -200,8 +214,8 @@ def _result_doc(
         "final_weights": None if state is None or state.weights is None else state.weights.tolist(),
         "wall_time_s": wall_time_s,
         "seed": spec.seed,
-        "task": {"name": spec.task.name, "source": spec.task.source},
-        "plan": spec.task.describe(),
+        "task": {"name": task.name, "source": task.source},
+        "plan": task.describe(),
         "config": spec.config,
         "versions": package_versions(),
         "run_dir": str(run_dir),
@@ -341,12 +355,19 @@ def run(
             except CheckpointError as e:
                 raise ConfigError(str(e)) from None
             run_dir = Path(str(current["resume"]))
+            if ckpt.ce_state.get("kind") == HALVING_KIND:
+                raise ConfigError(_NO_HALVING_RESUME.format(run_dir=run_dir))
             current = _resume_config(current, ckpt, cli_overrides)
         spec = build_run_spec(current)
-        state, history, records, wall_before, segments = _restore(spec, run_dir, ckpt)
+        if ckpt is not None and spec.halving:
+            raise ConfigError(_NO_HALVING_RESUME.format(run_dir=run_dir))
+        if not spec.halving:
+            state, history, records, wall_before, segments = _restore(spec, run_dir, ckpt)
     except ConfigError as e:
         _write_failure(Path(out_dir), str(e), config=json_safe(current))
         raise
+    if spec.halving:
+        return _iterate_halving(spec, run_dir, t_start, after_iteration)
     return _iterate(spec, run_dir, state, history, records, wall_before, segments, t_start, after_iteration)
 
 
@@ -505,6 +526,172 @@ def _iterate(
     return outcome
 
 
+def _candidate_file(name: str, index: int) -> str:
+    """``history.npz`` -> ``history_c1.npz`` (per-candidate file of a top-k run)."""
+    p = Path(name)
+    return str(p.with_name(f"{p.stem}_c{index}{p.suffix}"))
+
+
+def _iterate_halving(
+    spec: RunSpec,
+    run_dir: Path,
+    t_start: float,
+    after_iteration: Callable[[int], None] | None,
+) -> RunOutcome:
+    """A top-k run (``task.planner.top_k > 1``): successive halving over the candidate plans
+    (``realize.candidates``), all realized in one batched scene of ``ce.n_envs`` copies.
+
+    Files: ``result.json`` (top level: the leader, i.e. the winner once decided; plus
+    ``candidates``, ``winner``, ``budget``), ``history_c{i}.npz`` per candidate (its own
+    columns), ``checkpoint.json`` (every candidate's CE state; resume refuses it), rerun
+    recordings ``<rrd stem>_c{i}.rrd`` per candidate. No trajectory/scene files for the figures
+    (their readers assume one parameter layout)."""
+    from tqdm import tqdm
+
+    from realize.candidates import CandidateSpec, SuccessiveHalving
+    from realize.rollout import PlanRealizer
+    from realize.scene import BatchedScene
+
+    assert spec.budget is not None
+    tasks = spec.candidates
+    budget = spec.budget
+
+    def wall() -> float:
+        return time.perf_counter() - t_start
+
+    sh = SuccessiveHalving([CandidateSpec(t.describe(), t.layout, t.n_actions) for t in tasks], spec.ce, budget)
+    histories = [History(t.layout.column_names) for t in tasks]
+    records: list[dict[str, Any]] = []  # every iteration of every candidate, in run order
+    extra: dict[str, Any] = {"segments": 1, "resumed_from_iteration": None, "top_k": spec.planner.top_k}
+
+    def write_result(status: str, error: str | None = None) -> None:
+        lead = sh.candidates[sh.leader]
+        summary = sh.summary()
+        doc = _result_doc(spec, run_dir, status=status, state=lead.optimizer.state, records=lead.records,
+                          wall_time_s=wall(), error=error, extra=extra, task=tasks[lead.index])
+        doc.update(
+            n_candidates=len(tasks),
+            leader={"index": lead.index, "plan": lead.spec.plan},
+            winner=summary["winner"],
+            budget=summary["budget"],
+            spent_iterations=summary["spent_iterations"],
+            spent_samples=summary["spent_samples"],
+            halving_round=summary["round"],
+            candidates=[dict(c, history=_candidate_file(HISTORY_FILE, c["index"])) for c in summary["candidates"]],
+            files={"history": [_candidate_file(HISTORY_FILE, i) for i in range(len(tasks))],
+                   "checkpoint": CHECKPOINT_FILE},
+        )
+        atomic_write_json(run_dir / RESULT_FILE, doc)
+
+    if len(tasks) < spec.planner.top_k:
+        log.info("the planner returned %d distinct plan(s) for top_k = %d", len(tasks), spec.planner.top_k)
+    write_result("running")
+    scene = bar = None
+    loggers: dict[int, Any] = {}
+    status, exit_code, error = "running", 0, None
+    try:
+        with _Signals():
+            t0 = time.perf_counter()
+            scene = BatchedScene(spec.ce.n_samples, spec.geometry_cfg, spec.sim)
+            # one realizer per candidate on the same scene: every rollout starts with a reset,
+            # which is history-free on CPU (a used scene equals a fresh one bit for bit)
+            realizers = [PlanRealizer(t, scene, spec.rollout, seed=spec.seed) for t in tasks]
+            extra.update(backend=scene.backend, n_envs_scene=scene.n, setup_time_s=time.perf_counter() - t0)
+            for i, t in enumerate(tasks):
+                log.info("candidate %d: %s", i, t.describe())
+            log.info("%d candidate(s), halving budget %s; %d copies on %s (setup %.1f s)", len(tasks),
+                     budget.to_dict(), scene.n, scene.backend, extra["setup_time_s"])
+            bar = tqdm(total=budget.total_iterations, desc="CE top-k", unit="it", dynamic_ncols=True,
+                       disable=not spec.logging.progress, file=sys.stderr)
+            while (job := sh.ask()) is not None:
+                i, Z = job
+                cand = sh.candidates[i]
+                drawn_from = (cand.optimizer.state.mean, cand.optimizer.state.std)
+                t_eval = time.perf_counter()
+                res = realizers[i].rollout(Z, record=spec.logging.record and spec.logging.rerun)
+                t_eval = time.perf_counter() - t_eval
+                rec = sh.tell(res.to_eval())
+                rec.eval_time = t_eval
+                cand.records[-1]["eval_time"] = t_eval
+                histories[i].append(
+                    {"Z": rec.Z, "cost": rec.cost, "feasible": rec.feasible, "progress": rec.progress,
+                     "distance": rec.distance, "elite_idx": rec.elite_idx, "action_success": res.action_success,
+                     "goal": res.goal, "steps": res.steps},
+                    n_samples=rec.n_samples, success_share=rec.success_share, best_cost=rec.best_cost,
+                    mean=rec.mean, std=rec.std,
+                )
+                records.append(json_safe(dict(rec.summary(), candidate=i, eval_time=t_eval)))
+                histories[i].save(run_dir / _candidate_file(HISTORY_FILE, i))
+                save_checkpoint(
+                    run_dir,
+                    Checkpoint(len(records), {"kind": HALVING_KIND, **sh.to_dict()}, spec.config, list(records),
+                               wall(), 1),
+                )
+                write_result("running")
+                if spec.logging.rerun:
+                    if i not in loggers:
+                        loggers[i] = _make_candidate_logger(spec, run_dir, tasks[i], i, budget.total_iterations)
+                    if loggers[i] is not None:
+                        loggers[i] = _log_rerun(loggers[i], rec, res, *drawn_from)
+                best = rec.best_cost
+                bar.set_postfix_str(
+                    f"candidate {i} (round {min(sh.round, budget.n_rounds)}), success {rec.success_share:.0%}, "
+                    f"best cost " + (f"{best:.0f}" if math.isfinite(best) else "-")
+                )
+                bar.update(1)
+                if after_iteration is not None:
+                    after_iteration(len(records) - 1)
+            status = "done"
+    except KeyboardInterrupt as e:  # SIGINT, or SIGTERM via RunInterrupted
+        signum = e.signum if isinstance(e, RunInterrupted) else signal.SIGINT
+        status, exit_code = "interrupted", EXIT_SIGNAL.get(signum, 130)
+        error = f"interrupted by {signal.Signals(signum).name} after {len(records)} complete iteration(s)"
+    except Exception as e:
+        status, error = "failed", f"{type(e).__name__}: {e}"
+        with _shielded():
+            try:
+                atomic_write_text(run_dir / ERROR_FILE, traceback.format_exc())
+                write_result(status, error)
+            finally:
+                _close_all(bar, loggers, scene)
+        raise
+    with _shielded():
+        try:
+            write_result(status, error if status == "interrupted" else None)
+        finally:
+            _close_all(bar, loggers, scene)
+    lead = sh.candidates[sh.leader].optimizer.state
+    feasible = bool(lead.best_feasible)
+    outcome = RunOutcome(run_dir, status, feasible, lead.best_cost if feasible else math.inf, len(records), wall(),
+                         exit_code)
+    _report(outcome, spec)
+    w = sh.winner
+    print(f"top-k: {len(tasks)} candidate(s); "
+          + (f"winner {w}: {tasks[w].describe()}" if w is not None else f"no winner yet (leader {sh.leader})"),
+          flush=True)
+    return outcome
+
+
+def _make_candidate_logger(spec: RunSpec, run_dir: Path, task: Any, index: int, n_iterations: int) -> Any:
+    try:
+        from realize.rerun_log import RerunLogger
+    except ImportError as e:
+        log.warning("rerun logging is on but realize.rerun_log is not available (%s); no .rrd written", e)
+        return None
+    try:
+        return RerunLogger(run_dir / _candidate_file(spec.logging.rrd, index), task.layout, spec.geometry,
+                           padding=spec.rollout.astar.padding, n_iterations=n_iterations)
+    except Exception as e:  # logging must not cost the search
+        log.warning("rerun recording of candidate %d failed to open (%s: %s)", index, type(e).__name__, e)
+        return None
+
+
+def _close_all(bar: Any, loggers: Mapping[int, Any], scene: Any) -> None:
+    for lg in loggers.values():
+        _close(None, lg, None)
+    _close(bar, None, scene)
+
+
 def _figure_files(spec: RunSpec, run_dir: Path) -> Any:
     """``realize.figures`` (scene.json now, trajectories_iter{k}.npz per iteration), if present."""
     try:
@@ -564,11 +751,15 @@ def _close(bar: Any, rr_logger: Any, scene: Any) -> None:
 
 def _report(o: RunOutcome, spec: RunSpec) -> None:
     cost = f"{o.best_cost:.0f}" if math.isfinite(o.best_cost) else "none"
+    if spec.halving:
+        hist, rrd = _candidate_file(HISTORY_FILE, 0) + ", ...", _candidate_file(spec.logging.rrd, 0) + ", ..."
+    else:
+        hist, rrd = HISTORY_FILE, spec.logging.rrd
     print(
         f"realize: {o.status} after {o.iterations_done}/{spec.ce.iterations} CE iterations; "
         f"best cost {cost}; feasible {o.feasible}; wall time {o.wall_time_s:.1f} s\n"
-        f"results: {o.run_dir / RESULT_FILE} (also {HISTORY_FILE}, {CHECKPOINT_FILE}"
-        + (f", {spec.logging.rrd}" if spec.logging.rerun else "")
+        f"results: {o.run_dir / RESULT_FILE} (also {hist}, {CHECKPOINT_FILE}"
+        + (f", {rrd}" if spec.logging.rerun else "")
         + ")",
         flush=True,
     )

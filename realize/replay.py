@@ -18,6 +18,8 @@ How it hooks into the rollout without copying it: ``HookedScene`` is a ``Batched
 Env options that ``BatchedScene`` does not expose (render camera size/pose, reset noise
 amplitudes) are passed to ``gym.make`` through the task's registered kwargs for the time of the
 construction only (``env_overrides``).
+A top-k run (``task.planner.top_k > 1``) replays its leading candidate (the winner once
+decided): ``best_z`` belongs to that candidate's plan and parameters.
 What it doesn't: search (``realize.app``), change the run's other files, or perturb anything
 but the start state and the cube friction. Friction is set per copy through the SAPIEN PhysX
 components on the CPU backend: SAPIEN has no batched material API there (a loop over K shapes,
@@ -141,6 +143,15 @@ def build_replay_spec(run: SavedRun, backend: str = "cpu") -> RunSpec:
     cfg["device"] = {"cpu": "cpu", "gpu": "cuda"}.get(backend, "auto")
     cfg["resume"] = None
     spec = build_run_spec(cfg)
+    lead = run.doc.get("leader") if isinstance(run.doc, dict) else None
+    if spec.halving and isinstance(lead, dict):  # a top-k run: best_z belongs to the leading candidate
+        i = lead.get("index")
+        if not isinstance(i, int) or not 0 <= i < len(spec.candidates) or spec.candidates[i].describe() != lead.get("plan"):
+            raise ReplayError(
+                f"{run.run_dir / RESULT_FILE}: its leading candidate {lead.get('plan')!r} is not among the plans "
+                f"the planner returns now ({[t.describe() for t in spec.candidates]})"
+            )
+        spec.task = spec.candidates[i]
     if len(run.best_z) != spec.task.layout.dim:
         raise ReplayError(
             f"{run.run_dir / RESULT_FILE}: best_z has {len(run.best_z)} values, the task's parameters "

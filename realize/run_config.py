@@ -6,7 +6,9 @@ the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging`` and
 (``TaskSpec``, ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``). Every problem raises ``ConfigError`` with a one-line message
 naming the key (or file), the value and what is allowed. Nothing here builds a simulator; the
-only outside process it may start is the PDDL planner when ``task.planner.enabled`` is set.
+only outside process it may start is the PDDL planner when ``task.planner.enabled`` is set
+(``task.planner.top_k > 1``: its k best plans become candidate tasks, and the halving budget of
+``realize.candidates`` is checked before the planner runs).
 What it doesn't: read Hydra objects (``realize.app`` converts them to plain data first), or run.
 
 Key mapping: the ``ce`` group speaks the paper's language, ``ce.n_envs`` (samples = parallel
@@ -20,7 +22,7 @@ from __future__ import annotations
 import math
 import typing
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,11 +30,23 @@ import yaml
 
 if TYPE_CHECKING:  # the library modules are imported where used: `realize` starts fast
     from envs.geometry import GeometryCfg, SceneGeometry
+    from realize.candidates import HalvingBudget
     from realize.cross_entropy import CEConfig
     from realize.scene import SimSettings
     from realize.task import TaskSpec
 
-__all__ = ["ConfigError", "LoggingSettings", "RunSpec", "build_run_spec", "REPO_ROOT", "TOP_LEVEL_KEYS"]
+__all__ = [
+    "ConfigError",
+    "LoggingSettings",
+    "PlannerSettings",
+    "RunSpec",
+    "build_run_spec",
+    "build_task",
+    "build_task_candidates",
+    "planner_from_dict",
+    "REPO_ROOT",
+    "TOP_LEVEL_KEYS",
+]
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 TOP_LEVEL_KEYS = ("task", "scene", "sim", "controller", "ce", "logging", "seed", "device", "resume", "task_file")
@@ -230,35 +244,121 @@ def _resolve_path(p: Any, key: str) -> Path:
     return path
 
 
+PLANNER_KEYS = ("enabled", "domain", "problem", "timeout_s", "top_k", "round_iterations")
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """``task.planner``: the PDDL planner and, with ``top_k > 1``, the search over candidates.
+
+    ``top_k`` (default 1): realize the planner's k best distinct plans by successive halving
+    with one shared sample budget (``realize.candidates``; needs ``enabled: true`` and
+    ``ce.schedule: constant``); 1 is a single plan, as without the key.
+    ``round_iterations`` (default null = automatic): CE iterations per surviving candidate and
+    halving round; ignored with ``top_k = 1``. ``domain``/``problem``/``timeout_s`` are read
+    only when ``enabled``."""
+
+    enabled: bool = False
+    domain: str | None = None
+    problem: str | None = None
+    timeout_s: float = 30.0
+    top_k: int = 1
+    round_iterations: int | None = None
+
+
+def planner_from_dict(d: Any, source: str = "task") -> PlannerSettings:
+    """The task's ``planner`` mapping -> ``PlannerSettings`` (keys ``<source>:planner.<key>``)."""
+    where = f"{source}:planner"
+    d = _mapping(d, where)
+    _unknown(d, list(PLANNER_KEYS), where)
+    enabled = _bool(d.get("enabled", False), f"{where}.enabled")
+    top_k = _int(d.get("top_k", 1), f"{where}.top_k", lo=1)
+    m = d.get("round_iterations")
+    if m is not None:
+        m = _int(m, f"{where}.round_iterations", lo=1)
+    if top_k > 1 and not enabled:
+        raise ConfigError(
+            f"{where}.top_k = {top_k} needs {where}.enabled = true: candidate plans come from the PDDL "
+            f"planner (a fixed plan is one candidate; use top_k = 1)"
+        )
+    if not enabled:
+        return PlannerSettings(top_k=top_k, round_iterations=m)
+    return PlannerSettings(
+        enabled=True,
+        domain=_str(d.get("domain"), f"{where}.domain"),
+        problem=_str(d.get("problem"), f"{where}.problem"),
+        timeout_s=_float(d.get("timeout_s", 30.0), f"{where}.timeout_s"),
+        top_k=top_k,
+        round_iterations=m,
+    )
+
+
+def check_halving_budget(planner: PlannerSettings, ce: CEConfig, source: str = "task") -> None:
+    """With ``top_k > 1``: the CE settings must cover the halving rounds of ``top_k`` candidates
+    (checked before the planner runs; fewer candidates never need more). ``ConfigError``."""
+    if planner.top_k == 1:
+        return
+    from realize.candidates import BudgetError, plan_budget
+
+    where = f"{source}:planner"
+    if ce.schedule != "constant":
+        raise ConfigError(
+            f"ce.schedule = {ce.schedule!r} is invalid with {where}.top_k = {planner.top_k}: candidates share "
+            f"the budget in CE iterations of ce.n_envs samples (use ce.schedule=constant)"
+        )
+    try:
+        plan_budget(planner.top_k, ce.iterations, ce.n_samples, planner.round_iterations,
+                    keys=(f"{where}.top_k", "ce.iterations", f"{where}.round_iterations"))
+    except BudgetError as e:
+        raise ConfigError(str(e)) from None
+
+
 def build_task(d: Mapping[str, Any], geometry: SceneGeometry, source: str) -> TaskSpec:
-    """Task mapping -> checked ``TaskSpec``; runs the PDDL planner if ``planner.enabled``."""
+    """Task mapping -> checked ``TaskSpec``; runs the PDDL planner if ``planner.enabled``
+    (the plan is the planner's first, cheapest one)."""
+    return build_task_candidates(d, geometry, source)[0]
+
+
+def build_task_candidates(
+    d: Mapping[str, Any], geometry: SceneGeometry, source: str, planner: PlannerSettings | None = None
+) -> tuple[TaskSpec, list[TaskSpec]]:
+    """The task (its plan: the given one, or the planner's first) and the candidate tasks.
+
+    Without ``top_k > 1`` the candidates are ``[task]``. With it, one ``TaskSpec`` per distinct
+    planned plan (cheapest first; fewer than ``top_k`` if the planner finds fewer), each over
+    only the parameters its plan uses (``realize.task.task_for_plan``)."""
     from realize.actions import TEMPLATES
-    from realize.task import plan_from_actions, task_from_dict
+    from realize.task import plan_from_actions, task_for_plan, task_from_dict
 
     try:
         task = task_from_dict(d, geometry, TEMPLATES, source=source)
     except ValueError as e:
         raise ConfigError(str(e)) from None
-    planner = task.planner
-    if planner.get("enabled", False):
-        _unknown(planner, ["enabled", "domain", "problem", "timeout_s"], f"{source}:planner")
+    if planner is None:
+        planner = planner_from_dict(task.planner, source)
+    candidates = [task]
+    if planner.enabled:
         from realize.pddl import plan_from_pddl
 
-        domain = _resolve_path(planner.get("domain"), f"{source}:planner.domain")
-        problem = _resolve_path(planner.get("problem"), f"{source}:planner.problem")
-        timeout = _float(planner.get("timeout_s", 30.0), f"{source}:planner.timeout_s")
+        domain = _resolve_path(planner.domain, f"{source}:planner.domain")
+        problem = _resolve_path(planner.problem, f"{source}:planner.problem")
         try:
-            plans = plan_from_pddl(domain, problem, list(TEMPLATES), task.layout.names, timeout_s=timeout)
+            plans = plan_from_pddl(domain, problem, list(TEMPLATES), task.layout.names, top_k=planner.top_k,
+                                   timeout_s=planner.timeout_s)
             if not plans:
                 raise ConfigError(f"{source}:planner: the PDDL planner found no plan for {problem}")
-            task.plan = plan_from_actions(plans[0], task.layout, TEMPLATES, f"{source}:planner")
+            checked = [plan_from_actions(p, task.layout, TEMPLATES, f"{source}:planner[{i}]")
+                       for i, p in enumerate(plans)]
         except ConfigError:
             raise
         except ValueError as e:
             raise ConfigError(f"{source}:planner: {e}") from None
+        task.plan = checked[0]
+        if planner.top_k > 1:
+            candidates = [task_for_plan(task, p) for p in checked]
     if not task.plan:
         raise ConfigError(f"{source}:plan is empty (give a plan or set planner.enabled: true)")
-    return task
+    return task, candidates
 
 
 # --------------------------------------------------------------------------------------------
@@ -281,6 +381,15 @@ class RunSpec:
     ce: CEConfig
     logging: LoggingSettings
     config: dict[str, Any]
+    planner: PlannerSettings = field(default_factory=PlannerSettings)
+    # the candidate plans' tasks ([task] unless planner.top_k > 1) and their halving budget
+    candidates: list[TaskSpec] = field(default_factory=list)
+    budget: HalvingBudget | None = None
+
+    @property
+    def halving(self) -> bool:
+        """Successive halving over candidate plans (``task.planner.top_k > 1``)."""
+        return self.planner.top_k > 1
 
     @property
     def n_envs_max(self) -> int:
@@ -333,7 +442,14 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         task_d, source = _mapping(d.get("task"), "task"), "task"
         if not task_d:
             raise ConfigError("task: no task given (choose task=<name> or task_file=<path.yaml>)")
-    task = build_task(task_d, geometry, source)
+    planner = planner_from_dict(task_d.get("planner"), source)
+    check_halving_budget(planner, ce, source)  # before the planner runs
+    task, candidates = build_task_candidates(task_d, geometry, source, planner)
+    budget = None
+    if planner.top_k > 1:
+        from realize.candidates import plan_budget
+
+        budget = plan_budget(len(candidates), ce.iterations, ce.n_samples, planner.round_iterations)
 
     from realize.rollout import RolloutConfig
 
@@ -356,4 +472,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         ce=ce,
         logging=logging,
         config=dict(d),
+        planner=planner,
+        candidates=candidates,
+        budget=budget,
     )

@@ -161,3 +161,15 @@ def plan_from_actions(actions: Sequence[Any], layout: ParamLayout, templates: Ma
     plan = [ActionSpec(a.template, tuple(a.params)) for a in actions]
     check_plan(plan, layout, templates, where)
     return plan
+
+
+def task_for_plan(task: TaskSpec, plan: Sequence[ActionSpec]) -> TaskSpec:
+    """``task`` restricted to one candidate plan: the same goal and final cost, and a layout of
+    only the parameters the plan binds (plus the goal's ``base_in``, whose region the goal
+    check reads), in the task's order. ``plan`` must already be checked (``plan_from_actions``)."""
+    used = {p for a in plan for p in a.params}
+    if task.goal.base_in is not None:
+        used.add(task.goal.base_in)
+    regions = {n: r for n, r in task.layout.regions.items() if n in used}
+    return TaskSpec(task.name, ParamLayout(regions), list(plan), task.goal, task.final_cost, task.source,
+                    dict(task.planner))

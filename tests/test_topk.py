@@ -1,0 +1,181 @@
+"""Top-k runs (``task.planner.top_k > 1``): config checks before any simulation, candidate tasks
+over their own parameters, fewer plans than asked for, and a real tiny run on the pick_place
+PDDL files (result.json ``candidates``/``winner``/``budget``, per-candidate files, budget
+accounting, resume refused, interrupt, replay of the leading candidate's plan)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import realize.pddl
+from realize.app import CONFIG_DIR, run
+from realize.replay import build_replay_spec, load_run
+from realize.results import CHECKPOINT_FILE, RESULT_FILE, load_checkpoint
+from realize.run_config import ConfigError, build_run_spec
+from test_app import cfg_of, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
+
+TOPK = ["task.planner.enabled=true", "task.planner.top_k=2"]
+SEED_PLAN = "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
+
+BAD = [
+    (["task.planner.top_k=0"], ["task:planner.top_k = 0", ">= 1"]),
+    (["task.planner.top_k=2"], ["task:planner.top_k = 2", "task:planner.enabled"]),
+    (TOPK + ["ce.iterations=1"], ["ce.iterations = 1 is too small", "task:planner.top_k = 2", "(2) = 2"]),
+    (["task.planner.enabled=true", "task.planner.top_k=3", "task.planner.round_iterations=2", "ce.iterations=9"],
+     ["ce.iterations = 9", "2 x (3 + 2) = 10", "task:planner.round_iterations"]),
+    (TOPK + ["task.planner.round_iterations=0"], ["task:planner.round_iterations = 0"]),
+    (TOPK + ["ce.schedule=linear", "ce.n_envs_end=4"], ["ce.schedule = 'linear'", "task:planner.top_k = 2"]),
+    (["+task.planner.k=2"], ["task:planner", "'k'", "top_k"]),
+]
+
+
+@pytest.mark.parametrize("overrides, needles", BAD, ids=[" ".join(o) for o, _ in BAD])
+def test_bad_top_k_config_fails_before_simulation(overrides: list[str], needles: list[str], tmp_path: Path,
+                                                  no_sim: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_planner(*a, **k):
+        raise AssertionError("the planner ran for a config that fails its budget check")
+
+    if "too small" in needles[0] or "schedule" in needles[0]:
+        monkeypatch.setattr(realize.pddl, "plan_from_pddl", no_planner)
+    with pytest.raises(ConfigError) as ei:
+        run(cfg_of(tiny_with(overrides)), tmp_path)
+    msg = str(ei.value)
+    assert "\n" not in msg
+    for n in needles:
+        assert n in msg, f"{n!r} not in {msg!r}"
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert res["status"] == "failed" and res["simulated"] is False
+
+
+def test_top_k_1_is_a_single_plan(no_sim: None) -> None:
+    spec = build_run_spec(plain(["task.planner.enabled=true"]))
+    assert not spec.halving and spec.budget is None and spec.candidates == [spec.task]
+    assert spec.task.describe() == SEED_PLAN
+
+
+def test_candidates_use_only_their_parameters(tmp_path: Path, no_sim: None) -> None:
+    task = yaml.safe_load((CONFIG_DIR / "task" / "pick_place.yaml").read_text())
+    task["params"]["Spare"] = {"type": "box", "low": [0.0, 0.0], "high": [1.0, 1.0]}  # no plan uses it
+    task["planner"].update(enabled=True, top_k=3)
+    path = tmp_path / "spare.yaml"
+    path.write_text(yaml.safe_dump(task, sort_keys=False))
+    spec = build_run_spec(plain(tiny_with([f"task_file={path}", "ce.iterations=10"])))
+    assert spec.halving and len(spec.candidates) == 3 and spec.budget is not None
+    assert spec.budget.survivors == (3, 2) and spec.budget.round_iterations == 1
+    assert "Spare" in spec.task.layout.names  # the task keeps every parameter ...
+    for t in spec.candidates:  # ... each candidate only those its plan binds
+        assert t.layout.names == ["Table1", "Cube_g", "Table2", "Cube_p", "Exit"]
+        assert t.goal == spec.task.goal
+    assert spec.candidates[0].describe() == SEED_PLAN
+    assert len({t.describe() for t in spec.candidates}) == 3
+
+
+def test_fewer_plans_than_top_k(monkeypatch: pytest.MonkeyPatch, no_sim: None) -> None:
+    real = realize.pddl.plan_from_pddl
+    asked = []
+
+    def one_plan(*a, top_k: int = 1, **k):
+        asked.append(top_k)
+        return real(*a, top_k=top_k, **k)[:1]
+
+    monkeypatch.setattr(realize.pddl, "plan_from_pddl", one_plan)
+    spec = build_run_spec(plain(tiny_with(["task.planner.enabled=true", "task.planner.top_k=5",
+                                           "ce.iterations=10"])))
+    assert asked == [5]
+    assert len(spec.candidates) == 1 and spec.candidates[0].describe() == SEED_PLAN
+    assert spec.budget is not None and spec.budget.survivors == () and spec.budget.final_iterations == 10
+
+
+# --------------------------------------------------------------------------------------------
+# a real tiny run
+# --------------------------------------------------------------------------------------------
+
+RUN = tiny_with(TOPK + ["ce.iterations=3", "seed=2", "logging.rerun=true"])
+
+
+@pytest.fixture(scope="module")
+def topk_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("topk")
+    out = run(cfg_of(RUN), d)
+    assert out.status == "done" and out.iterations_done == 3
+    return d
+
+
+def test_topk_run_writes_candidates(topk_run: Path) -> None:
+    res = json.loads((topk_run / RESULT_FILE).read_text())
+    assert res["status"] == "done" and res["top_k"] == 2 and res["n_candidates"] == 2
+    cands = res["candidates"]
+    assert [c["index"] for c in cands] == [0, 1] and cands[0]["plan"] == SEED_PLAN
+    assert cands[1]["plan"] != SEED_PLAN
+    b = res["budget"]
+    assert b == {"n_candidates": 2, "total_iterations": 3, "n_samples_per_iteration": 4, "total_samples": 12,
+                 "round_iterations": 1, "survivors_per_round": [2], "final_iterations": 1}
+    # budget accounting: one round of 1 iteration each, the winner 1 more: 3 x 4 samples in all
+    assert sum(c["samples"] for c in cands) == res["spent_samples"] == 12 == b["total_samples"]
+    assert sorted(c["iterations"] for c in cands) == [1, 2] and res["spent_iterations"] == 3
+    w = res["winner"]["index"]
+    assert res["winner"]["plan"] == cands[w]["plan"] and res["leader"]["index"] == w
+    assert cands[w]["dropped_round"] is None and cands[1 - w]["dropped_round"] == 0
+    # the top level is the winner's, as for a single-plan run
+    assert res["plan"] == cands[w]["plan"] and res["best_params"] == cands[w]["best_params"]
+    assert res["feasible"] == cands[w]["feasible"] and res["best_cost"] == cands[w]["best_cost"]
+    assert res["iterations_done"] == cands[w]["iterations"] == len(res["success_per_iter"])
+    assert res["columns"] == cands[w]["columns"] and len(res["best_z"]) == len(res["columns"])
+    for c in cands:
+        with np.load(topk_run / c["history"], allow_pickle=False) as h:
+            assert len(h["iteration"]) == c["iterations"] and list(h["column_names"]) == c["columns"]
+            assert h["Z_000"].shape == (4, len(c["columns"]))
+            assert h["action_success_000"].shape[1] == c["n_actions"]
+        assert (topk_run / f"realize_c{c['index']}.rrd").stat().st_size > 0
+    ck = load_checkpoint(topk_run)
+    assert ck.iteration == 3 and [r["candidate"] for r in ck.records][:2] == [0, 1]
+    assert ck.ce_state["kind"] == "successive_halving" and len(ck.ce_state["candidates"]) == 2
+
+
+def test_topk_resume_is_refused(topk_run: Path, no_sim: None) -> None:
+    before = (topk_run / RESULT_FILE).read_text()
+    with pytest.raises(ConfigError, match=r"resume: .* is a top-k run .*not supported yet.*start a new run"):
+        run(cfg_of([f"resume={topk_run}"]), topk_run, cli_overrides=[f"resume={topk_run}"])
+    assert (topk_run / RESULT_FILE).read_text() == before
+
+
+def test_topk_replay_spec_is_the_leaders_plan(topk_run: Path, no_sim: None) -> None:
+    saved = load_run(topk_run)
+    spec = build_replay_spec(saved)
+    assert spec.task.describe() == saved.doc["leader"]["plan"]
+    assert spec.task.layout.column_names == saved.columns
+
+
+def test_topk_interrupted_in_round_0(tmp_path: Path) -> None:
+    def stop(i: int) -> None:
+        if i == 0:
+            raise KeyboardInterrupt
+
+    out = run(cfg_of(tiny_with(TOPK + ["ce.iterations=3"])), tmp_path, after_iteration=stop)
+    assert out.status == "interrupted" and out.iterations_done == 1
+    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    assert res["interrupted"] is True and res["winner"] is None and res["leader"]["index"] == 0
+    assert [c["iterations"] for c in res["candidates"]] == [1, 0] and res["spent_samples"] == 4
+    assert res["candidates"][1]["best_params"] is None
+    assert (tmp_path / CHECKPOINT_FILE).is_file()
+
+
+def test_candidate_0_equals_a_single_plan_run_in_the_shared_scene(topk_run: Path, tmp_path: Path) -> None:
+    """Candidate 0 (the planner's first plan, the run's seed) draws the samples of a single-plan
+    run; its second iteration runs after candidate 1 used the same scene, and still gives the
+    single-plan run's numbers bit for bit (CPU resets are history-free)."""
+    res = json.loads((topk_run / RESULT_FILE).read_text())
+    assert res["winner"]["index"] == 0 and res["candidates"][0]["iterations"] == 2  # seed 2: c0, c1, c0
+    assert load_checkpoint(topk_run).records[1]["candidate"] == 1
+    single = tmp_path / "single"
+    run(cfg_of(tiny_with(["task.planner.enabled=true", "ce.iterations=2", "seed=2"])), single)
+    with np.load(topk_run / "history_c0.npz", allow_pickle=False) as a, \
+            np.load(single / "history.npz", allow_pickle=False) as b:
+        for k in ("Z_000", "Z_001", "cost_000", "cost_001", "feasible_001", "progress_001", "distance_001",
+                  "action_success_001", "steps_001"):
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
