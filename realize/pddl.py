@@ -10,6 +10,8 @@ the action templates extended with preconditions and effects. This module is tha
   (action costs if the domain declares them, else plan length, as the planner orders them);
   SymK's repeated final report is dropped, and PDDL plans that differ only in bookkeeping
   arguments collapse into one skeleton, so fewer than ``top_k`` plans may come back;
+* with unit action costs, plans of equal length are put in a fixed order (then by their text),
+  as SymK's own order of ties can vary between calls;
 * it maps each plan onto realize's vocabulary as :class:`PlannedAction` values.
 
 Mapping rule
@@ -109,6 +111,10 @@ def plan_from_pddl(
     engine = OPTIMAL_ENGINE if top_k == 1 else TOP_K_ENGINE
     raw_plans = _solve(task, engine, top_k, timeout_s, domain, problem)
 
+    if _unit_costs(task):
+        # SymK reports equally long plans in an order that can vary between calls: sort them
+        # (length, then text) so the candidate list, and a top-k run, is reproducible
+        raw_plans = sorted(raw_plans, key=lambda p: (len(p.actions), [str(a) for a in p.actions]))
     region = _region_type(task)
     plans: list[list[PlannedAction]] = []
     for raw in raw_plans:
@@ -187,6 +193,13 @@ def _solve(
         hint = _timeout_hint(last.status, timeout_s) if last is not None else ""
         raise PlanningError(f"{engine} found no plan ({where}): status {status}{hint}{logs}")
     return plans
+
+
+def _unit_costs(task: Problem) -> bool:
+    """Whether a plan's cost is its length (no action costs or other metric declared)."""
+    from unified_planning.model.metrics import MinimizeSequentialPlanLength
+
+    return all(isinstance(m, MinimizeSequentialPlanLength) for m in task.quality_metrics)
 
 
 def _same_plan(a: SequentialPlan, b: SequentialPlan) -> bool:
