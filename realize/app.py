@@ -313,6 +313,48 @@ def _shielded() -> Iterator[None]:
             signal.signal(s, h)
 
 
+class _RunGuard:
+    """End of a run loop, however it ends: ``status`` becomes ``done``, ``interrupted`` (SIGINT,
+    or SIGTERM via :class:`RunInterrupted`; swallowed, ``exit_code`` set) or ``failed`` (the
+    traceback goes to ``error.txt`` and the exception propagates). The result is written one
+    last time and ``close`` runs in every case, shielded from a second Ctrl-C."""
+
+    def __init__(self, n_done: Callable[[], int], write_result: Callable[..., None], close: Callable[[], None],
+                 error_file: Path | None = None) -> None:
+        self.n_done, self.write_result, self.close = n_done, write_result, close
+        self.error_file = error_file
+        self.status, self.exit_code, self.error = "running", 0, None
+
+    def __enter__(self) -> "_RunGuard":
+        return self
+
+    def __exit__(self, kind: Any, exc: Any, tb: Any) -> bool:
+        if kind is None:
+            self.status = "done"
+        elif issubclass(kind, KeyboardInterrupt):
+            signum = exc.signum if isinstance(exc, RunInterrupted) else signal.SIGINT
+            self.status, self.exit_code = "interrupted", EXIT_SIGNAL.get(signum, 130)
+            self.error = f"interrupted by {signal.Signals(signum).name} after {self.n_done()} complete iteration(s)"
+        elif issubclass(kind, Exception):
+            self.status, self.error = "failed", f"{kind.__name__}: {exc}"
+            with _shielded():
+                try:
+                    if self.error_file is not None:
+                        atomic_write_text(self.error_file, "".join(traceback.format_exception(kind, exc, tb)))
+                    self.write_result(self.status, self.error)
+                finally:
+                    self.close()
+            return False
+        else:
+            return False
+        with _shielded():  # a second Ctrl-C must not cut the final write short
+            try:
+                self.write_result(self.status, self.error if self.status == "interrupted" else None)
+            finally:
+                self.close()
+        return True
+
+
 def _make_rerun_logger(spec: RunSpec, run_dir: Path, start_iteration: int) -> Any:
     if not spec.logging.rerun:
         return None
@@ -436,8 +478,9 @@ def _iterate(
         return outcome
     write_result("running")
     scene = realizer = rr_logger = bar = None
-    status, exit_code, error = "running", 0, None
-    try:
+    guard = _RunGuard(lambda: len(records), write_result, lambda: _close(bar, rr_logger, scene),
+                      run_dir / ERROR_FILE)
+    with guard:
         with _Signals():
             t0 = time.perf_counter()
             scene = BatchedScene(spec.n_envs_max, spec.geometry_cfg, spec.sim)
@@ -500,25 +543,7 @@ def _iterate(
                 bar.update(1)
                 if after_iteration is not None:
                     after_iteration(rec.iteration)
-            status = "done"
-    except KeyboardInterrupt as e:  # SIGINT, or SIGTERM via RunInterrupted
-        signum = e.signum if isinstance(e, RunInterrupted) else signal.SIGINT
-        status, exit_code = "interrupted", EXIT_SIGNAL.get(signum, 130)
-        error = f"interrupted by {signal.Signals(signum).name} after {len(records)} complete iteration(s)"
-    except Exception as e:
-        status, error = "failed", f"{type(e).__name__}: {e}"
-        with _shielded():
-            try:
-                atomic_write_text(run_dir / ERROR_FILE, traceback.format_exc())
-                write_result(status, error)
-            finally:
-                _close(bar, rr_logger, scene)
-        raise
-    with _shielded():  # a second Ctrl-C must not cut the final write short
-        try:
-            write_result(status, error if status == "interrupted" else None)
-        finally:
-            _close(bar, rr_logger, scene)
+    status, exit_code = guard.status, guard.exit_code
     best = cur_state.best_cost if (cur_state is not None and cur_state.best_feasible) else math.inf
     feasible = bool(cur_state is not None and cur_state.best_feasible)
     outcome = RunOutcome(run_dir, status, feasible, best, len(records), wall(), exit_code)
@@ -588,8 +613,9 @@ def _iterate_halving(
     write_result("running")
     scene = bar = None
     loggers: dict[int, Any] = {}
-    status, exit_code, error = "running", 0, None
-    try:
+    guard = _RunGuard(lambda: len(records), write_result, lambda: _close_all(bar, loggers, scene),
+                      run_dir / ERROR_FILE)
+    with guard:
         with _Signals():
             t0 = time.perf_counter()
             scene = BatchedScene(spec.ce.n_samples, spec.geometry_cfg, spec.sim)
@@ -641,25 +667,7 @@ def _iterate_halving(
                 bar.update(1)
                 if after_iteration is not None:
                     after_iteration(len(records) - 1)
-            status = "done"
-    except KeyboardInterrupt as e:  # SIGINT, or SIGTERM via RunInterrupted
-        signum = e.signum if isinstance(e, RunInterrupted) else signal.SIGINT
-        status, exit_code = "interrupted", EXIT_SIGNAL.get(signum, 130)
-        error = f"interrupted by {signal.Signals(signum).name} after {len(records)} complete iteration(s)"
-    except Exception as e:
-        status, error = "failed", f"{type(e).__name__}: {e}"
-        with _shielded():
-            try:
-                atomic_write_text(run_dir / ERROR_FILE, traceback.format_exc())
-                write_result(status, error)
-            finally:
-                _close_all(bar, loggers, scene)
-        raise
-    with _shielded():
-        try:
-            write_result(status, error if status == "interrupted" else None)
-        finally:
-            _close_all(bar, loggers, scene)
+    status, exit_code = guard.status, guard.exit_code
     lead = sh.candidates[sh.leader].optimizer.state
     feasible = bool(lead.best_feasible)
     outcome = RunOutcome(run_dir, status, feasible, lead.best_cost if feasible else math.inf, len(records), wall(),
