@@ -90,11 +90,11 @@ class RealizeMoveAndPushEnv(RealizePickPlaceEnv):
                 # keep the cube's centre above the stick's top
                 hx, hy, _ = st.half_size
                 for c, cube in enumerate(self.cubes):
-                    p = cube.pose.p.clone()
+                    p = cube.pose.p[env_idx].clone()
                     lo = torch.tensor([st.center[0] - hx + self.offsets[c][0], st.center[1] - hy + self.offsets[c][1]])
                     hi = torch.tensor([st.center[0] + hx + self.offsets[c][0], st.center[1] + hy + self.offsets[c][1]])
                     p[:, :2] = torch.maximum(torch.minimum(p[:, :2], hi), lo)
-                    cube.set_pose(Pose.create_from_pq(p, cube.pose.q))
+                    cube.set_pose(Pose.create_from_pq(p, cube.pose.q[env_idx]))
 
     def evaluate(self) -> dict:
         """Goal for every env (copy 0 only when tiled: use BatchedScene for all copies)."""
