@@ -1,8 +1,11 @@
-"""Scene geometry of the pick-and-place world, as plain dataclasses built from config.
+"""Scene geometry of the realize worlds, as plain dataclasses built from config.
 
 What it does: describes the static world (tables, an optional wall or ramp, the exit area, the
 cube and the robot's start pose) in one copy's local frame, validates it, and offers the
-obstacle boxes that the controllers (A* occupancy grid, fabric collision terms) need.
+obstacle boxes that the controllers (A* occupancy grid, fabric collision terms) need. The
+``push`` variant (move-and-push) adds an upright dynamic stick with the cube resting on its top
+and an open box (a static container: floor and four low walls) on the floor; tables are optional
+there and serve as plain obstacles.
 What it doesn't: build anything in a simulator (see `envs/scene_builder.py`), nor hold the
 symbolic parameter regions of a plan (those live in the task config, see `realize/regions.py`).
 
@@ -16,7 +19,7 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any, Mapping
 
-VARIANTS = ("plain", "wall", "ramp")
+VARIANTS = ("plain", "wall", "ramp", "push")
 
 
 class GeometryError(ValueError):
@@ -61,7 +64,7 @@ class SceneGeometry:
 
     variant: str
     tables: tuple[Box, ...]
-    extras: tuple[Box, ...]  # wall / ramp
+    extras: tuple[Box, ...]  # wall / ramp / the container's floor and walls
     cube_half_size: float
     cube_pos: tuple[float, float, float]
     cube_mass: float
@@ -72,11 +75,28 @@ class SceneGeometry:
     exit_high: tuple[float, float]
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
+    stick: Box | None = None  # push variant: the dynamic upright stick at its start pose
+    containers: tuple[Box, ...] = ()  # push variant: open boxes, outer bounds (walls in extras)
+    container_wall: float = 0.0  # wall thickness of the containers (m)
+    stick_mass: float = 0.0  # kg
+    stick_friction: float = 0.0
+
+    @property
+    def static_obstacles(self) -> tuple[Box, ...]:
+        """Every static box (the fabric's collision boxes; the stick is not one: it is pushed)."""
+        return self.tables + self.extras
 
     @property
     def obstacles(self) -> tuple[Box, ...]:
-        """Every static box the robot base must avoid."""
-        return self.tables + self.extras
+        """Every box the robot base must avoid (A* occupancy): the static boxes and the stick's
+        footprint at its start pose."""
+        return self.static_obstacles + ((self.stick,) if self.stick is not None else ())
+
+    def container(self, name: str) -> Box:
+        for c in self.containers:
+            if c.name == name:
+                return c
+        raise KeyError(f"scene has no container named {name!r}; containers: {[c.name for c in self.containers]}")
 
     def table(self, name: str) -> Box:
         for t in self.tables:
@@ -130,6 +150,16 @@ class GeometryCfg:
     ramp_width: float = 0.4
     ramp_drop: float = 0.35
     ramp_friction: float = 0.0
+    # push variant: an upright stick (dynamic) with the cube on its top (cube_offset is then
+    # relative to the stick's axis) and an open box on the floor (inner footprint, wall height)
+    stick_center: tuple[float, float] = (0.0, 0.0)
+    stick_size: tuple[float, float, float] = (0.04, 0.04, 0.7)
+    stick_mass: float = 0.3
+    stick_friction: float = 0.8
+    box_center: tuple[float, float] = (0.8, 0.0)
+    box_inner: tuple[float, float] = (0.4, 0.4)
+    box_wall_height: float = 0.12
+    box_wall_thickness: float = 0.02
 
 
 def _err(key: str, value: Any, allowed: str) -> GeometryError:
@@ -170,7 +200,8 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
     """Validate `cfg` and turn it into boxes. Raises `GeometryError` naming the bad key."""
     if cfg.variant not in VARIANTS:
         raise _err("variant", cfg.variant, f"allowed: {list(VARIANTS)}")
-    if len(cfg.tables) < 2:
+    push = cfg.variant == "push"
+    if len(cfg.tables) < 2 and not push:
         raise _err("tables", [t.name for t in cfg.tables], "need at least two tables (pick and place)")
     names = [t.name for t in cfg.tables]
     if len(set(names)) != len(names):
@@ -194,13 +225,27 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
         raise _err("cube_friction", cfg.cube_friction, "must be >= 0")
     if cfg.robot_radius <= 0:
         raise _err("robot_radius", cfg.robot_radius, "must be > 0")
-    t1 = tables[0]
-    cx, cy = t1.center[0] + cfg.cube_offset[0], t1.center[1] + cfg.cube_offset[1]
-    if not t1.contains_xy(cx, cy, margin=-cfg.cube_size / 2):
-        raise _err("cube_offset", cfg.cube_offset, f"the cube must rest on {t1.name}'s top")
-    cube_pos = (cx, cy, 2 * t1.half_size[2] + cfg.cube_size / 2)
-
     extras: list[Box] = []
+    stick: Box | None = None
+    containers: tuple[Box, ...] = ()
+    if push:
+        stick, box_parts, container = _push_parts(cfg)
+        extras.extend(box_parts)
+        containers = (container,)
+        cx, cy = stick.center[0] + cfg.cube_offset[0], stick.center[1] + cfg.cube_offset[1]
+        if not stick.contains_xy(cx, cy):
+            raise _err("cube_offset", cfg.cube_offset, "the cube's centre must lie above the stick's top")
+        cube_pos = (cx, cy, 2 * stick.half_size[2] + cfg.cube_size / 2)
+        for b in tables:
+            if b.contains_xy(*stick.center[:2], margin=stick.half_size[0] + stick.half_size[1]):
+                raise _err("stick_center", cfg.stick_center, f"the stick overlaps {b.name}")
+    else:
+        t1 = tables[0]
+        cx, cy = t1.center[0] + cfg.cube_offset[0], t1.center[1] + cfg.cube_offset[1]
+        if not t1.contains_xy(cx, cy, margin=-cfg.cube_size / 2):
+            raise _err("cube_offset", cfg.cube_offset, f"the cube must rest on {t1.name}'s top")
+        cube_pos = (cx, cy, 2 * t1.half_size[2] + cfg.cube_size / 2)
+
     if cfg.variant == "wall":
         wx, wy, wz = cfg.wall_size
         if min(wx, wy, wz) <= 0:
@@ -230,7 +275,7 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
                 color=(0.55, 0.55, 0.6, 1.0), friction=cfg.ramp_friction)
         )
     sx, sy, syaw = cfg.robot_start
-    for b in tables + extras:
+    for b in tables + extras + ([stick] if stick is not None else []):
         if b.contains_xy(sx, sy, margin=cfg.robot_radius):
             raise _err("robot_start", cfg.robot_start, f"the robot's footprint overlaps {b.name}")
     bl, bh = cfg.bounds_low, cfg.bounds_high
@@ -255,4 +300,48 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
         exit_high=tuple(eh),
         bounds_low=tuple(bl),
         bounds_high=tuple(bh),
+        stick=stick,
+        containers=containers,
+        container_wall=cfg.box_wall_thickness if push else 0.0,
+        stick_mass=cfg.stick_mass if push else 0.0,
+        stick_friction=cfg.stick_friction if push else 0.0,
     )
+
+
+def _push_parts(cfg: GeometryCfg) -> tuple[Box, list[Box], Box]:
+    """The push variant's stick (start pose), the container's five static boxes (floor, walls)
+    and the container's outer bounds (named ``box``, for the goal predicate)."""
+    sx, sy, sh = cfg.stick_size
+    if min(sx, sy) <= 0 or not 0.3 <= sh <= 1.1:
+        raise _err("stick_size", cfg.stick_size, "width and depth must be > 0 and the height in [0.3, 1.1] m")
+    if max(sx, sy) > 0.1:
+        raise _err("stick_size", cfg.stick_size, "width and depth must be <= 0.1 m (a stick, not a table)")
+    if cfg.stick_mass <= 0:
+        raise _err("stick_mass", cfg.stick_mass, "must be > 0")
+    if cfg.stick_friction < 0:
+        raise _err("stick_friction", cfg.stick_friction, "must be >= 0")
+    stick = Box("stick", (cfg.stick_center[0], cfg.stick_center[1], sh / 2), (sx / 2, sy / 2, sh / 2),
+                color=(0.75, 0.6, 0.35, 1.0))
+    ix, iy = cfg.box_inner
+    h, w = cfg.box_wall_height, cfg.box_wall_thickness
+    if min(ix, iy) <= cfg.cube_size:
+        raise _err("box_inner", cfg.box_inner, f"both sides must be larger than the cube ({cfg.cube_size} m)")
+    if not 0 < h <= 0.5:
+        raise _err("box_wall_height", h, "must be in (0, 0.5] m")
+    if not 0 < w <= 0.1:
+        raise _err("box_wall_thickness", w, "must be in (0, 0.1] m")
+    bx, by = cfg.box_center
+    ox, oy = ix / 2 + w, iy / 2 + w  # outer half sizes
+    colour = (0.3, 0.45, 0.7, 1.0)
+    floor = w / 2
+    parts = [
+        Box("box_floor", (bx, by, floor / 2), (ox, oy, floor / 2), color=colour),
+        Box("box_wall_xn", (bx - ix / 2 - w / 2, by, h / 2), (w / 2, oy, h / 2), color=colour),
+        Box("box_wall_xp", (bx + ix / 2 + w / 2, by, h / 2), (w / 2, oy, h / 2), color=colour),
+        Box("box_wall_yn", (bx, by - iy / 2 - w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
+        Box("box_wall_yp", (bx, by + iy / 2 + w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
+    ]
+    outer = Box("box", (bx, by, h / 2), (ox, oy, h / 2), color=colour)
+    if outer.contains_xy(stick.center[0], stick.center[1], margin=max(sx, sy) / 2):
+        raise _err("box_center", cfg.box_center, "the box overlaps the stick")
+    return stick, parts, outer

@@ -174,7 +174,7 @@ class RealizePickPlaceEnv(BaseEnv):
         self.obstacles: list[list] = []
         self.cubes: list = []
         for c, off in enumerate(self.offsets):
-            self.obstacles.append([self._build_box(box, off, c) for box in g.obstacles])
+            self.obstacles.append([self._build_box(box, off, c) for box in g.static_obstacles])
             cb = self.scene.create_actor_builder()
             h = g.cube_half_size
             mat = sapien.physx.PhysxMaterial(g.cube_friction, g.cube_friction, 0.0)
@@ -182,6 +182,12 @@ class RealizePickPlaceEnv(BaseEnv):
             cb.add_box_visual(half_size=[h, h, h], material=sapien.render.RenderMaterial(base_color=[0.85, 0.1, 0.1, 1]))
             cb.initial_pose = sapien.Pose(p=[g.cube_pos[0] + off[0], g.cube_pos[1] + off[1], g.cube_pos[2]])
             self.cubes.append(cb.build(name=f"cube_{c}"))
+
+    @property
+    def dynamic_actors(self) -> list:
+        """Every dynamic actor, per copy (the cubes here): ``realize.scene.BatchedScene`` takes
+        them out of the PhysX scene and back in on reset, which makes resets history-free."""
+        return list(self.cubes)
 
     # ------------------------------------------------------------------ episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):

@@ -205,9 +205,13 @@ def geometry_from_dict(d: Mapping[str, Any]) -> SceneGeometry:
 
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(SceneGeometry):
+        if f.name not in d and f.default is not dataclasses.MISSING:
+            continue  # written before the field existed
         v = d[f.name]
-        if f.name in ("tables", "extras"):
+        if f.name in ("tables", "extras", "containers"):
             v = tuple(box(b) for b in v)
+        elif f.name == "stick":
+            v = None if v is None else box(v)
         elif isinstance(v, list):
             v = tuple(v)
         kw[f.name] = v

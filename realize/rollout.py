@@ -6,8 +6,9 @@ time; a plan whose action fails or times out stops there and is held still), ste
 all plans together, and returns a ``RolloutResult``: cost (steps until each action finished +
 the final cost), per-action success, goal success psi_g read from the simulator, feasibility,
 a progress score and a distance proxy for ranking infeasible plans, and optionally downsampled
-trajectories. Plans that diverge (NaN or exploding joint speeds) are failed with a reason and do
-not disturb the others. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
+trajectories. A goal that reads the cube is read ``goal_settle_s`` after the plan's last action
+(physics only, not counted in the cost), so a pushed or dropped cube has landed. Plans that
+diverge (NaN or exploding joint speeds) are failed with a reason and do not disturb the others. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
 What it doesn't: choose parameters (``realize.cross_entropy``) or know any backend details
 (``realize.scene``).
 """
@@ -22,6 +23,7 @@ from typing import Any, Mapping
 import torch
 from torch import Tensor
 
+from envs.move_and_push import cube_in_container
 from realize.actions import FAIL, FAILURES, TEMPLATES, Template
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import PIDConfig
@@ -64,6 +66,10 @@ class RolloutConfig:
     approach_speed: float = 0.15  # m/s of the straight moves in to and out from the object
     rest_speed: float = 0.05  # m/s, the cube counts as resting below this
     manip_timeout_s: float = 15.0
+    push_pre_distance: float = 0.15  # m, push: the straight move starts this far before the push point
+    push_depth: float = 0.1  # m, push: and ends this far past it
+    push_speed: float = 0.15  # m/s of the straight push (faster: the fabric lags behind the sliding goal)
+    goal_settle_s: float = 1.5  # s of physics after a plan's last action before a cube goal is read (uncounted)
     max_time_s: float = 120.0  # horizon of a whole plan
     record_every: int = 5  # control steps between recorded trajectory samples
     diverge_speed: float = 50.0  # joint speed that marks a plan as diverged
@@ -78,7 +84,7 @@ class RolloutConfig:
             if f.name in ("pid", "astar", "fabric", "freeze_finished"):
                 continue
             v = getattr(self, f.name)
-            zero_ok = f.name in ("grasp_offset", "grasp_clearance", "place_drop")
+            zero_ok = f.name in ("grasp_offset", "grasp_clearance", "place_drop", "goal_settle_s", "push_depth")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
                 raise RolloutConfigError(
                     f"{prefix}.{f.name} = {v!r} is invalid: must be a finite number {'>= 0' if zero_ok else '> 0'}")
@@ -265,6 +271,8 @@ class PlanRealizer:
             ok &= ((p[:, 0] - t.center[0]).abs() <= t.half_size[0]) & ((p[:, 1] - t.center[1]).abs() <= t.half_size[1])
             ok &= (p[:, 2] - top).abs() <= 0.02
             ok &= ctx.cube_speed <= self.cfg.rest_speed
+        if goal.cube_in_box is not None:
+            ok &= cube_in_container(ctx.cube[:, :3], ctx.cube_speed, g, goal.cube_in_box, self.cfg.rest_speed)
         if goal.base_in is not None:
             region = self.layout.regions[goal.base_in]
             assert isinstance(region, Box)
@@ -315,6 +323,30 @@ class PlanRealizer:
                 running[r] = False
                 ctx.hold_arm(r)
 
+        # psi_g of a plan is read goal_settle_s after its last action (a pushed or dropped cube
+        # must land first); plans that never finish are read at the end
+        goal = torch.zeros(n, dtype=torch.bool, device=dev)
+        goal_read = torch.zeros(n, dtype=torch.bool, device=dev)
+        settle_left = torch.full((n,), -1, dtype=torch.long, device=dev)
+        reads_cube = task.goal.cube_on is not None or task.goal.cube_in_box is not None
+        settle_steps = int(round(cfg.goal_settle_s / ctx.dt)) if reads_cube else 0
+
+        def settle_tick() -> None:
+            settle_left[settle_left > 0] -= 1
+
+        def read_due_goals() -> None:
+            due = (settle_left == 0) & ~goal_read
+            if due.any():
+                goal[due] = self.goal_reached(ctx)[due]
+                goal_read[due] = True
+
+        def record_sample() -> None:
+            if record and step % cfg.record_every == 0:
+                rec_t.append(step * ctx.dt)
+                rec_base.append(ctx.base[:, :2].clone())
+                rec_ee.append(ctx.tcp.clone())
+                rec_cube.append(ctx.cube[:, :3].clone())
+
         ctx.read()
         ctx.arm_hold[:] = ctx.q[:, 3:]
         begin(0, torch.nonzero(running).flatten())
@@ -339,11 +371,8 @@ class PlanRealizer:
             step += 1
             steps += running.long()
             ctx.read()
-            if record and step % cfg.record_every == 0:
-                rec_t.append(step * ctx.dt)
-                rec_base.append(ctx.base[:, :2].clone())
-                rec_ee.append(ctx.tcp.clone())
-                rec_cube.append(ctx.cube[:, :3].clone())
+            settle_tick()
+            record_sample()
             # ---- faults: a diverged plan stops, the others go on
             bad = running & (~torch.isfinite(ctx.q).all(1) | (ctx.qd.abs().max(1).values > cfg.diverge_speed)
                              | ctx.fab_invalid)
@@ -372,9 +401,26 @@ class PlanRealizer:
                     action[r] = a + 1
                     finished = action[r] >= A
                     running[r[finished]] = False
+                    settle_left[r[finished]] = settle_steps
                     nxt = r[~finished]
                     if len(nxt) and a + 1 < A:
                         begin(a + 1, nxt)
+            read_due_goals()
+        # the last finished plans settle with every robot asleep (physics only, no cost)
+        while bool((settle_left > 0).any()):
+            ctx.begin_step()  # every robot idle: held as in the loop above
+            ctx.base_cmd.zero_()
+            scene.set_base_velocity(ctx.base_cmd)
+            scene.set_arm_targets(ctx.arm_cmd, ctx.arm_vel_cmd)
+            scene.set_gripper(ctx.grip_cmd)
+            if cfg.freeze_finished:
+                scene.freeze(torch.ones(n, dtype=torch.bool, device=dev))
+            scene.step()
+            step += 1
+            ctx.read()
+            settle_tick()
+            record_sample()
+            read_due_goals()
         # plans cut by the horizon
         cut = running.clone()
         if cut.any():
@@ -384,8 +430,8 @@ class PlanRealizer:
                 rows = torch.nonzero(cut & (action == a)).flatten()
                 if len(rows):
                     distance[rows] = self.templates[spec.template].distance(ctx, rows)
-        # let the last released cubes settle before reading the goal predicate
-        goal = self.goal_reached(ctx)
+        unread = ~goal_read
+        goal[unread] = self.goal_reached(ctx)[unread]
         all_ok = success.all(dim=1)
         feasible = all_ok & goal
         goal_fail = all_ok & ~goal

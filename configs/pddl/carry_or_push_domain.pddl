@@ -1,25 +1,29 @@
-; Carry-or-push: the cube must end up in a box next to its table. The robot can
-; carry it there (grasp, drive, place) or push it off the table edge into the
-; box. Same mapping convention as pick_place_domain.pddl: arguments of type
-; `region` are the template's symbolic parameters, the rest are bookkeeping.
-; `road` is a static one-way drive graph, so no plan can loop or take detours and
-; the planner's top-k list holds exactly the two skeletons.
+; Carry-or-push (scene=carry_or_push): the cube resting on top of an upright stick must end up
+; in an open box on the floor. The robot can carry it (grasp it off the stick top, place it into
+; the box) or push the stick over towards the box so that the cube falls in.
+; Mapping convention (realize/pddl.py): arguments of type `region` (and its subtypes) are the
+; template's symbolic parameters, mapped by name to the task's params; the rest (where the base
+; parks, where the cube is) is bookkeeping and is dropped.
+; A `site` is where the base parks, a `spot` where the cube can be; `reach` says which spots the
+; arm reaches from which site. `road` is a static one-way drive graph from the start, so no plan
+; loops or takes detours and the planner's top-k list holds exactly the two skeletons.
 (define (domain carry-or-push)
   (:requirements :strips :typing)
   (:types
-    region site cube - object
+    region site spot cube - object
     base_region grasp_region place_region push_region - region)
   (:predicates
-    (robot-at ?p - site)
+    (robot-at ?s - site)
     (road ?from - site ?to - site)
-    (base-near ?r - base_region ?p - site)
+    (base-near ?r - base_region ?s - site)
+    (reach ?s - site ?p - spot)
     (hand-empty)
     (holding ?c - cube)
-    (cube-at ?c - cube ?p - site)
-    (grasps ?g - grasp_region ?c - cube)
-    (place-on ?r - place_region ?p - site)
-    ; pushing ?c at a point of ?r from base site ?b moves it from ?p1 to ?p2
-    (pushes ?r - push_region ?c - cube ?b - site ?p1 - site ?p2 - site))
+    (cube-at ?c - cube ?p - spot)
+    (grasps ?g - grasp_region ?p - spot)
+    (place-on ?r - place_region ?p - spot)
+    ; pushing at a point of ?r from site ?b moves what rests at ?p1 to ?p2
+    (pushes ?r - push_region ?b - site ?p1 - spot ?p2 - spot))
 
   (:action move_to
     :parameters (?r - base_region ?from - site ?to - site)
@@ -27,16 +31,16 @@
     :effect (and (not (robot-at ?from)) (robot-at ?to)))
 
   (:action grasp
-    :parameters (?g - grasp_region ?c - cube ?p - site)
-    :precondition (and (hand-empty) (robot-at ?p) (cube-at ?c ?p) (grasps ?g ?c))
+    :parameters (?g - grasp_region ?c - cube ?s - site ?p - spot)
+    :precondition (and (hand-empty) (robot-at ?s) (reach ?s ?p) (cube-at ?c ?p) (grasps ?g ?p))
     :effect (and (not (hand-empty)) (not (cube-at ?c ?p)) (holding ?c)))
 
   (:action place
-    :parameters (?r - place_region ?c - cube ?p - site)
-    :precondition (and (holding ?c) (robot-at ?p) (place-on ?r ?p))
+    :parameters (?r - place_region ?c - cube ?s - site ?p - spot)
+    :precondition (and (holding ?c) (robot-at ?s) (reach ?s ?p) (place-on ?r ?p))
     :effect (and (not (holding ?c)) (hand-empty) (cube-at ?c ?p)))
 
   (:action push
-    :parameters (?r - push_region ?c - cube ?b - site ?p1 - site ?p2 - site)
-    :precondition (and (hand-empty) (robot-at ?b) (cube-at ?c ?p1) (pushes ?r ?c ?b ?p1 ?p2))
+    :parameters (?r - push_region ?c - cube ?b - site ?p1 - spot ?p2 - spot)
+    :precondition (and (hand-empty) (robot-at ?b) (cube-at ?c ?p1) (pushes ?r ?b ?p1 ?p2))
     :effect (and (not (cube-at ?c ?p1)) (cube-at ?c ?p2))))

@@ -5,7 +5,8 @@ What it does: wraps the generic fabric (``realize.controllers.fabrics``) for the
   * the forcing term attracts three points of the gripper, the tool centre point (TCP), a point
     ``axis_length`` behind it on the approach axis and one beside it on the closing axis, to the
     same points of the goal pose; together they pull position and orientation;
-  * collision leaves keep the robot's spheres off the scene's boxes (tables, wall, ramp) and off
+  * collision leaves keep the robot's spheres off the scene's static boxes (tables, wall, ramp,
+    a container; not the push scene's stick, which the gripper must touch) and off
     the floor, with a box signed distance; the fingers and the front of the gripper are left out
     of the box leaves (they must reach a cube lying on a table);
   * joint-limit leaves for torso and arm;
@@ -89,7 +90,7 @@ class WholeBodyConfig:
 
 def boxes_tensor(geometry: SceneGeometry, floor: bool = True) -> Tensor:
     """(M, 9) obstacle boxes: centre xyz, half sizes xyz, yaw, pitch, is-floor flag."""
-    rows = [list(b.center) + list(b.half_size) + [b.yaw, b.pitch, 0.0] for b in geometry.obstacles]
+    rows = [list(b.center) + list(b.half_size) + [b.yaw, b.pitch, 0.0] for b in geometry.static_obstacles]
     if floor:
         rows.append([0.0, 0.0, -FLOOR_HALF, FLOOR_HALF, FLOOR_HALF, FLOOR_HALF, 0.0, 0.0, 1.0])
     return torch.tensor(rows, dtype=torch.float64)
