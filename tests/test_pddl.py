@@ -17,7 +17,7 @@ DEMO_PROBLEM = PDDL_DIR / "carry_or_push_problem.pddl"
 
 TEMPLATES = ("move_to", "grasp", "place", "push")
 SEED_PARAMS = ("Table1", "Cube_g", "Table2", "Cube_p", "Exit")
-DEMO_PARAMS = ("PushSide", "Stick_p", "StickSide", "Cube_g", "Cube_p")
+DEMO_PARAMS = ("PushSide", "Stick_p", "StickSide", "BoxSide", "Cube_g", "Cube_p")
 
 
 def A(template: str, *params: str) -> PlannedAction:
@@ -33,6 +33,7 @@ SEED_PLAN = [
 ]
 PUSH_PLAN = [A("move_to", "PushSide"), A("push", "Stick_p")]
 CARRY_PLAN = [A("move_to", "StickSide"), A("grasp", "Cube_g"), A("place", "Cube_p")]
+CARRY_DRIVE_PLAN = [A("move_to", "StickSide"), A("grasp", "Cube_g"), A("move_to", "BoxSide"), A("place", "Cube_p")]
 
 
 def _variant(tmp_path: Path, src: Path, old: str, new: str) -> Path:
@@ -52,10 +53,12 @@ def test_seed_problem_plans_the_seed_plan(capsys: pytest.CaptureFixture[str]) ->
     assert capsys.readouterr().out == ""  # no planner credits or logs on stdout
 
 
-def test_top_k_demo_returns_both_skeletons_cheapest_first() -> None:
+def test_top_k_demo_returns_the_three_skeletons_cheapest_first() -> None:
     plans = plan_from_pddl(DEMO_DOMAIN, DEMO_PROBLEM, TEMPLATES, DEMO_PARAMS, top_k=3)
-    # the one-way road graph admits exactly these two plans (unit costs: 2 and 3)
-    assert plans == [PUSH_PLAN, CARRY_PLAN]
+    # unit costs 2, 3 and 4; the one-way road graph leaves only one other (useless) 4-action
+    # plan, carry then drive to BoxSide, which the fixed order of equally long plans puts 4th
+    assert plans == [PUSH_PLAN, CARRY_PLAN, CARRY_DRIVE_PLAN]
+    assert plan_from_pddl(DEMO_DOMAIN, DEMO_PROBLEM, TEMPLATES, DEMO_PARAMS, top_k=2) == [PUSH_PLAN, CARRY_PLAN]
     assert len({tuple(p) for p in plans}) == len(plans)
     assert [len(p) for p in plans] == sorted(len(p) for p in plans)
 

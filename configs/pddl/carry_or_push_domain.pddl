@@ -6,7 +6,7 @@
 ; parks, where the cube is) is bookkeeping and is dropped.
 ; A `site` is where the base parks, a `spot` where the cube can be; `reach` says which spots the
 ; arm reaches from which site. `road` is a static one-way drive graph from the start, so no plan
-; loops or takes detours and the planner's top-k list holds exactly the two skeletons.
+; loops and the planner's top-k list holds exactly the problem's skeletons.
 (define (domain carry-or-push)
   (:requirements :strips :typing)
   (:types
