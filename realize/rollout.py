@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, fields
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import torch
 from torch import Tensor
@@ -260,24 +260,42 @@ class PlanRealizer:
         self.last: RolloutResult | None = None
 
     # ------------------------------------------------------------------ goal predicate
-    def goal_reached(self, ctx: StepContext) -> Tensor:
+    def goal_reached(self, ctx: StepContext) -> tuple[Tensor, Tensor]:
+        """psi_g per plan, and how far (m) each plan is from it: the cube's distance to the goal
+        table's top (or the container's inside) plus the base's distance to its goal rectangle.
+        The distance is the fallback's distance-to-success for plans whose actions all succeeded
+        but whose goal did not hold (e.g. the cube was let go beside the table)."""
         g = self.scene.geometry
         goal = self.task.goal
         ok = torch.ones(self.scene.n, dtype=torch.bool, device=self.device)
+        dist = torch.zeros(self.scene.n, device=self.device)
+        p = ctx.cube[:, :3]
+
+        def outside(center: Sequence[float], half: Sequence[float]) -> Tensor:
+            c = torch.tensor(center[:2], dtype=p.dtype, device=p.device)
+            h = torch.tensor(half[:2], dtype=p.dtype, device=p.device)
+            return ((p[:, :2] - c).abs() - h).clamp(min=0.0).norm(dim=1)
+
         if goal.cube_on is not None:
             t = g.table(goal.cube_on)
-            p = ctx.cube[:, :3]
             top = 2 * t.half_size[2] + g.cube_half_size
             ok &= ((p[:, 0] - t.center[0]).abs() <= t.half_size[0]) & ((p[:, 1] - t.center[1]).abs() <= t.half_size[1])
             ok &= (p[:, 2] - top).abs() <= 0.02
             ok &= ctx.cube_speed <= self.cfg.rest_speed
+            dz = ((p[:, 2] - top).abs() - 0.02).clamp(min=0.0)
+            dist += torch.sqrt(outside(t.center, t.half_size) ** 2 + dz ** 2)
         if goal.cube_in_box is not None:
-            ok &= cube_in_container(ctx.cube[:, :3], ctx.cube_speed, g, goal.cube_in_box, self.cfg.rest_speed)
+            ok &= cube_in_container(p, ctx.cube_speed, g, goal.cube_in_box, self.cfg.rest_speed)
+            box, w = g.container(goal.cube_in_box), g.container_wall
+            dz = (p[:, 2] - 2 * box.half_size[2]).clamp(min=0.0)
+            dist += torch.sqrt(outside(box.center, (box.half_size[0] - w, box.half_size[1] - w)) ** 2 + dz ** 2)
         if goal.base_in is not None:
             region = self.layout.regions[goal.base_in]
             assert isinstance(region, Box)
-            ok &= region.contains(ctx.base[:, :2].double()).to(self.device)
-        return ok
+            base = ctx.base[:, :2].double()
+            ok &= region.contains(base).to(self.device)
+            dist += (region.project(base) - base).norm(dim=1).to(dist)
+        return ok, dist
 
     # ------------------------------------------------------------------ rollout
     def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
@@ -327,6 +345,7 @@ class PlanRealizer:
         # must land first); plans that never finish are read at the end
         goal = torch.zeros(n, dtype=torch.bool, device=dev)
         goal_read = torch.zeros(n, dtype=torch.bool, device=dev)
+        goal_dist = torch.zeros(n, device=dev)
         settle_left = torch.full((n,), -1, dtype=torch.long, device=dev)
         reads_cube = task.goal.cube_on is not None or task.goal.cube_in_box is not None
         settle_steps = int(round(cfg.goal_settle_s / ctx.dt)) if reads_cube else 0
@@ -337,7 +356,8 @@ class PlanRealizer:
         def read_due_goals() -> None:
             due = (settle_left == 0) & ~goal_read
             if due.any():
-                goal[due] = self.goal_reached(ctx)[due]
+                ok, dist = self.goal_reached(ctx)
+                goal[due], goal_dist[due] = ok[due], dist[due]
                 goal_read[due] = True
 
         def record_sample() -> None:
@@ -431,12 +451,14 @@ class PlanRealizer:
                 if len(rows):
                     distance[rows] = self.templates[spec.template].distance(ctx, rows)
         unread = ~goal_read
-        goal[unread] = self.goal_reached(ctx)[unread]
+        ok, dist = self.goal_reached(ctx)
+        goal[unread], goal_dist[unread] = ok[unread], dist[unread]
         all_ok = success.all(dim=1)
         feasible = all_ok & goal
         goal_fail = all_ok & ~goal
         fail_code[goal_fail] = FAIL["goal_not_reached"]
         fail_action[goal_fail] = A
+        distance[goal_fail] = goal_dist[goal_fail]
         cost = steps.to(torch.float32) + float(task.final_cost)
         progress = success.sum(dim=1).to(torch.float32) + goal.to(torch.float32) * all_ok
         failure = []

@@ -205,8 +205,9 @@ def test_goal_names_unknown_container(cfg: dict[str, Any], spec: RunSpec) -> Non
 
 # ---------------------------------------------------------------------------------- carry or push
 
-# columns: PushSide.xy, Stick_p.xyz, StickSide.xy, Cube_g.xyz (top-down), Cube_p.xyz (top-down)
-CARRY_OR_PUSH = [-0.75, 0.0, 0.0, 0.0, 0.55, 0.45, -0.85, 0.0, 0.0, 0.8725, 0.8, 0.0, 0.57]
+# columns: PushSide.xy, Stick_p.xyz, StickSide.xy, BoxSide.xy (unused here), Cube_g.xyz (top-down),
+#          Cube_p.xyz (top-down)
+CARRY_OR_PUSH = [-0.75, 0.0, 0.0, 0.0, 0.55, 0.45, -0.85, 1.1, -0.8, 0.0, 0.0, 0.8725, 0.8, 0.0, 0.57]
 
 
 def test_carry_or_push_both_skeletons_realize_and_carry_is_cheaper() -> None:

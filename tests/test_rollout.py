@@ -422,3 +422,26 @@ def test_ramp_slide_and_carry_both_put_the_cube_on_table2() -> None:
     assert ((cube[:, 2] - (2 * t2.half_size[2] + scene.geometry.cube_half_size)).abs() < 0.01).all()
     ramp = next(b for b in scene.geometry.obstacles if b.name == "ramp")
     assert ramp.contains_xy(RAMP_SLIDE[7], RAMP_SLIDE[8]) and not t2.contains_xy(RAMP_SLIDE[7], RAMP_SLIDE[8])
+
+
+# wide-region task, plain scene: the seed grasp, then the cube let go over the floor between the tables
+FLOOR_DROP = [-0.85, 1.2, 0.0, 1.2, 0.8925, -0.8, -0.5, 0.0, -0.5, 0.9, 2.2, 0.0]
+
+
+def test_goal_failure_ranks_by_distance_to_the_goal() -> None:
+    """A plan whose actions all succeed but whose cube ends on the floor fails at the goal, and
+    its distance-to-success (the CE fallback's tie-break) is the cube's distance to table 2's
+    top, computed here independently from the simulator's final cube pose."""
+    spec = build_run_spec(compose_config("task=pick_place_wide"))
+    with BatchedScene(1, spec.geometry_cfg, spec.sim) as scene:
+        res = PlanRealizer(spec.task, scene, spec.rollout, seed=0).rollout(
+            torch.tensor([FLOOR_DROP], dtype=torch.float64))
+        cube = scene.cube_pose()[0, :3]
+    assert res.failure == ["5:goal:goal_not_reached"] and res.action_success.all()
+    t2 = scene.geometry.table("table2")
+    top = 2 * t2.half_size[2] + scene.geometry.cube_half_size
+    dx = max(abs(float(cube[0]) - t2.center[0]) - t2.half_size[0], 0.0)
+    dy = max(abs(float(cube[1]) - t2.center[1]) - t2.half_size[1], 0.0)
+    dz = max(abs(float(cube[2]) - top) - 0.02, 0.0)
+    assert float(res.distance[0]) == pytest.approx(math.sqrt(dx * dx + dy * dy + dz * dz), abs=1e-4)
+    assert float(res.distance[0]) > 0.5
