@@ -13,14 +13,15 @@
 from __future__ import annotations
 
 import copy
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 import torch
 
 from envs.move_and_push import cube_in_container
-from realize.app import CONFIG_DIR
+from _compose import compose_config as _compose
+from _compose import torch_single_thread  # noqa: F401  (fixture)
 from realize.rollout import PlanRealizer, RolloutConfigError, RolloutResult
 from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task
 from realize.scene import BatchedScene
@@ -32,23 +33,10 @@ VECTORS = torch.tensor([TOWARDS_BOX, SIDEWAYS], dtype=torch.float64)
 
 
 def compose_config(*overrides: str, experiment: str = "move_and_push") -> dict[str, Any]:
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
-
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test_push"):
-        cfg = compose(config_name="config", overrides=["device=cpu", f"experiment={experiment}", *overrides])
-    d = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(d, dict)
-    d.pop("hydra", None)
-    return d
+    return _compose(f"experiment={experiment}", *overrides, job_name="test_push")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _torch_single_thread() -> Iterator[None]:
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("torch_single_thread")
 
 
 @pytest.fixture(scope="module")

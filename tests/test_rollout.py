@@ -27,6 +27,8 @@ import pytest
 import torch
 import yaml
 
+from _compose import compose_config as _compose
+from _compose import torch_single_thread  # noqa: F401  (fixture)
 from realize.app import CONFIG_DIR
 from realize.rollout import PlanRealizer, RolloutResult
 from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task, load_task_file
@@ -49,24 +51,10 @@ VECTORS = torch.tensor([GOOD, SIDE, FAR_SIDE])
 
 
 def compose_config(*overrides: str) -> dict[str, Any]:
-    """The app's resolved config (``configs/config.yaml`` + defaults) as plain data, CPU backend."""
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
-
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test_rollout"):
-        cfg = compose(config_name="config", overrides=["device=cpu", *overrides])
-    d = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(d, dict)
-    d.pop("hydra", None)
-    return d
+    return _compose(*overrides, job_name="test_rollout")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _torch_single_thread() -> Iterator[None]:
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("torch_single_thread")
 
 
 @pytest.fixture(scope="module")
