@@ -6,7 +6,8 @@ directory of seeds, or a Hydra multirun sweep), takes the best plan's release po
 
 * ``slide``: the release point lies over the ramp's footprint (the cube slid onto table 2),
 * ``carry``: it lies over table 2 (the robot carried the cube there),
-* ``other``: anywhere else; ``none`` when the run found no feasible plan.
+* ``other``: anywhere else; ``none`` when the run found no feasible plan;
+* the run's status (``running``, ``interrupted``, ``failed``) when it has not finished.
 
 It prints one row per run and a summary (runs per mode, best cost mean +- std per mode), and
 writes both as CSV (``--out``, default ``ramp_modes.csv`` in the first directory).
@@ -32,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 
 from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict  # noqa: E402
 
+MODES = ("slide", "carry", "other", "none")
 MODE_OPTIONS = ("n_modes", "uniform_share", "rank_weighted", "knn_robust")
 
 
@@ -50,6 +52,8 @@ def release_point(result: dict[str, Any]) -> tuple[float, float] | None:
 
 
 def mode_of(result: dict[str, Any], geometry: SceneGeometry) -> str:
+    if result.get("status", "done") != "done":  # running, interrupted or failed: not counted as a mode
+        return str(result.get("status"))
     if not result.get("feasible"):
         return "none"
     xy = release_point(result)
@@ -90,7 +94,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for scene in sorted({r["scene"] for r in rows}):
         sub = [r for r in rows if r["scene"] == scene]
-        for mode in ("slide", "carry", "other", "none"):
+        for mode in sorted({r["mode"] for r in sub}, key=lambda m: (m not in MODES, MODES.index(m) if m in MODES else m)):
             costs = [float(r["best_cost"]) for r in sub if r["mode"] == mode and r["best_cost"] is not None]
             n = sum(r["mode"] == mode for r in sub)
             if not n:
@@ -118,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         cost = "-" if r["best_cost"] is None else f"{r['best_cost']:.0f}"
         print(f"{r['run']:<40} {r['scene']:<6} seed {r['seed']!s:<3} {r['mode']:<6} cost {cost:>5}  "
-              f"success {r['success_iter0']:.0%} -> {r['success_last']:.0%}")
+              f"success {r['success_iter0']:.0%} -> {r['success_last']:.0%}".replace("nan%", "-"))
     summ = summary(rows)
     for s in summ:
         print(f"{s['scene']}: {s['mode']} in {s['runs']} of {s['of']} runs, best cost "
