@@ -207,19 +207,25 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("overrides, needles", BAD, ids=[" ".join(o) for o, _ in BAD])
-def test_bad_config_fails_before_simulation(overrides: list[str], needles: list[str], tmp_path: Path,
-                                             no_sim: None) -> None:
-    t0 = time.perf_counter()
+def expect_config_error(overrides: list[str], needles: list[str], run_dir: Path) -> tuple[str, dict]:
+    """Run the tiny config with ``overrides``: it must fail with a one-line ConfigError holding
+    every needle; returns the message and the result.json written for it."""
     with pytest.raises(ConfigError) as ei:
-        run(cfg_of(tiny_with(overrides)), tmp_path)
+        run(cfg_of(tiny_with(overrides)), run_dir)
     msg = str(ei.value)
     assert "\n" not in msg
     for n in needles:
         assert n in msg, f"{n!r} not in {msg!r}"
+    return msg, json.loads((run_dir / RESULT_FILE).read_text())
+
+
+@pytest.mark.parametrize("overrides, needles", BAD, ids=[" ".join(o) for o, _ in BAD])
+def test_bad_config_fails_before_simulation(overrides: list[str], needles: list[str], tmp_path: Path,
+                                             no_sim: None) -> None:
+    t0 = time.perf_counter()
+    msg, res = expect_config_error(overrides, needles, tmp_path)
     assert time.perf_counter() - t0 < 30
     # the failure is on disk for sweeps and post-mortems
-    res = json.loads((tmp_path / RESULT_FILE).read_text())
     assert res["status"] == "failed" and res["error"] == msg and res["simulated"] is False
     assert not (tmp_path / CHECKPOINT_FILE).exists() and not (tmp_path / HISTORY_FILE).exists()
 

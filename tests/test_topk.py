@@ -17,7 +17,7 @@ from realize.app import CONFIG_DIR, run
 from realize.replay import build_replay_spec, load_run
 from realize.results import CHECKPOINT_FILE, RESULT_FILE, load_checkpoint
 from realize.run_config import ConfigError, build_run_spec
-from test_app import cfg_of, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
+from test_app import cfg_of, expect_config_error, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
 
 TOPK = ["task.planner.enabled=true", "task.planner.top_k=2"]
 SEED_PLAN = "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
@@ -42,13 +42,7 @@ def test_bad_top_k_config_fails_before_simulation(overrides: list[str], needles:
 
     if "too small" in needles[0] or "schedule" in needles[0]:
         monkeypatch.setattr(realize.pddl, "plan_from_pddl", no_planner)
-    with pytest.raises(ConfigError) as ei:
-        run(cfg_of(tiny_with(overrides)), tmp_path)
-    msg = str(ei.value)
-    assert "\n" not in msg
-    for n in needles:
-        assert n in msg, f"{n!r} not in {msg!r}"
-    res = json.loads((tmp_path / RESULT_FILE).read_text())
+    _, res = expect_config_error(overrides, needles, tmp_path)
     assert res["status"] == "failed" and res["simulated"] is False
 
 
