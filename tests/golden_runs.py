@@ -1,0 +1,61 @@
+"""The small runs whose results must not change when code is restructured (bit for bit on CPU).
+
+``GOLDEN_RUNS`` names each run by its command-line overrides; ``run_golden(name, dir)`` runs one
+through the ``realize`` command (a subprocess, as a user would) and returns the numbers kept in
+``tests/fixtures/golden_runs.json``. ``python tests/golden_runs.py`` re-records that fixture:
+only do that when a change is *meant* to change results, and say so in the commit message.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+FIXTURE = REPO / "tests" / "fixtures" / "golden_runs.json"
+_QUIET = ["device=cpu", "logging.rerun=false", "logging.progress=false"]
+
+GOLDEN_RUNS: dict[str, list[str]] = {
+    # the seed task (pick and place), plain CE
+    "seed_task": ["ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=3"],
+    # the move-and-push scene and template
+    "push_task": ["experiment=move_and_push", "ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=1"],
+    # successive halving over the planner's two best plans (carry or push)
+    "top_k": ["experiment=carry_or_push", "task.planner.top_k=2", "ce.n_envs=8", "ce.n_elite=2",
+              "ce.iterations=3", "seed=0"],
+    # a two-mode mixture with kNN-robust ranking
+    "mixture_ce": ["ce.n_envs=12", "ce.n_elite=4", "ce.iterations=3", "ce.n_modes=2", "ce.knn_robust=3",
+                   "seed=5"],
+}
+KEYS = ("feasible", "best_cost", "success_per_iter", "best_cost_per_iter", "best_z")
+
+
+def run_golden(name: str, run_dir: Path) -> dict[str, Any]:
+    """Run ``GOLDEN_RUNS[name]`` into ``run_dir``; the compared numbers of its result.json."""
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    args = [sys.executable, "-m", "realize", *GOLDEN_RUNS[name], *_QUIET, f"hydra.run.dir={run_dir}"]
+    p = subprocess.run(args, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
+    if p.returncode != 0:
+        raise RuntimeError(f"golden run {name} failed ({p.returncode}):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}")
+    doc = json.loads((run_dir / "result.json").read_text())
+    out = {k: doc.get(k) for k in KEYS}
+    if "candidates" in doc:
+        out["winner"] = doc.get("winner")
+        out["candidates"] = [{"plan": c.get("plan"), "best_cost": c.get("best_cost")} for c in doc["candidates"]]
+    return out
+
+
+if __name__ == "__main__":  # pragma: no cover - re-records the fixture
+    import tempfile
+
+    names = sys.argv[1:] or list(GOLDEN_RUNS)
+    data = json.loads(FIXTURE.read_text()) if FIXTURE.exists() else {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in names:
+            data[n] = {"overrides": GOLDEN_RUNS[n], **run_golden(n, Path(tmp) / n)}
+            print(n, data[n]["best_cost"], data[n]["success_per_iter"], flush=True)
+    FIXTURE.write_text(json.dumps(data, indent=1) + "\n")
