@@ -12,7 +12,7 @@ What it does:
     ``result.json`` are written atomically (in that order: the checkpoint is the commit point),
     a tqdm bar shows the success share and best cost, the rerun logger (if present and
     ``logging.rerun``) logs the iteration, and with ``logging.record`` the sample trajectories
-    go to ``trajectories_iter{k}.npz`` (``realize.figures`` format, with ``scene.json``);
+    go to ``trajectories_iter{k}.npz`` (``realize.run_dir.scene_files``, with ``scene.json``);
   * with ``task.planner.top_k > 1`` the run is successive halving over the planner's k best
     plans in one shared budget (``realize.candidates``; ``_iterate_halving``): per-candidate
     ``history_c{i}.npz`` and ``<rrd stem>_c{i}.rrd``, and ``result.json`` gains ``candidates``,
@@ -39,30 +39,20 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from hydra.errors import CompactHydraException
 from omegaconf import DictConfig, OmegaConf
 
-from realize.results import (
-    CHECKPOINT_FILE,
-    ERROR_FILE,
-    HISTORY_FILE,
-    RESULT_FILE,
-    Checkpoint,
-    CheckpointError,
-    History,
-    atomic_write_json,
-    atomic_write_text,
-    json_safe,
-    load_checkpoint,
-    load_history,
-    package_versions,
-    save_checkpoint,
-    series,
-)
+from realize.run_dir.build import RunInfo, failure_doc, halving_doc, result_doc
+from realize.run_dir.checkpoint import Checkpoint, CheckpointError, load_checkpoint
+from realize.run_dir.directory import RunDir
+from realize.run_dir.history import History
+from realize.run_dir.jsonio import atomic_write_text
+from realize.run_dir.names import CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, RESULT_FILE, candidate_file
+from realize.run_dir.summaries import IterationSummary
 from realize.run_config import REPO_ROOT, ConfigError, RunSpec, build_run_spec
 
 __all__ = ["main", "run", "RunOutcome", "RunInterrupted", "CONFIG_DIR", "preflight"]
@@ -143,124 +133,6 @@ def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequenc
     if "logging" in current:
         cfg["logging"] = current["logging"]
     return cfg
-
-
-# --------------------------------------------------------------------------------------------
-# result document
-# --------------------------------------------------------------------------------------------
-
-
-def _best_params(task: Any, best_z: Any) -> dict[str, dict[str, float]] | None:
-    if best_z is None:
-        return None
-    import torch
-
-    z = torch.as_tensor(best_z, dtype=torch.float64).reshape(1, -1)
-    out: dict[str, dict[str, float]] = {}
-    for name, part in task.layout.split(z).items():
-        coords = task.layout.regions[name].coord_names
-        out[name] = {c: float(v) for c, v in zip(coords, part[0].tolist())}
-    return out
-
-
-def _result_doc(
-    spec: RunSpec,
-    run_dir: Path,
-    *,
-    status: str,
-    state: Any,
-    records: list[dict[str, Any]],
-    wall_time_s: float,
-    error: str | None = None,
-    extra: Mapping[str, Any] | None = None,
-    task: Any = None,
-) -> dict[str, Any]:
-    """The result document; ``task`` (default ``spec.task``) is the plan ``state`` searched over."""
-    task = spec.task if task is None else task
-    best_feasible = bool(state.best_feasible) if state is not None else False
-    best_cost = float(state.best_cost) if (state is not None and best_feasible) else None
-    doc: dict[str, Any] = {
-        "status": status,
-        "interrupted": status == "interrupted",
-        "error": error,
-        "feasible": best_feasible,
-        "best_cost": best_cost,
-        "best_iteration": state.best_iteration if state is not None and state.best_z is not None else None,
-        "best_params": _best_params(task, None if state is None else state.best_z),
-        "best_z": None if state is None or state.best_z is None else state.best_z.tolist(),
-        "columns": task.layout.column_names,
-        "iterations_done": len(records),
-        "iterations": spec.ce.iterations,
-        "converged": bool(state.converged) if state is not None else False,
-        "success_per_iter": series(records, "success_share"),
-        "best_cost_per_iter": series(records, "best_cost"),
-        "iteration_best_cost_per_iter": series(records, "iteration_best_cost"),
-        "n_samples_per_iter": series(records, "n_samples"),
-        "n_feasible_per_iter": series(records, "n_feasible"),
-        "elite_per_iter": [
-            {
-                "n_elite": r.get("n_elite"),
-                "refit": r.get("refit"),
-                "cost_min": json_safe(_num(r.get("elite_cost_min"))),
-                "cost_mean": json_safe(_num(r.get("elite_cost_mean"))),
-                "cost_max": json_safe(_num(r.get("elite_cost_max"))),
-            }
-            for r in records
-        ],
-        "iteration_time_s": series(records, "wall_time"),
-        "final_mean": None if state is None or state.mean is None else state.mean.tolist(),
-        "final_std": None if state is None or state.std is None else state.std.tolist(),
-        # mixture weights (ce.n_modes > 1; final_mean/final_std are then k lists of D)
-        "final_weights": None if state is None or state.weights is None else state.weights.tolist(),
-        "wall_time_s": wall_time_s,
-        "seed": spec.seed,
-        "task": {"name": task.name, "source": task.source},
-        "plan": task.describe(),
-        "config": spec.config,
-        "versions": package_versions(),
-        "run_dir": str(run_dir),
-        "files": {"history": HISTORY_FILE, "checkpoint": CHECKPOINT_FILE},
-    }
-    if extra:
-        doc.update(extra)
-    return doc
-
-
-def _num(v: Any) -> Any:
-    if isinstance(v, str):
-        try:
-            return float(v)
-        except ValueError:
-            return v
-    return v
-
-
-def _write_failure(run_dir: Path, message: str, detail: str | None = None, config: Any = None) -> None:
-    """Record a run that failed before (or without) a RunSpec: result.json + error.txt.
-
-    Never in a directory that holds a run (``resume=DIR`` with a bad override must not
-    overwrite DIR's result)."""
-    if (run_dir / CHECKPOINT_FILE).exists():
-        return
-    try:
-        atomic_write_text(run_dir / ERROR_FILE, (detail or message).rstrip() + "\n")
-        atomic_write_json(
-            run_dir / RESULT_FILE,
-            {
-                "status": "failed",
-                "interrupted": False,
-                "error": message,
-                "feasible": False,
-                "best_cost": None,
-                "iterations_done": 0,
-                "simulated": False,
-                "wall_time_s": None,
-                "config": config,
-                "versions": package_versions(),
-            },
-        )
-    except OSError:  # pragma: no cover - the run dir itself is unwritable
-        pass
 
 
 # --------------------------------------------------------------------------------------------
@@ -406,14 +278,15 @@ def run(
         if not spec.halving:
             state, history, records, wall_before, segments = _restore(spec, run_dir, ckpt)
     except ConfigError as e:
-        _write_failure(Path(out_dir), str(e), config=json_safe(current))
+        RunDir(out_dir).write_failure(failure_doc(str(e), config=current))
         raise
     if spec.halving:
         return _iterate_halving(spec, run_dir, t_start, after_iteration)
     return _iterate(spec, run_dir, state, history, records, wall_before, segments, t_start, after_iteration)
 
 
-def _restore(spec: RunSpec, run_dir: Path, ckpt: Checkpoint | None) -> tuple[Any, History, list, float, int]:
+def _restore(spec: RunSpec, run_dir: Path, ckpt: Checkpoint | None
+             ) -> tuple[Any, History, list[IterationSummary], float, int]:
     from realize.cross_entropy import CEState
 
     if ckpt is None:
@@ -428,7 +301,7 @@ def _restore(spec: RunSpec, run_dir: Path, ckpt: Checkpoint | None) -> tuple[Any
     if not hist_path.is_file():
         raise ConfigError(f"resume: {hist_path} is missing (the run's per-iteration history)")
     try:
-        history = load_history(hist_path, keep=ckpt.iteration)
+        history = RunDir(run_dir).load_history(keep=ckpt.iteration)
     except (OSError, KeyError, ValueError) as e:
         raise ConfigError(f"resume: {hist_path} cannot be read ({e})") from None
     if len(history) != ckpt.iteration or history.column_names != spec.task.layout.column_names:
@@ -441,7 +314,7 @@ def _iterate(
     run_dir: Path,
     state: Any,
     history: History,
-    records: list[dict[str, Any]],
+    records: list[IterationSummary],
     wall_before: float,
     segments: int,
     t_start: float,
@@ -457,15 +330,14 @@ def _iterate(
         return wall_before + (time.perf_counter() - t_start)
 
     start_it = 0 if state is None else state.iteration
-    extra: dict[str, Any] = {"segments": segments, "resumed_from_iteration": start_it if start_it else None}
+    info = RunInfo(segments=segments, resumed_from_iteration=start_it if start_it else None)
     cur_state = state
+    rd = RunDir(run_dir)
 
     def write_result(status: str, error: str | None = None) -> None:
-        atomic_write_json(
-            run_dir / RESULT_FILE,
-            _result_doc(spec, run_dir, status=status, state=cur_state, records=records, wall_time_s=wall(),
-                        error=error, extra=extra),
-        )
+        rd.write_result(result_doc(status=status, state=cur_state, summaries=records, task=spec.task,
+                                   iterations=spec.ce.iterations, seed=spec.seed, config=spec.config,
+                                   run_dir=run_dir, wall_time_s=wall(), error=error, info=info))
 
     if start_it:
         log.info("resuming %s after iteration %d of %d", run_dir, start_it, spec.ce.iterations)
@@ -486,9 +358,9 @@ def _iterate(
             scene = BatchedScene(spec.n_envs_max, spec.geometry_cfg, spec.sim)
             realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
             opt = CrossEntropyOptimizer(spec.task.layout, spec.ce, device=scene.device, state=state)
-            extra.update(backend=scene.backend, n_envs_scene=scene.n, setup_time_s=time.perf_counter() - t0)
+            info.backend, info.n_envs, info.setup_time_s = scene.backend, scene.n, time.perf_counter() - t0
             log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n, scene.backend,
-                     extra["setup_time_s"])
+                     info.setup_time_s)
             rr_logger = _make_rerun_logger(spec, run_dir, start_it)
             figure_files = _figure_files(spec, run_dir)
             bar = tqdm(total=spec.ce.iterations, initial=start_it, desc="CE", unit="it", dynamic_ncols=True,
@@ -516,17 +388,16 @@ def _iterate(
                         "goal": res.goal,
                         "steps": res.steps,
                     },
-                    n_samples=rec.n_samples,
+                    n_envs=rec.n_samples,
                     success_share=rec.success_share,
                     best_cost=rec.best_cost,
                     mean=rec.mean,
                     std=rec.std,
                     weights=rec.weights,
                 )
-                new_records = records + [json_safe(rec.summary())]
-                history.save(run_dir / HISTORY_FILE)
-                save_checkpoint(  # the commit point of the iteration
-                    run_dir,
+                new_records = records + [rec.summary()]
+                rd.write_history(history)
+                rd.write_checkpoint(  # the commit point of the iteration
                     Checkpoint(new_state.iteration, new_state.to_dict(), spec.config, new_records, wall(), segments),
                 )
                 records[:] = new_records
@@ -549,12 +420,6 @@ def _iterate(
     outcome = RunOutcome(run_dir, status, feasible, best, len(records), wall(), exit_code)
     _report(outcome, spec)
     return outcome
-
-
-def _candidate_file(name: str, index: int) -> str:
-    """``history.npz`` -> ``history_c1.npz`` (per-candidate file of a top-k run)."""
-    p = Path(name)
-    return str(p.with_name(f"{p.stem}_c{index}{p.suffix}"))
 
 
 def _iterate_halving(
@@ -586,27 +451,16 @@ def _iterate_halving(
 
     sh = SuccessiveHalving([CandidateSpec(t.describe(), t.layout, t.n_actions) for t in tasks], spec.ce, budget)
     histories = [History(t.layout.column_names) for t in tasks]
-    records: list[dict[str, Any]] = []  # every iteration of every candidate, in run order
-    extra: dict[str, Any] = {"segments": 1, "resumed_from_iteration": None, "top_k": spec.planner.top_k}
+    records: list[IterationSummary] = []  # every iteration of every candidate, in run order
+    info = RunInfo()
+    rd = RunDir(run_dir)
 
     def write_result(status: str, error: str | None = None) -> None:
         lead = sh.candidates[sh.leader]
-        summary = sh.summary()
-        doc = _result_doc(spec, run_dir, status=status, state=lead.optimizer.state, records=lead.records,
-                          wall_time_s=wall(), error=error, extra=extra, task=tasks[lead.index])
-        doc.update(
-            n_candidates=len(tasks),
-            leader={"index": lead.index, "plan": lead.spec.plan},
-            winner=summary["winner"],
-            budget=summary["budget"],
-            spent_iterations=summary["spent_iterations"],
-            spent_samples=summary["spent_samples"],
-            halving_round=summary["round"],
-            candidates=[dict(c, history=_candidate_file(HISTORY_FILE, c["index"])) for c in summary["candidates"]],
-            files={"history": [_candidate_file(HISTORY_FILE, i) for i in range(len(tasks))],
-                   "checkpoint": CHECKPOINT_FILE},
-        )
-        atomic_write_json(run_dir / RESULT_FILE, doc)
+        rd.write_result(result_doc(status=status, state=lead.optimizer.state, summaries=lead.records,
+                                   task=tasks[lead.index], iterations=spec.ce.iterations, seed=spec.seed,
+                                   config=spec.config, run_dir=run_dir, wall_time_s=wall(), error=error, info=info,
+                                   halving=halving_doc(sh, spec.planner.top_k)))
 
     if len(tasks) < spec.planner.top_k:
         log.info("the planner returned %d distinct plan(s) for top_k = %d", len(tasks), spec.planner.top_k)
@@ -622,11 +476,11 @@ def _iterate_halving(
             # one realizer per candidate on the same scene: every rollout starts with a reset,
             # which is history-free on CPU (a used scene equals a fresh one bit for bit)
             realizers = [PlanRealizer(t, scene, spec.rollout, seed=spec.seed) for t in tasks]
-            extra.update(backend=scene.backend, n_envs_scene=scene.n, setup_time_s=time.perf_counter() - t0)
+            info.backend, info.n_envs, info.setup_time_s = scene.backend, scene.n, time.perf_counter() - t0
             for i, t in enumerate(tasks):
                 log.info("candidate %d: %s", i, t.describe())
             log.info("%d candidate(s), halving budget %s; %d copies on %s (setup %.1f s)", len(tasks),
-                     budget.to_dict(), scene.n, scene.backend, extra["setup_time_s"])
+                     budget.to_dict(), scene.n, scene.backend, info.setup_time_s)
             bar = tqdm(total=budget.total_iterations, desc="CE top-k", unit="it", dynamic_ncols=True,
                        disable=not spec.logging.progress, file=sys.stderr)
             while (job := sh.ask()) is not None:
@@ -638,18 +492,17 @@ def _iterate_halving(
                 t_eval = time.perf_counter() - t_eval
                 rec = sh.tell(res.to_eval())
                 rec.eval_time = t_eval
-                cand.records[-1]["eval_time"] = t_eval
+                cand.records[-1].eval_time = t_eval
                 histories[i].append(
                     {"Z": rec.Z, "cost": rec.cost, "feasible": rec.feasible, "progress": rec.progress,
                      "distance": rec.distance, "elite_idx": rec.elite_idx, "action_success": res.action_success,
                      "goal": res.goal, "steps": res.steps},
-                    n_samples=rec.n_samples, success_share=rec.success_share, best_cost=rec.best_cost,
+                    n_envs=rec.n_samples, success_share=rec.success_share, best_cost=rec.best_cost,
                     mean=rec.mean, std=rec.std,
                 )
-                records.append(json_safe(dict(rec.summary(), candidate=i, eval_time=t_eval)))
-                histories[i].save(run_dir / _candidate_file(HISTORY_FILE, i))
-                save_checkpoint(
-                    run_dir,
+                records.append(replace(rec.summary(), candidate=i, eval_time=t_eval))
+                rd.write_history(histories[i], candidate=i)
+                rd.write_checkpoint(
                     Checkpoint(len(records), {"kind": HALVING_KIND, **sh.to_dict()}, spec.config, list(records),
                                wall(), 1),
                 )
@@ -687,7 +540,7 @@ def _make_candidate_logger(spec: RunSpec, run_dir: Path, task: Any, index: int, 
         log.warning("rerun logging is on but realize.rerun_log is not available (%s); no .rrd written", e)
         return None
     try:
-        return RerunLogger(run_dir / _candidate_file(spec.logging.rrd, index), task.layout, spec.geometry,
+        return RerunLogger(run_dir / candidate_file(spec.logging.rrd, index), task.layout, spec.geometry,
                            padding=spec.rollout.astar.padding, n_iterations=n_iterations)
     except Exception as e:  # logging must not cost the search
         log.warning("rerun recording of candidate %d failed to open (%s: %s)", index, type(e).__name__, e)
@@ -701,12 +554,9 @@ def _close_all(bar: Any, loggers: Mapping[int, Any], scene: Any) -> None:
 
 
 def _figure_files(spec: RunSpec, run_dir: Path) -> Any:
-    """``realize.figures`` (scene.json now, trajectories_iter{k}.npz per iteration), if present."""
-    try:
-        from realize import figures
-    except ImportError as e:
-        log.warning("realize.figures is not available (%s); no scene.json / trajectory files", e)
-        return None
+    """``realize.run_dir.scene_files`` (scene.json now, trajectories_iter{k}.npz per iteration)."""
+    from realize.run_dir import scene_files as figures
+
     try:
         figures.save_scene(run_dir, spec.task.layout, spec.geometry, padding=spec.rollout.astar.padding)
     except Exception as e:  # figure inputs must not cost the search
@@ -760,7 +610,7 @@ def _close(bar: Any, rr_logger: Any, scene: Any) -> None:
 def _report(o: RunOutcome, spec: RunSpec) -> None:
     cost = f"{o.best_cost:.0f}" if math.isfinite(o.best_cost) else "none"
     if spec.halving:
-        hist, rrd = _candidate_file(HISTORY_FILE, 0) + ", ...", _candidate_file(spec.logging.rrd, 0) + ", ..."
+        hist, rrd = candidate_file(HISTORY_FILE, 0) + ", ...", candidate_file(spec.logging.rrd, 0) + ", ..."
     else:
         hist, rrd = HISTORY_FILE, spec.logging.rrd
     print(

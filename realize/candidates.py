@@ -54,6 +54,7 @@ from torch import Tensor
 
 from realize.cross_entropy import CEConfig, CEState, CrossEntropyOptimizer, EvalResult, IterationRecord
 from realize.regions import ParamLayout
+from realize.run_dir.summaries import CandidateSummary, IterationSummary, best_params
 
 __all__ = [
     "BudgetError",
@@ -202,7 +203,7 @@ class Candidate:
     iterations: int = 0
     samples: int = 0
     dropped_round: int | None = None
-    records: list[dict[str, Any]] = field(default_factory=list)
+    records: list[IterationSummary] = field(default_factory=list)
 
     @property
     def state(self) -> CEState:
@@ -212,37 +213,25 @@ class Candidate:
     def key(self) -> tuple[float, float, float, float]:
         return candidate_key(self.optimizer.state, self.spec.n_actions)
 
-    def best_params(self) -> dict[str, dict[str, float]] | None:
-        """The best sample split by parameter, ``{name: {coord: value}}`` (None before any)."""
-        z = self.optimizer.state.best_z
-        if z is None:
-            return None
-        layout = self.spec.layout
-        out: dict[str, dict[str, float]] = {}
-        for name, part in layout.split(z.reshape(1, -1)).items():
-            coords = layout.regions[name].coord_names
-            out[name] = {c: float(v) for c, v in zip(coords, part[0].tolist())}
-        return out
-
-    def summary(self) -> dict[str, Any]:
-        """Plain values for result.json (non-finite cost -> None)."""
+    def summary(self) -> CandidateSummary:
+        """This candidate's plan, best sample (best cost ``inf`` unless feasible) and spending."""
         s = self.optimizer.state
         feasible = bool(s.best_feasible)
-        return {
-            "index": self.index,
-            "plan": self.spec.plan,
-            "n_actions": self.spec.n_actions,
-            "columns": self.spec.layout.column_names,
-            "feasible": feasible,
-            "best_cost": float(s.best_cost) if feasible and math.isfinite(s.best_cost) else None,
-            "best_iteration": s.best_iteration if s.best_z is not None else None,
-            "best_params": self.best_params(),
-            "best_z": None if s.best_z is None else s.best_z.tolist(),
-            "iterations": self.iterations,
-            "samples": self.samples,
-            "dropped_round": self.dropped_round,
-            "converged": bool(s.converged),
-        }
+        return CandidateSummary(
+            index=self.index,
+            plan=self.spec.plan,
+            n_actions=self.spec.n_actions,
+            columns=self.spec.layout.column_names,
+            feasible=feasible,
+            best_cost=float(s.best_cost) if feasible else math.inf,
+            best_iteration=s.best_iteration if s.best_z is not None else None,
+            best_params=best_params(self.spec.layout, s.best_z),
+            best_z=None if s.best_z is None else s.best_z.tolist(),
+            iterations=self.iterations,
+            samples=self.samples,
+            dropped_round=self.dropped_round,
+            converged=bool(s.converged),
+        )
 
 
 Evaluate = Callable[[int, Tensor], EvalResult]

@@ -55,6 +55,7 @@ import torch
 from torch import Tensor
 
 from realize.regions import ParamLayout
+from realize.run_dir.summaries import IterationSummary
 
 __all__ = [
     "CEConfig",
@@ -574,30 +575,29 @@ class IterationRecord:
     best_idx: int = -1
     robust_cost: Tensor | None = None
 
-    def summary(self) -> dict[str, Any]:
-        """Scalars and the distribution as plain Python values (for JSON/CSV logs)."""
-        out = {
-            "iteration": self.iteration,
-            "n_samples": self.n_samples,
-            "sampled_from": self.sampled_from,
-            "refit": self.refit,
-            "n_feasible": self.n_feasible,
-            "success_share": self.success_share,
-            "best_cost": _f2j(self.best_cost),
-            "iteration_best_cost": _f2j(self.iteration_best_cost),
-            "elite_cost_min": _f2j(self.elite_cost_min),
-            "elite_cost_mean": _f2j(self.elite_cost_mean),
-            "elite_cost_max": _f2j(self.elite_cost_max),
-            "n_elite": int(self.elite_idx.numel()),
-            "mean": _t2l(self.mean),
-            "std": _t2l(self.std),
-            "eval_time": self.eval_time,
-            "wall_time": self.wall_time,
-            "converged": self.converged,
-        }
-        if self.weights is not None:
-            out["weights"] = _t2l(self.weights)
-        return out
+    def summary(self) -> IterationSummary:
+        """This iteration's numbers without the per-sample tensors (``result.json``'s series and
+        the checkpoint's records are made of these)."""
+        return IterationSummary(
+            iteration=self.iteration,
+            n_envs=self.n_samples,
+            sampled_from=self.sampled_from,
+            refit=self.refit,
+            n_feasible=self.n_feasible,
+            success_share=self.success_share,
+            best_cost=self.best_cost,
+            iteration_best_cost=self.iteration_best_cost,
+            elite_cost_min=self.elite_cost_min,
+            elite_cost_mean=self.elite_cost_mean,
+            elite_cost_max=self.elite_cost_max,
+            n_elite=int(self.elite_idx.numel()),
+            mean=_t2l(self.mean),
+            std=_t2l(self.std),
+            eval_time=self.eval_time,
+            wall_time=self.wall_time,
+            converged=self.converged,
+            weights=_t2l(self.weights),
+        )
 
 
 @dataclass

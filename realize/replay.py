@@ -49,7 +49,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from realize.results import RESULT_FILE, atomic_write_json
+from realize.run_dir.jsonio import atomic_write_json
+from realize.run_dir.names import RESULT_FILE
 from realize.run_config import RunSpec, build_run_spec
 from realize.scene import BatchedScene, SimSettings
 

@@ -21,17 +21,12 @@ from hydra import compose, initialize_config_dir
 
 import realize.scene
 from realize.app import CONFIG_DIR, preflight, run
-from realize.results import (
-    CHECKPOINT_FILE,
-    HISTORY_FILE,
-    RESULT_FILE,
-    CheckpointError,
-    History,
-    load_checkpoint,
-    load_history,
-)
+from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
+from realize.run_dir.history import History, load_history
+from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, RESULT_FILE
 from realize.run_config import ConfigError, build_run_spec
-from realize.sweep_summary import COLUMNS, JOB_STATUS_FILE, write_summary
+from realize.run_dir.names import JOB_STATUS_FILE
+from realize.sweep_summary import COLUMNS, write_summary
 
 REPO = CONFIG_DIR.parent
 PY = sys.executable
@@ -495,7 +490,7 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     h = History(["a.x", "a.y"])
     for i in range(3):
         h.append({"Z": np.full((2 + i, 2), float(i)), "cost": np.arange(2 + i, dtype=float)},
-                 n_samples=2 + i, success_share=0.5, best_cost=float("inf") if i == 0 else 10.0 - i,
+                 n_envs=2 + i, success_share=0.5, best_cost=float("inf") if i == 0 else 10.0 - i,
                  mean=None if i == 0 else np.ones(2), std=None if i == 0 else np.ones(2))
     h.save(tmp_path / HISTORY_FILE)
     back = load_history(tmp_path / HISTORY_FILE, keep=2)
@@ -504,8 +499,8 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     assert np.isnan(back.arrays()["mean"][0]).all()
     # a mixture: the heaviest mode in mean/std (I, D), every mode in mode_* (I, k, D)
     mix = History(["a.x", "a.y"])
-    mix.append({"cost": np.zeros(2)}, n_samples=2, success_share=0.0, best_cost=float("inf"), mean=None, std=None)
-    mix.append({"cost": np.zeros(2)}, n_samples=2, success_share=1.0, best_cost=1.0,
+    mix.append({"cost": np.zeros(2)}, n_envs=2, success_share=0.0, best_cost=float("inf"), mean=None, std=None)
+    mix.append({"cost": np.zeros(2)}, n_envs=2, success_share=1.0, best_cost=1.0,
                mean=np.array([[0.0, 0.0], [5.0, 5.0]]), std=np.array([[1.0, 1.0], [2.0, 2.0]]),
                weights=np.array([0.25, 0.75]))
     mix.save(tmp_path / "mix.npz")
@@ -516,7 +511,7 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     np.testing.assert_array_equal(a["mode_weight"][1], [0.25, 0.75])
     assert "mode_mean" not in back.arrays()  # single-mode runs keep the old file layout
     bad = History(["x"])
-    bad.append({"bad": np.array([object()])}, n_samples=1, success_share=0, best_cost=0, mean=None, std=None)
+    bad.append({"bad": np.array([object()])}, n_envs=1, success_share=0, best_cost=0, mean=None, std=None)
     with pytest.raises(TypeError, match="object"):
         bad.save(tmp_path / "x.npz")
 

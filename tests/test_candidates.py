@@ -104,13 +104,13 @@ def test_cheapest_realized_candidate_wins_even_when_not_first() -> None:
     assert [x.samples for x in c] == [16, 112, 32]
     # budget accounting: exactly the single-plan budget
     assert sh.spent_iterations == 10 and sh.spent_samples == b.total_samples == 10 * 16
-    assert len(c[1].records) == 7 and c[1].records[-1]["iteration"] == 6
+    assert len(c[1].records) == 7 and c[1].records[-1].iteration == 6
     s = sh.summary()
     assert s["winner"] == {"index": 1, "plan": "plan1"} and s["spent_samples"] == 160
-    assert [x["dropped_round"] for x in s["candidates"]] == [0, None, 1]
-    assert s["candidates"][1]["feasible"] and 10.0 <= s["candidates"][1]["best_cost"] < 10.5
-    assert set(s["candidates"][1]["best_params"]) == {"P0", "P1"}  # its own parameters
-    assert len(s["candidates"][2]["best_z"]) == 6
+    assert [x.dropped_round for x in s["candidates"]] == [0, None, 1]
+    assert s["candidates"][1].feasible and 10.0 <= s["candidates"][1].best_cost < 10.5
+    assert set(s["candidates"][1].best_params) == {"P0", "P1"}  # its own parameters
+    assert len(s["candidates"][2].best_z) == 6
 
 
 def test_survivor_continues_its_own_search() -> None:
@@ -145,8 +145,8 @@ def test_feasible_before_infeasible_and_progress_share() -> None:
     # n_actions are 3, 4, 5, 6: progress shares 0, 2/4, 3/5 -> round 0 keeps 3 and 2
     assert c[3].dropped_round is None and sh.winner == 3
     assert c[0].dropped_round == 0 and c[1].dropped_round == 0 and c[2].dropped_round == 1
-    assert c[3].summary()["best_cost"] >= 1000.0
-    assert c[0].summary()["best_cost"] is None and c[0].summary()["feasible"] is False
+    assert c[3].summary().best_cost >= 1000.0
+    assert c[0].summary().to_json()["best_cost"] is None and c[0].summary().feasible is False
 
 
 def test_candidate_key() -> None:

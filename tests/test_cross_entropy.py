@@ -238,7 +238,7 @@ def test_best_cost_never_increases_and_is_global_best():
     h = res.history[-1]
     assert h.elite_cost_min <= h.elite_cost_mean <= h.elite_cost_max
     assert h.success_share == h.n_feasible / h.n_samples
-    json.dumps(h.summary())
+    json.dumps(h.summary().to_json(), allow_nan=False)
 
 
 def test_rank_samples_order():

@@ -27,7 +27,8 @@ from realize.replay import (
     set_cube_friction,
     validate,
 )
-from realize.results import RESULT_FILE, atomic_write_json
+from realize.run_dir.jsonio import atomic_write_json
+from realize.run_dir.names import RESULT_FILE
 from realize.run_config import build_run_spec
 from realize.scene import SimSettings
 

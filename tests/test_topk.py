@@ -15,7 +15,8 @@ import yaml
 import realize.pddl
 from realize.app import CONFIG_DIR, run
 from realize.replay import build_replay_spec, load_run
-from realize.results import CHECKPOINT_FILE, RESULT_FILE, load_checkpoint
+from realize.run_dir.checkpoint import load_checkpoint
+from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.run_config import ConfigError, build_run_spec
 from test_app import cfg_of, expect_config_error, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
 
@@ -127,7 +128,7 @@ def test_topk_run_writes_candidates(topk_run: Path) -> None:
             assert h["action_success_000"].shape[1] == c["n_actions"]
         assert (topk_run / f"realize_c{c['index']}.rrd").stat().st_size > 0
     ck = load_checkpoint(topk_run)
-    assert ck.iteration == 3 and [r["candidate"] for r in ck.records][:2] == [0, 1]
+    assert ck.iteration == 3 and [r.candidate for r in ck.records][:2] == [0, 1]
     assert ck.ce_state["kind"] == "successive_halving" and len(ck.ce_state["candidates"]) == 2
 
 
@@ -165,7 +166,7 @@ def test_candidate_0_equals_a_single_plan_run_in_the_shared_scene(topk_run: Path
     single-plan run's numbers bit for bit (CPU resets are history-free)."""
     res = json.loads((topk_run / RESULT_FILE).read_text())
     assert res["winner"]["index"] == 0 and res["candidates"][0]["iterations"] == 2  # seed 2: c0, c1, c0
-    assert load_checkpoint(topk_run).records[1]["candidate"] == 1
+    assert load_checkpoint(topk_run).records[1].candidate == 1
     single = tmp_path / "single"
     run(cfg_of(tiny_with(["task.planner.enabled=true", "ce.iterations=2", "seed=2"])), single)
     with np.load(topk_run / "history_c0.npz", allow_pickle=False) as a, \
