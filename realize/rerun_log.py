@@ -38,7 +38,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 from realize.regions import ParamLayout
 from realize.topdown import (
     BEST_RGB,

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from envs.fetch_omni import REST_QPOS
-from envs.geometry import GeometryCfg, build_geometry
+from realize.geometry import GeometryCfg, build_geometry
 from realize.controllers.fabrics import _distance_jets, fabric_acceleration
 from realize.controllers.whole_body import (
     BoxDistance,
