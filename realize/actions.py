@@ -25,7 +25,7 @@ from torch import Tensor
 
 from realize.controllers.astar import astar_world, path_to_waypoints
 from realize.controllers.pid import PIDState, pid_init, pid_step
-from realize.kinematics import FINGERTIP_REACH
+from realize.fetch_body import FINGERTIP_REACH
 from realize.regions import Annulus, Box, Fixed, Hemisphere, Region
 
 PAD_HALF_WIDTH = 0.013  # m, half width of the finger pads across the closing axis (fetch.urdf)
