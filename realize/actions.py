@@ -23,8 +23,9 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor
 
-from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.controllers.astar import astar_world
 from realize.controllers.pid import PIDState, pid_init, pid_step
+from realize.controllers.waypoints import path_to_waypoints
 from realize.fetch_body import FINGERTIP_REACH
 from realize.regions import Annulus, Box, Fixed, Hemisphere, Region
 
