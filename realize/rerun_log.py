@@ -39,7 +39,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from envs.geometry import SceneGeometry
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.topdown import (
     BEST_RGB,
     decimate_time,

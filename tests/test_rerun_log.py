@@ -12,7 +12,7 @@ import torch
 from _synthetic import make_geometry, make_layout, run_synthetic
 from envs.geometry import Box as ObstacleBox
 from envs.geometry import GeometryCfg, build_geometry
-from realize.regions import Hemisphere
+from realize.hemisphere import Hemisphere
 from realize.rerun_log import SCALAR_PATHS, RerunLogger, read_rrd_summary
 from realize.topdown import (
     decimate_time,
