@@ -73,7 +73,8 @@ import numpy as np  # noqa: E402
 
 from realize.geometry import Box as ObstacleBox  # noqa: E402
 from realize.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
-from realize.regions import Fixed, ParamLayout  # noqa: E402
+from realize.param_layout import ParamLayout  # noqa: E402
+from realize.regions import Fixed  # noqa: E402
 from realize.topdown import (  # noqa: E402
     decimate_time,
     ellipse_params,

@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import torch
 
 from realize.geometry import GeometryCfg
-from realize.kinematics import WHOLE_BODY_JOINT_NAMES
+from realize.fetch_joints import WHOLE_BODY_JOINT_NAMES
 from realize.scene.settings import EnvOptions, SimSettings
 
 __all__ = [
