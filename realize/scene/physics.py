@@ -19,10 +19,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
+import gymnasium as gym
 import torch
+from mani_skill.utils import sapien_utils
 
-from realize.geometry import GeometryCfg
+import envs  # registers the tasks
 from realize.fetch_joints import WHOLE_BODY_JOINT_NAMES
+from realize.geometry import GeometryCfg
 from realize.scene.settings import EnvOptions, SimSettings
 
 __all__ = [
@@ -42,10 +45,6 @@ GRIPPER_OPEN, GRIPPER_CLOSED = 0.05, -0.01  # finger joint targets (m); closed <
 def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, **backend_kwargs: Any) -> Any:
     """``gym.make`` the task that builds ``geometry``'s world, with ``sim``'s physics, the
     ``options`` that are set (the rest stays the task's) and the backend's own kwargs."""
-    import gymnasium as gym
-
-    import envs  # registers the tasks
-
     kwargs: dict[str, Any] = dict(
         geometry=geometry,
         obs_mode="none",
@@ -63,8 +62,6 @@ def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, **ba
         if cam.height is not None:
             render["height"] = int(cam.height)
         if cam.eye is not None and cam.target is not None:
-            from mani_skill.utils import sapien_utils
-
             render["pose"] = sapien_utils.look_at(eye=list(map(float, cam.eye)), target=list(map(float, cam.target)))
         if render:
             kwargs["human_render_camera_configs"] = {"render_camera": render}
