@@ -156,7 +156,7 @@ class StepContext:
     def __init__(self, scene: BatchedScene, cfg: RolloutConfig, fabric: WholeBodyFabric, grid, occupancy):
         self.scene, self.cfg, self.fabric = scene, cfg, fabric
         self.grid, self.occupancy = grid, occupancy
-        self.n, self.device = scene.n, scene.device
+        self.n, self.device = scene.n_envs, scene.device
         self.dt = scene.control_dt
         n, dev = self.n, self.device
         self.base_cmd = torch.zeros(n, 3, device=dev)
@@ -256,7 +256,7 @@ class PlanRealizer:
                                               padding=self.cfg.astar.padding + g.robot_radius).to(self.device)
         self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
                                       dtype=fabric_dtype)
-        self.templates: dict[str, Template] = {name: cls(scene.n, self.device) for name, cls in TEMPLATES.items()}
+        self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}
         self.last: RolloutResult | None = None
 
     # ------------------------------------------------------------------ goal predicate
@@ -267,8 +267,8 @@ class PlanRealizer:
         but whose goal did not hold (e.g. the cube was let go beside the table)."""
         g = self.scene.geometry
         goal = self.task.goal
-        ok = torch.ones(self.scene.n, dtype=torch.bool, device=self.device)
-        dist = torch.zeros(self.scene.n, device=self.device)
+        ok = torch.ones(self.scene.n_envs, dtype=torch.bool, device=self.device)
+        dist = torch.zeros(self.scene.n_envs, device=self.device)
         p = ctx.cube[:, :3]
 
         def outside(center: Sequence[float], half: Sequence[float]) -> Tensor:
@@ -299,10 +299,10 @@ class PlanRealizer:
 
     # ------------------------------------------------------------------ rollout
     def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
-        """Simulate the plan for every row of Z (M, D), M <= scene.n, and score it."""
+        """Simulate the plan for every row of Z (M, D), M <= scene.n_envs, and score it."""
         t0 = time.perf_counter()
         scene, cfg, task = self.scene, self.cfg, self.task
-        n, dev = scene.n, self.device
+        n, dev = scene.n_envs, self.device
         m = Z.shape[0]
         if Z.ndim != 2 or Z.shape[1] != self.layout.dim:
             raise ValueError(f"Z must be (M, {self.layout.dim}), got {tuple(Z.shape)}")

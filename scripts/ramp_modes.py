@@ -30,7 +30,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict  # noqa: E402
+from realize.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
 from realize.run_dir.directory import RunDir  # noqa: E402
 from realize.run_dir.names import RESULT_FILE  # noqa: E402
 from realize.run_dir.result_doc import FailureDoc, ResultDoc  # noqa: E402
@@ -79,7 +79,7 @@ def rows_from(dirs: list[Path]) -> list[dict[str, Any]]:
             if r is None:
                 raise ValueError(f"{f}: not a JSON object")
             cfg = r.config or {}
-            geometry = build_geometry(geometry_cfg_from_dict(cfg.get("scene")))
+            geometry = build_geometry(GeometryCfg.from_mapping(cfg.get("scene")))
             ce = cfg.get("ce", {})
             done = isinstance(r, ResultDoc)
             success = (r.success_per_iter if done else []) or [math.nan]

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import torch
 
-from envs.geometry import GeometryCfg, SceneGeometry, build_geometry
+from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
 from realize.cross_entropy import CEConfig, CrossEntropyOptimizer, EvalResult, IterationRecord
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
 from realize.run_dir.result_doc import ResultDoc

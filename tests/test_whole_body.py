@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from envs.fetch_omni import REST_QPOS
-from envs.geometry import GeometryCfg, build_geometry
+from realize.geometry import GeometryCfg, build_geometry
 from realize.controllers.fabrics import _distance_jets, fabric_acceleration
 from realize.controllers.whole_body import (
     BoxDistance,
@@ -22,7 +22,7 @@ from realize.controllers.whole_body import (
     WholeBodyConfig,
     WholeBodyFabric,
 )
-from realize.kinematics import whole_body_qpos_from_full
+from realize.fetch_joints import whole_body_qpos_from_full
 from realize.rollout import RolloutConfig
 
 F64 = torch.float64

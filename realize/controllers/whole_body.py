@@ -27,7 +27,7 @@ from typing import Any, Mapping, Sequence
 import torch
 from torch import Tensor
 
-from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.kinematics import FetchKinematics
 

@@ -25,8 +25,9 @@ from matplotlib.patches import PathPatch, Polygon  # noqa: E402
 from matplotlib.path import Path as MplPath  # noqa: E402
 import numpy as np  # noqa: E402
 
-from envs.geometry import SceneGeometry  # noqa: E402
-from realize.regions import Fixed, ParamLayout  # noqa: E402
+from realize.geometry import SceneGeometry  # noqa: E402
+from realize.param_layout import ParamLayout  # noqa: E402
+from realize.regions import Fixed  # noqa: E402
 from realize.run_dir.directory import RunDir  # noqa: E402
 from realize.run_dir.names import SCENE_FILE  # noqa: E402
 from realize.run_dir.scene_files import SceneInfo  # noqa: E402

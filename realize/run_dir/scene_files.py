@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from envs.geometry import Box as ObstacleBox
-from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict
-from realize.regions import ParamLayout
+from realize.geometry import Box as ObstacleBox
+from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
+from realize.param_layout import ParamLayout
 from realize.run_dir.jsonio import atomic_write_json, atomic_write_npz, read_json
 from realize.run_dir.names import SCENE_FILE, TRAJ_PATTERN, trajectories_name
 
@@ -84,7 +84,7 @@ def geometry_from_dict(d: Mapping[str, Any]) -> SceneGeometry:
 def scene_from_config(cfg: Mapping[str, Any]) -> SceneInfo | None:
     """The scene of a run's resolved config, or ``None`` if the config does not describe one."""
     try:
-        geometry = build_geometry(geometry_cfg_from_dict(cfg["scene"]))
+        geometry = build_geometry(GeometryCfg.from_mapping(cfg["scene"]))
         params = cfg.get("task", {}).get("params")
         if cfg.get("task_file"):
             import yaml
