@@ -28,7 +28,7 @@ from realize.actions import FAIL, FAILURES, TEMPLATES, Template
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import PIDConfig
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.cross_entropy import EvalResult
+from realize.searcher import EvalResult
 from realize.regions import Box
 from realize.scene import BatchedScene
 from realize.task import TaskSpec

@@ -18,7 +18,10 @@ import numpy as np
 import torch
 
 from envs.geometry import GeometryCfg, SceneGeometry, build_geometry
-from realize.cross_entropy import CEConfig, CrossEntropyOptimizer, EvalResult, IterationRecord
+from realize.ce.config import CEConfig
+from realize.ce.optimizer import CrossEntropyOptimizer
+from realize.ce.state import IterationRecord
+from realize.searcher import EvalResult
 from realize.figures import save_scene, save_trajectories
 from realize.regions import ParamLayout
 
@@ -136,11 +139,11 @@ def run_synthetic(n: int = 60, iterations: int = 4, n_elite: int = 6, seed: int 
     """A real CE run over the toy evaluator; keeps records, rollouts and the sampling
     distribution (mean, std) each iteration drew from (None, None for the uniform one)."""
     layout, geometry = make_layout(), make_geometry()
-    opt = CrossEntropyOptimizer(layout, CEConfig(n_samples=n, n_elite=n_elite, iterations=iterations, seed=seed))
+    opt = CrossEntropyOptimizer(layout, CEConfig(n_envs=n, n_elite=n_elite, iterations=iterations, seed=seed))
     out = SyntheticRun(layout, geometry)
     prev: tuple[torch.Tensor | None, torch.Tensor | None] = (None, None)
     while not opt.done:
-        Z = opt.ask()
+        Z = opt.ask().Z
         ro = fake_rollout(layout, geometry, Z, T)
         rec = opt.tell(EvalResult(ro.cost, ro.feasible, ro.progress, ro.distance))
         out.records.append(rec)
