@@ -11,7 +11,7 @@ rebuilds it once more.
 
 Columns: ``job, overrides, status, error, feasible, best_cost, wall_time_s,
 iterations_done, interrupted, run_dir``. ``status`` is ``done``, ``failed`` or ``interrupted``.
-Both files are read and written through ``realize.run_dir.directory.RunDir`` (``JobStatus``,
+Both files are read and written through ``realize.run_dir.directory.RunDir`` (``JobStatusDoc``,
 ``ResultDoc``/``FailureDoc``).
 What it doesn't: run or retry jobs, or read anything but JSON files (no unpickling).
 """
@@ -33,7 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 from realize.run_dir.directory import RunDir
 from realize.run_dir.jsonio import atomic_write_text
 from realize.run_dir.names import JOB_STATUS_FILE
-from realize.run_dir.summaries import JobStatus
+from realize.run_dir.summaries import JobStatusDoc
 
 __all__ = ["SweepSummary", "write_summary", "COLUMNS"]
 
@@ -58,7 +58,7 @@ def _one_line(text: str, limit: int = 500) -> str:
 
 def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
     job = RunDir(status_file.parent)
-    st = job.job_status() or JobStatus(job_num=None)
+    st = job.job_status() or JobStatusDoc(job_num=None)
     try:
         res = job.result()
     except (KeyError, TypeError, ValueError, AttributeError):  # a malformed result: the job's own status
@@ -158,7 +158,7 @@ class SweepSummary(Callback):
         if not ok:
             err = job_return._return_value  # the exception (reading .return_value would re-raise)
             error = f"{type(err).__name__}: {err}" if err is not None else "unknown error"
-        status = JobStatus(
+        status = JobStatusDoc(
             job_num=int(hydra.job.num) if hydra.job.get("num") is not None else None,
             overrides=[str(o) for o in (job_return.overrides or [])],
             status="done" if ok else "failed",

@@ -21,14 +21,15 @@ from hydra import compose, initialize_config_dir
 
 import realize.scene
 from realize.cli import preflight
+from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 from realize.run import run
-from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
-from realize.run_dir.history import History, load_history
-from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, RESULT_FILE
-from realize.config import ConfigError
 from realize.run_config import build_run_spec
-from realize.run_dir.names import JOB_STATUS_FILE
+from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
+from realize.run_dir.directory import RunDir
+from realize.run_dir.history import History, load_history
+from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE
+from realize.run_dir.result_doc import ResultDoc
 from realize.sweep_summary import COLUMNS, write_summary
 
 REPO = CONFIG_DIR.parent
@@ -342,6 +343,18 @@ def test_tiny_run_writes_results(tmp_path: Path) -> None:
     assert (tmp_path / "scene.json").is_file()
     with np.load(tmp_path / "trajectories_iter1.npz", allow_pickle=False) as tr:
         assert tr["traj_base"].shape[0] == 4 and tr["traj_base"].shape[2] == 2
+    # the typed reader sees the same run, and writes back the same document
+    rd = RunDir(tmp_path)
+    doc = rd.result()
+    assert isinstance(doc, ResultDoc) and doc.to_json() == res
+    assert doc.n_envs == 4 and doc.backend == "cpu" and doc.n_envs_per_iter == [4, 4]
+    assert [r.success_share for r in rd.checkpoint().records] == doc.success_per_iter
+    assert [r.best_cost for r in rd.checkpoint().records] == doc.best_cost_per_iter
+    plan = rd.best_plan()
+    assert plan.best_z == res["best_z"] and plan.config == res["config"] and plan.leader is None
+    assert rd.load_history().column_names == doc.columns and rd.trajectory_iterations() == [0, 1]
+    scene = rd.scene()
+    assert scene is not None and scene.layout.column_names == doc.columns
 
 
 def _compare(a: Path, b: Path) -> None:

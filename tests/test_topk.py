@@ -14,13 +14,15 @@ import pytest
 import yaml
 
 import realize.pddl
-from realize.paths import CONFIG_DIR
-from realize.run import run
-from realize.replay import build_replay_spec, load_run
-from realize.run_dir.checkpoint import load_checkpoint
-from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
+from realize.replay import build_replay_spec, load_run
+from realize.run import run
 from realize.run_config import build_run_spec
+from realize.run_dir.checkpoint import load_checkpoint
+from realize.run_dir.directory import RunDir
+from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
+from realize.run_dir.result_doc import ResultDoc
 from test_app import cfg_of, expect_config_error, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
 
 TOPK = ["task.planner.enabled=true", "task.planner.top_k=2"]
@@ -133,6 +135,20 @@ def test_topk_run_writes_candidates(topk_run: Path) -> None:
     ck = load_checkpoint(topk_run)
     assert ck.iteration == 3 and [r.candidate for r in ck.records][:2] == [0, 1]
     assert ck.ce_state["kind"] == "successive_halving" and len(ck.ce_state["candidates"]) == 2
+
+
+def test_topk_run_reads_back_typed(topk_run: Path) -> None:
+    rd = RunDir(topk_run)
+    doc = rd.result()
+    assert isinstance(doc, ResultDoc) and doc.halving is not None
+    assert doc.to_json() == json.loads((topk_run / RESULT_FILE).read_text())
+    h = doc.halving
+    assert h.winner is not None and h.leader == h.winner and h.n_candidates == 2
+    w = h.candidates[h.winner.index]
+    assert doc.plan == w.plan and doc.best_z == w.best_z and doc.columns == w.columns
+    assert rd.best_plan().leader == h.leader
+    for c in h.candidates:
+        assert len(rd.load_history(candidate=c.index)) == c.iterations
 
 
 @pytest.mark.parametrize("stop_at", [0, 1])

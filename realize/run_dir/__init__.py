@@ -7,7 +7,7 @@ Modules (import from them; this package file only describes them):
                   ``job_status.json``);
 * ``jsonio``      the one JSON encoding of inf/NaN (``null``; decoded per field) and atomic writes;
 * ``summaries``   ``IterationSummary`` (one CE iteration; the checkpoint's ``records``),
-                  ``CandidateSummary`` (one candidate of a top-k run), ``JobStatus`` (a sweep job);
+                  ``CandidateSummary`` (one candidate of a top-k run), ``JobStatusDoc`` (a sweep job);
 * ``result_doc``  ``ResultDoc`` (``result.json``; ``HalvingDoc`` for top-k runs) and ``FailureDoc``;
 * ``build``       pure builders: ``result_doc``, ``halving_doc``, ``failure_doc`` from the search's
                   state, summaries and task; ``RunInfo``;

@@ -56,7 +56,7 @@ from realize.run_dir.scene_files import (
     save_trajectories,
     trajectory_iterations,
 )
-from realize.run_dir.summaries import JobStatus
+from realize.run_dir.summaries import JobStatusDoc
 
 __all__ = ["RunDir", "RunDirError", "BestPlan"]
 
@@ -264,9 +264,9 @@ class RunDir:
 
     # ---- sweeps --------------------------------------------------------------------------
 
-    def job_status(self) -> JobStatus | None:
+    def job_status(self) -> JobStatusDoc | None:
         d = read_json(self.path / JOB_STATUS_FILE)
-        return None if d is None else JobStatus.from_json(d)
+        return None if d is None else JobStatusDoc.from_json(d)
 
-    def write_job_status(self, status: JobStatus) -> None:
+    def write_job_status(self, status: JobStatusDoc) -> None:
         atomic_write_json(self.path / JOB_STATUS_FILE, status.to_json())

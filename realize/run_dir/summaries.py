@@ -3,7 +3,7 @@
 What it does: ``IterationSummary`` is one CE iteration in plain numbers (what the checkpoint
 stores as ``records`` and what the result document's per-iteration series are built from);
 ``CandidateSummary`` is one candidate plan of a top-k run (``result.json["candidates"]``);
-``JobStatus`` is a sweep job's ``job_status.json``. Float fields hold real floats in memory,
+``JobStatusDoc`` is a sweep job's ``job_status.json``. Float fields hold real floats in memory,
 ``inf``/``nan`` included; ``to_json``/``from_json`` convert at the JSON boundary only, with the
 one encoding of ``realize.run_dir.jsonio`` (non-finite -> ``null``; each field says what
 ``null`` reads back as).
@@ -20,7 +20,7 @@ from typing import Any
 
 from realize.run_dir.jsonio import decode_float, decode_floats, encode_float, encode_floats, json_safe
 
-__all__ = ["IterationSummary", "CandidateSummary", "JobStatus", "BestParams", "best_params"]
+__all__ = ["IterationSummary", "CandidateSummary", "JobStatusDoc", "BestParams", "best_params"]
 
 BestParams = dict[str, dict[str, float]]  # {parameter: {coordinate: value}}
 
@@ -195,7 +195,7 @@ class CandidateSummary:
 
 
 @dataclass
-class JobStatus:
+class JobStatusDoc:
     """A sweep job's ``job_status.json``: Hydra's job number, its overrides, ``status``
     (``done`` or ``failed``: how Hydra saw the job) and the error if it raised."""
 
@@ -209,6 +209,6 @@ class JobStatus:
                 "error": self.error}
 
     @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> JobStatus:
+    def from_json(cls, d: Mapping[str, Any]) -> JobStatusDoc:
         return cls(job_num=_opt_int(d.get("job_num")), overrides=[str(o) for o in d.get("overrides") or []],
                    status=str(d.get("status", "failed")), error=str(d.get("error") or ""))
