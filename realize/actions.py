@@ -23,10 +23,12 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor
 
-from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.controllers.astar import astar_world
 from realize.controllers.pid import PIDState, pid_init, pid_step
-from realize.kinematics import FINGERTIP_REACH
-from realize.regions import Annulus, Box, Fixed, Hemisphere, Region
+from realize.controllers.waypoints import path_to_waypoints
+from realize.fetch_body import FINGERTIP_REACH
+from realize.hemisphere import Hemisphere
+from realize.regions import Annulus, Box, Fixed, Region
 
 PAD_HALF_WIDTH = 0.013  # m, half width of the finger pads across the closing axis (fetch.urdf)
 

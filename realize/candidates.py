@@ -35,7 +35,7 @@ from realize.budget import HalvingBudget
 from realize.ce.config import CEConfig
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.ce.state import CEState, IterationRecord
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.run_dir.build import halving_doc
 from realize.run_dir.summaries import CandidateSummary, best_params
 from realize.searcher import Batch, EvalResult, SearchReport

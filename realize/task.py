@@ -17,7 +17,8 @@ from typing import Any, Mapping, Sequence
 
 from envs.geometry import SceneGeometry
 from realize.config import ConfigError
-from realize.regions import Box, ParamLayout, Region, region_from_dict
+from realize.param_layout import ParamLayout, region_from_dict
+from realize.regions import Box, Region
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from envs.geometry import GeometryCfg, SceneGeometry, build_geometry
 from realize.ce.config import CEConfig
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.ce.state import IterationRecord
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
 from realize.run_dir.result_doc import ResultDoc

@@ -15,8 +15,9 @@ from realize.ce.config import CEConfig
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.ce.state import CEState
 from realize.config import ConfigError
+from realize.param_layout import ParamLayout
+from realize.regions import Box
 from realize.searcher import EvalResult
-from realize.regions import Box, ParamLayout
 
 F64 = torch.float64
 

@@ -13,8 +13,10 @@ from realize.ce.mixture import kmeans, mode_counts
 from realize.ce.optimizer import CrossEntropyOptimizer, optimize
 from realize.ce.ranking import knn_mean, rank_samples
 from realize.ce.state import CEState
+from realize.hemisphere import Hemisphere
+from realize.param_layout import ParamLayout
+from realize.regions import Annulus, Box, Fixed
 from realize.searcher import EvalResult
-from realize.regions import Annulus, Box, Fixed, Hemisphere, ParamLayout
 
 F64 = torch.float64
 

@@ -17,7 +17,8 @@ from realize.candidates import CandidateSpec, SuccessiveHalving
 from realize.ce.config import CEConfig
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.loop import search_loop
-from realize.regions import Box, ParamLayout
+from realize.param_layout import ParamLayout
+from realize.regions import Box
 from realize.searcher import EvalResult, Searcher
 from realize.sinks.base import Iteration, SinkError, SinkSet
 

@@ -28,7 +28,7 @@ import torch
 import yaml
 
 from realize.actions import TEMPLATES
-from realize.kinematics import TCP_OFFSET
+from realize.fetch_body import TCP_OFFSET
 from realize.rollout import PlanRealizer, RolloutConfig, StepContext
 from realize.scene import BatchedScene, SimSettings, quat_to_matrix
 from realize.task import task_from_dict

@@ -22,7 +22,7 @@ from realize.controllers.whole_body import (
     WholeBodyConfig,
     WholeBodyFabric,
 )
-from realize.kinematics import whole_body_qpos_from_full
+from realize.fetch_joints import whole_body_qpos_from_full
 from realize.rollout import RolloutConfig
 
 F64 = torch.float64

@@ -49,7 +49,7 @@ from realize.ce.ranking import (
     sort_key,
 )
 from realize.ce.state import CEResult, CEState, IterationRecord
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.searcher import Batch, EvalResult, SearchReport
 
 __all__ = ["CrossEntropyOptimizer", "optimize", "Evaluator", "IterationCallback"]

@@ -26,7 +26,8 @@ from matplotlib.path import Path as MplPath  # noqa: E402
 import numpy as np  # noqa: E402
 
 from envs.geometry import SceneGeometry  # noqa: E402
-from realize.regions import Fixed, ParamLayout  # noqa: E402
+from realize.param_layout import ParamLayout  # noqa: E402
+from realize.regions import Fixed  # noqa: E402
 from realize.run_dir.directory import RunDir  # noqa: E402
 from realize.run_dir.names import SCENE_FILE  # noqa: E402
 from realize.run_dir.scene_files import SceneInfo  # noqa: E402

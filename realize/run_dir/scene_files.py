@@ -26,7 +26,7 @@ import numpy as np
 
 from envs.geometry import Box as ObstacleBox
 from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.run_dir.jsonio import atomic_write_json, atomic_write_npz, read_json
 from realize.run_dir.names import SCENE_FILE, TRAJ_PATTERN, trajectories_name
 

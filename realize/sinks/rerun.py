@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 from realize.sinks.base import Iteration
 
 __all__ = ["RerunSink", "recording_name"]
