@@ -14,7 +14,6 @@ import pytest
 import yaml
 
 import realize.pddl
-from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 from realize.replay import build_replay_spec, load_run
 from realize.run import run
