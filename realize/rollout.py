@@ -9,7 +9,7 @@ a progress score and a distance proxy for ranking infeasible plans, and optional
 trajectories. A goal that reads the cube is read ``goal_settle_s`` after the plan's last action
 (physics only, not counted in the cost), so a pushed or dropped cube has landed. Plans that
 diverge (NaN or exploding joint speeds) are failed with a reason and do not disturb the others. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
-What it doesn't: choose parameters (``realize.cross_entropy``) or know any backend details
+What it doesn't: choose parameters (``realize.ce``) or know any backend details
 (``realize.scene``).
 """
 
@@ -28,7 +28,7 @@ from realize.actions import FAIL, FAILURES, TEMPLATES, Template
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import PIDConfig
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.cross_entropy import EvalResult
+from realize.searcher import EvalResult
 from realize.regions import Box
 from realize.scene import BatchedScene
 from realize.task import TaskSpec

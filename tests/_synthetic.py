@@ -16,12 +16,15 @@ from pathlib import Path
 
 import torch
 
+from realize.ce.config import CEConfig
+from realize.ce.optimizer import CrossEntropyOptimizer
+from realize.ce.state import IterationRecord
 from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
-from realize.cross_entropy import CEConfig, CrossEntropyOptimizer, EvalResult, IterationRecord
 from realize.param_layout import ParamLayout
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
 from realize.run_dir.result_doc import ResultDoc
+from realize.searcher import EvalResult
 
 PARAMS = {
     "Table1": {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25},
@@ -137,11 +140,11 @@ def run_synthetic(n: int = 60, iterations: int = 4, n_elite: int = 6, seed: int 
     """A real CE run over the toy evaluator; keeps records, rollouts and the sampling
     distribution (mean, std) each iteration drew from (None, None for the uniform one)."""
     layout, geometry = make_layout(), make_geometry()
-    opt = CrossEntropyOptimizer(layout, CEConfig(n_samples=n, n_elite=n_elite, iterations=iterations, seed=seed))
+    opt = CrossEntropyOptimizer(layout, CEConfig(n_envs=n, n_elite=n_elite, iterations=iterations, seed=seed))
     out = SyntheticRun(layout, geometry)
     prev: tuple[torch.Tensor | None, torch.Tensor | None] = (None, None)
     while not opt.done:
-        Z = opt.ask()
+        Z = opt.ask().Z
         ro = fake_rollout(layout, geometry, Z, T)
         rec = opt.tell(EvalResult(ro.cost, ro.feasible, ro.progress, ro.distance))
         out.records.append(rec)
@@ -158,7 +161,7 @@ def write_run_dir(run: SyntheticRun, run_dir: Path, trajectories: bool = True, s
     history = History(run.layout.column_names)
     for r in recs:
         history.append({"Z": r.Z, "cost": r.cost, "feasible": r.feasible, "elite_idx": r.elite_idx},
-                       n_envs=r.n_samples, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean,
+                       n_envs=r.n_envs, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean,
                        std=r.std)
     rd.write_history(history)
     feasible = any(r.n_feasible > 0 for r in recs)

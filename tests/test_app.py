@@ -20,8 +20,11 @@ import yaml
 from hydra import compose, initialize_config_dir
 
 import realize.scene
-from realize.app import CONFIG_DIR, preflight, run
-from realize.run_config import ConfigError, build_run_spec
+from realize.cli import preflight
+from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
+from realize.run import run
+from realize.run_config import build_run_spec
 from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History, load_history
@@ -92,21 +95,23 @@ def no_sim(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_default_config_validates_without_simulating(no_sim: None) -> None:
     spec = build_run_spec(plain([]))
-    assert spec.ce.n_samples == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
+    assert spec.ce.n_envs == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
     assert spec.task.describe() == "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
     assert spec.task.layout.names == ["Table1", "Cube_g", "Table2", "Cube_p", "Exit"]
-    assert asdict(spec.sim) == asdict(realize.scene.SimSettings())  # the yaml spells out the defaults
-    assert spec.n_envs_max == 200
+    # the yaml spells out the defaults; the backend is resolved at the edge (device=auto)
+    assert asdict(spec.sim) == dict(asdict(realize.scene.SimSettings()), backend=spec.placement.backend)
+    assert spec.placement.backend in ("cpu", "gpu") and spec.placement.device.type in ("cpu", "cuda")
+    assert spec.placement.dtype == spec.ce.torch_dtype
 
 
 def test_experiment_presets() -> None:
     seed = build_run_spec(plain(["experiment=seed_paper"]))
-    assert (seed.ce.n_samples, seed.ce.n_elite, seed.ce.iterations) == (200, 10, 10)
+    assert (seed.ce.n_envs, seed.ce.n_elite, seed.ce.iterations) == (200, 10, 10)
     journal = build_run_spec(plain(["experiment=journal", "scene=wall"]))
     assert journal.ce.schedule == "linear"
-    assert journal.ce.n_samples_at(0) == 3000 and journal.ce.n_samples_at(19) == 300
+    assert journal.ce.n_envs_at(0) == 3000 and journal.ce.n_envs_at(19) == 300
     assert (journal.ce.n_elite, journal.ce.iterations) == (50, 20)
-    assert journal.n_envs_max == 3000
+    assert journal.ce.n_envs == 3000  # the scene's size: the schedule only shrinks the batch
     assert journal.geometry.variant == "wall" and journal.geometry.extras[0].name == "wall"
     assert build_run_spec(plain(["scene=ramp"])).geometry.extras[0].name == "ramp"
 
@@ -123,7 +128,7 @@ def test_ramp_ablation_sweep_composes() -> None:
     changed = {}
     for arm in arms:
         spec = build_run_spec(plain(["experiment=ramp_ablation", f"ablation={arm}"]))
-        assert spec.geometry.variant == "ramp" and spec.ce.n_samples == 64
+        assert spec.geometry.variant == "ramp" and spec.ce.n_envs == 64
         assert "Cube_p" in spec.task.layout.names and spec.task.layout.regions["Cube_p"].dim == 3
         changed[arm] = {k for k in ("n_modes", "uniform_share", "rank_weighted", "knn_robust")
                         if getattr(spec.ce, k) != getattr(base, k)}
@@ -177,6 +182,7 @@ BAD = [
     (["ce.n_envs=4", "ce.n_elite=5"], ["ce.n_elite = 5", "ce.n_envs = 4"]),
     (["ce.iterations=0"], ["ce.iterations = 0"]),
     (["ce.schedule=linear"], ["ce.n_envs_end"]),
+    (["ce.schedule=linear", "ce.n_envs_end=300"], ["ce.n_envs_end = 300", "ce.n_envs = 4"]),
     (["ce.fallback=magic"], ["ce.fallback", "magic"]),
     (["+ce.n_samples=3"], ["ce", "n_samples"]),
     (["+task.foo=1"], ["task", "foo"]),

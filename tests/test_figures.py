@@ -65,7 +65,7 @@ def test_fig2_png_and_csv(run_dir, synthetic):
         rec = synthetic.records[k]
         mine = [r for r in rows if r["iteration"] == str(k)]
         base = [r for r in mine if r["series"] == "base"]
-        assert len({r["sample"] for r in base}) == rec.n_samples
+        assert len({r["sample"] for r in base}) == rec.n_envs
         assert max(int(r["step"]) for r in base) <= 20
         ee = [r for r in mine if r["series"] == "ee"]
         assert ee and {r["sample"] for r in ee} == {str(int(rec.elite_idx[0]))}
@@ -164,7 +164,7 @@ def test_history_written_by_the_history_writer_loads(synthetic, tmp_path):
     h = History(synthetic.layout.column_names)
     for r in synthetic.records:
         h.append({"Z": r.Z, "cost": r.cost, "feasible": r.feasible, "elite_idx": r.elite_idx},
-                 n_envs=r.n_samples, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean, std=r.std)
+                 n_envs=r.n_envs, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean, std=r.std)
     rd = RunDir(tmp_path)
     rd.write_history(h)
     rd.write_scene(synthetic.layout, synthetic.geometry)

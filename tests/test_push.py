@@ -23,7 +23,9 @@ from envs.move_and_push import cube_in_container
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
 from realize.rollout import PlanRealizer, RolloutConfigError, RolloutResult
-from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task
+from realize.config import ConfigError
+from realize.run_config import RunSpec, build_run_spec
+from realize.task_plans import build_task
 from realize.scene import BatchedScene
 
 # columns: PushSide.x, PushSide.y, Stick_p.x, Stick_p.y, Stick_p.z

@@ -16,7 +16,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from realize.app import CONFIG_DIR
+from realize.paths import CONFIG_DIR
 from realize.replay import ReplayError, build_replay_spec, load_run, replay
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE

@@ -3,7 +3,7 @@
 What it does:
   * ``RunInfo``: how the run was set up (segments, the iteration it resumed from, the scene's
     backend and copies, setup time); the loop fills it in as it learns it;
-  * ``result_doc(...)`` -> ``ResultDoc`` from the CE state (``realize.cross_entropy.CEState``,
+  * ``result_doc(...)`` -> ``ResultDoc`` from the CE state (``realize.ce.state.CEState``,
     or ``None`` before the first iteration), the ``IterationSummary`` list, the task
     (``realize.task.TaskSpec``) and the run's identity (iterations, seed, config, directory);
   * ``halving_doc(sh, top_k)`` -> ``HalvingDoc`` from a ``realize.candidates.SuccessiveHalving``;
@@ -30,7 +30,7 @@ __all__ = ["RunInfo", "SearchState", "TaskInfo", "result_doc", "halving_doc", "f
 
 
 class SearchState(Protocol):
-    """What ``result_doc`` reads of the search state (``realize.cross_entropy.CEState``)."""
+    """What ``result_doc`` reads of the search state (``realize.ce.state.CEState``)."""
 
     best_z: Any  # (D,) tensor or None
     best_cost: float
