@@ -32,7 +32,7 @@ def open_realization(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None,
     from realize.scene import BatchedScene
 
     tasks = [spec.task] if tasks is None else list(tasks)
-    scene = BatchedScene(spec.ce.n_envs if n_envs is None else n_envs, spec.geometry_cfg, spec.sim)
+    scene = BatchedScene.from_spec(spec, spec.ce.n_envs if n_envs is None else n_envs)
     try:
         realizers = [PlanRealizer(t, scene, spec.rollout, seed=spec.seed) for t in tasks]
     except BaseException:

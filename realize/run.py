@@ -218,15 +218,15 @@ class _Assembly:
     def _open_scene(self) -> tuple[Any, list[Any]]:
         spec, t0 = self.spec, time.perf_counter()
         scene, realizers = open_realization(spec, self.tasks)
-        self.info.backend, self.info.n_envs, self.info.setup_time_s = scene.backend, scene.n, time.perf_counter() - t0
+        self.info.backend, self.info.n_envs, self.info.setup_time_s = scene.backend, scene.n_envs, time.perf_counter() - t0
         if spec.halving:
             assert spec.budget is not None
             for i, t in enumerate(self.tasks):
                 log.info("candidate %d: %s", i, t.describe())
             log.info("%d candidate(s), halving budget %s; %d copies on %s (setup %.1f s)", len(self.tasks),
-                     spec.budget.to_dict(), scene.n, scene.backend, self.info.setup_time_s)
+                     spec.budget.to_dict(), scene.n_envs, scene.backend, self.info.setup_time_s)
         else:
-            log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n, scene.backend,
+            log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n_envs, scene.backend,
                      self.info.setup_time_s)
         return scene, realizers
 
