@@ -450,7 +450,7 @@ def _iterate(
     from tqdm import tqdm
 
     from realize.cross_entropy import CrossEntropyOptimizer
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
 
     def wall() -> float:
@@ -574,7 +574,7 @@ def _iterate_halving(
     from tqdm import tqdm
 
     from realize.candidates import CandidateSpec, SuccessiveHalving
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
 
     assert spec.budget is not None

@@ -407,7 +407,7 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
     the task camera's); the camera sits at ``eye`` looking at ``target``, by default at
     ``video_camera(geometry)``, or where the task's render camera is with ``task_camera``.
     """
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
 
     t0 = time.perf_counter()
     run = load_run(run_dir)
@@ -478,7 +478,7 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     defaults unless given) and, per replica, the cube friction times U(friction_range) drawn
     from ``numpy.random.default_rng(seed)`` (None: friction unchanged).
     """
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
 
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
         raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")

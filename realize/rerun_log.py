@@ -58,7 +58,7 @@ from realize.topdown import (
 
 if TYPE_CHECKING:  # avoid importing the simulator stack just for a type
     from realize.cross_entropy import IterationRecord
-    from realize.rollout import RolloutResult
+    from realize.realization.result import RolloutResult
 
 __all__ = ["RerunLogger", "read_rrd_summary", "TIMELINE", "SCALAR_PATHS"]
 

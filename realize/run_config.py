@@ -327,7 +327,7 @@ def build_task_candidates(
     Without ``top_k > 1`` the candidates are ``[task]``. With it, one ``TaskSpec`` per distinct
     planned plan (cheapest first; fewer than ``top_k`` if the planner finds fewer), each over
     only the parameters its plan uses (``realize.task.task_for_plan``)."""
-    from realize.actions import TEMPLATES
+    from realize.realization.actions import TEMPLATES
     from realize.task import plan_from_actions, task_for_plan, task_from_dict
 
     try:
@@ -451,10 +451,10 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
 
         budget = plan_budget(len(candidates), ce.iterations, ce.n_samples, planner.round_iterations)
 
-    from realize.rollout import RolloutConfig
+    from realize.realization.config import RolloutConfig
 
     try:
-        rollout = RolloutConfig.from_dict(_mapping(d.get("controller"), "controller"), "controller")
+        rollout = RolloutConfig.from_mapping(_mapping(d.get("controller"), "controller"), "controller")
     except (ValueError, TypeError) as e:
         msg = str(e)
         raise ConfigError(msg if msg.startswith("controller") else f"controller: {msg}") from None

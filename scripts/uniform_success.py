@@ -132,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
 
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
 
     gen = torch.Generator(device="cpu")

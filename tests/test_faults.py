@@ -9,7 +9,8 @@ import math
 import pytest
 import torch
 
-from realize.rollout import PlanRealizer, StepContext
+from realize.realization.context import StepContext
+from realize.realization.rollout import PlanRealizer
 from realize.run_config import build_run_spec
 from realize.scene import BatchedScene
 from tests.test_rollout import GOOD, SEED_TASK, compose_config

@@ -19,10 +19,11 @@ import numpy as np
 import pytest
 import torch
 
-from envs.move_and_push import cube_in_container
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
-from realize.rollout import PlanRealizer, RolloutConfigError, RolloutResult
+from realize.realization.goals import cube_in_container
+from realize.realization.result import RolloutResult
+from realize.realization.rollout import PlanRealizer
 from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task
 from realize.scene import BatchedScene
 
@@ -178,10 +179,10 @@ def test_bad_push_region_names_the_key(cfg: dict[str, Any], spec: RunSpec) -> No
 @pytest.mark.parametrize("key,value", [("push_depth", -0.1), ("push_speed", 0.0), ("push_pre_distance", float("nan")),
                                        ("goal_settle_s", -1.0)])
 def test_bad_push_setting_names_the_key(key: str, value: float) -> None:
-    from realize.rollout import RolloutConfig
+    from realize.realization.config import RolloutConfig
 
-    with pytest.raises(RolloutConfigError, match=rf"controller\.{key} = "):
-        RolloutConfig.from_dict({key: value})
+    with pytest.raises(ConfigError, match=rf"controller\.{key} = "):
+        RolloutConfig.from_mapping({key: value})
 
 
 def test_goal_names_unknown_container(cfg: dict[str, Any], spec: RunSpec) -> None:

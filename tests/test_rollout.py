@@ -30,7 +30,8 @@ import yaml
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
 from realize.app import CONFIG_DIR
-from realize.rollout import PlanRealizer, RolloutResult
+from realize.realization.result import RolloutResult
+from realize.realization.rollout import PlanRealizer
 from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task, load_task_file
 from realize.scene import BatchedScene
 
@@ -380,7 +381,8 @@ def test_wrong_z_shape(spec: RunSpec, scene3: BatchedScene, shape: tuple[int, ..
 
 
 def test_place_takes_a_box_of_release_points_grasp_does_not() -> None:
-    from realize.actions import Grasp, Place
+    from realize.realization.actions.grasp import Grasp
+    from realize.realization.actions.place import Place
     from realize.regions import Box as BoxRegion
 
     box3 = BoxRegion([-0.1, -1.4, 0.76], [0.1, -0.1, 1.15])
