@@ -179,9 +179,10 @@ def test_bad_push_region_names_the_key(cfg: dict[str, Any], spec: RunSpec) -> No
 @pytest.mark.parametrize("key,value", [("push_depth", -0.1), ("push_speed", 0.0), ("push_pre_distance", float("nan")),
                                        ("goal_settle_s", -1.0)])
 def test_bad_push_setting_names_the_key(key: str, value: float) -> None:
+    from realize.config import ConfigError as SettingsError
     from realize.realization.config import RolloutConfig
 
-    with pytest.raises(ConfigError, match=rf"controller\.{key} = "):
+    with pytest.raises(SettingsError, match=rf"controller\.{key} = "):
         RolloutConfig.from_mapping({key: value})
 
 
