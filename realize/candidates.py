@@ -53,7 +53,7 @@ import torch
 from torch import Tensor
 
 from realize.cross_entropy import CEConfig, CEState, CrossEntropyOptimizer, EvalResult, IterationRecord
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 
 __all__ = [
     "BudgetError",

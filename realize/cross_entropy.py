@@ -54,7 +54,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 
 __all__ = [
     "CEConfig",

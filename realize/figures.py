@@ -73,7 +73,8 @@ import numpy as np  # noqa: E402
 
 from envs.geometry import Box as ObstacleBox  # noqa: E402
 from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict  # noqa: E402
-from realize.regions import Fixed, ParamLayout  # noqa: E402
+from realize.param_layout import ParamLayout  # noqa: E402
+from realize.regions import Fixed  # noqa: E402
 from realize.topdown import (  # noqa: E402
     decimate_time,
     ellipse_params,

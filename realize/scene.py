@@ -29,7 +29,7 @@ import torch
 
 from envs.geometry import GeometryCfg, SceneGeometry, geometry_cfg_from_dict
 from envs.fetch_omni import REST_QPOS
-from realize.kinematics import WHOLE_BODY_JOINT_NAMES
+from realize.fetch_joints import WHOLE_BODY_JOINT_NAMES
 
 BASE_JOINTS = WHOLE_BODY_JOINT_NAMES[:3]  # x, y, yaw
 ARM_JOINTS = WHOLE_BODY_JOINT_NAMES[3:]  # torso + 7 arm joints

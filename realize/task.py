@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 from envs.geometry import SceneGeometry
-from realize.regions import Box, ParamLayout, Region, region_from_dict
+from realize.param_layout import ParamLayout, region_from_dict
+from realize.regions import Box, Region
 
 
 class TaskError(ValueError):

@@ -26,7 +26,9 @@ from typing import Any
 import numpy as np
 
 from envs.geometry import Box as ObstacleBox
-from realize.regions import Annulus, Fixed, Hemisphere, ParamLayout, Region
+from realize.hemisphere import Hemisphere
+from realize.param_layout import ParamLayout
+from realize.regions import Annulus, Fixed, Region
 from realize.regions import Box as BoxRegion
 
 __all__ = [

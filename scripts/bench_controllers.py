@@ -36,12 +36,13 @@ import yaml
 
 from envs.fetch_omni import REST_QPOS
 from envs.geometry import GeometryCfg, build_geometry
-from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.controllers.astar import astar_world
 from realize.controllers.body import DOF
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import pid_init, pid_step
+from realize.controllers.waypoints import path_to_waypoints
 from realize.controllers.whole_body import WholeBodyFabric
-from realize.kinematics import whole_body_qpos_from_full
+from realize.fetch_joints import whole_body_qpos_from_full
 from realize.realization.actions import TEMPLATES
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext

@@ -20,7 +20,7 @@ import torch
 from envs.geometry import GeometryCfg, SceneGeometry, build_geometry
 from realize.cross_entropy import CEConfig, CrossEntropyOptimizer, EvalResult, IterationRecord
 from realize.figures import save_scene, save_trajectories
-from realize.regions import ParamLayout
+from realize.param_layout import ParamLayout
 
 PARAMS = {
     "Table1": {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25},

@@ -333,7 +333,7 @@ def test_tiny_run_writes_results(tmp_path: Path) -> None:
     assert ck.iteration == 2 and len(ck.records) == 2
     rrd = tmp_path / "realize.rrd"
     assert rrd.is_file() and rrd.stat().st_size > 0
-    from realize.rerun_log import read_rrd_summary
+    from realize.rerun_read import read_rrd_summary
 
     rr = read_rrd_summary(rrd)
     assert rr["iterations"] == [0, 1]

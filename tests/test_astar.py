@@ -13,14 +13,10 @@ import torch
 
 nx = pytest.importorskip("networkx")
 
-from realize.controllers.astar import (  # noqa: E402
-    SQRT2,
-    AStarStatus,
-    astar,
-    astar_world,
-    components,
-    path_to_waypoints,
-)
+from realize.controllers.astar import AStarStatus, astar, astar_world  # noqa: E402
+from realize.controllers.astar_search import SQRT2  # noqa: E402
+from realize.controllers.grid_cells import components  # noqa: E402
+from realize.controllers.waypoints import path_to_waypoints  # noqa: E402
 from realize.controllers.occupancy import (  # noqa: E402
     GridSpec,
     cell_in_grid,

@@ -18,7 +18,8 @@ from realize.candidates import (
     plan_budget,
 )
 from realize.cross_entropy import CEConfig, CEState, CrossEntropyOptimizer, EvalResult
-from realize.regions import Box, ParamLayout
+from realize.param_layout import ParamLayout
+from realize.regions import Box
 
 F64 = torch.float64
 

@@ -19,7 +19,9 @@ from realize.cross_entropy import (
     optimize,
     rank_samples,
 )
-from realize.regions import Annulus, Box, Fixed, Hemisphere, ParamLayout
+from realize.hemisphere import Hemisphere
+from realize.param_layout import ParamLayout
+from realize.regions import Annulus, Box, Fixed
 
 F64 = torch.float64
 

@@ -11,13 +11,13 @@ import pytest
 import torch
 from torch.func import jacfwd, jvp, vmap
 
-from realize.kinematics import (
+from realize.fetch_joints import (
     FULL_JOINT_NAMES,
     WHOLE_BODY_JOINT_NAMES,
-    FetchKinematics,
     full_qpos_from_whole_body,
     whole_body_qpos_from_full,
 )
+from realize.kinematics import FetchKinematics
 
 F64 = torch.float64
 

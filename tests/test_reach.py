@@ -28,7 +28,7 @@ import torch
 import yaml
 
 from realize.controllers.body import BASE_XY, UPPER
-from realize.kinematics import TCP_OFFSET
+from realize.fetch_body import TCP_OFFSET
 from realize.realization.actions import TEMPLATES
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext

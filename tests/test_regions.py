@@ -7,15 +7,10 @@ import math
 import pytest
 import torch
 
-from realize.regions import (
-    Annulus,
-    Box,
-    Fixed,
-    Hemisphere,
-    ParamLayout,
-    Region,
-    region_from_dict,
-)
+from realize.config import ConfigError
+from realize.hemisphere import Hemisphere
+from realize.param_layout import ParamLayout, region_from_dict
+from realize.regions import Annulus, Box, Fixed, Region
 
 F64 = torch.float64
 N_UNIF = 20000
@@ -213,7 +208,7 @@ def test_hemisphere_top_frame_and_yaw_about_approach():
     ],
 )
 def test_bad_input_names_field(ctor, field):
-    with pytest.raises(ValueError, match=field):
+    with pytest.raises(ConfigError, match=field):
         ctor()
 
 
@@ -223,17 +218,17 @@ def test_region_from_dict_roundtrip_and_errors():
         assert region_from_dict(r.to_dict(), where) == r
     a = region_from_dict({"type": "annulus", "center": [1, 2], "r_min": 0.5, "r_max": 1.0}, where)
     assert isinstance(a, Annulus) and a.dim == 2
-    with pytest.raises(ValueError, match=r"^configs/task/pick_place\.yaml:params\.Table1: .*r_max"):
+    with pytest.raises(ConfigError, match=r"^configs/task/pick_place\.yaml:params\.Table1\.r_max = -1\.0 is invalid: must be > 0"):
         region_from_dict({"type": "annulus", "center": [1, 2], "r_min": 0.5, "r_max": -1.0}, where)
-    with pytest.raises(ValueError, match=r"^configs.*Table1: unknown region type 'torus'.*annulus, box, fixed, hemisphere"):
+    with pytest.raises(ConfigError, match=r"^configs.*Table1: unknown region type 'torus'.*annulus, box, fixed, hemisphere"):
         region_from_dict({"type": "torus"}, where)
-    with pytest.raises(ValueError, match=r"Table1: .*missing key.*'r_max'"):
+    with pytest.raises(ConfigError, match=r"Table1: .*missing key.*'r_max'"):
         region_from_dict({"type": "annulus", "center": [1, 2], "r_min": 0.5}, where)
-    with pytest.raises(ValueError, match=r"Table1: unknown key.*'radius'"):
+    with pytest.raises(ConfigError, match=r"Table1: unknown key.*'radius'"):
         region_from_dict({"type": "box", "low": [0], "high": [1], "radius": 2}, where)
-    with pytest.raises(ValueError, match=r"Table1: missing key 'type'"):
+    with pytest.raises(ConfigError, match=r"Table1: missing key 'type'"):
         region_from_dict({"low": [0], "high": [1]}, where)
-    with pytest.raises(ValueError, match="wrong.yaml:x: .*mapping"):
+    with pytest.raises(ConfigError, match="wrong.yaml:x: .*mapping"):
         region_from_dict([1, 2], "wrong.yaml:x")  # type: ignore[arg-type]
 
 
@@ -286,9 +281,9 @@ def test_layout_project_into_all_regions():
 
 
 def test_layout_errors_name_the_parameter():
-    with pytest.raises(ValueError, match=r"^task\.yaml:params\.Cube_g: radius must be > 0"):
+    with pytest.raises(ConfigError, match=r"^task\.yaml:params\.Cube_g\.radius = 0(\.0)? is invalid: must be > 0"):
         ParamLayout.from_dict({"Cube_g": {"type": "hemisphere", "center": [0, 0, 0], "radius": 0}}, "task.yaml:params")
-    with pytest.raises(ValueError, match="task.yaml:params: expected a non-empty mapping"):
+    with pytest.raises(ConfigError, match="task.yaml:params: expected a non-empty mapping"):
         ParamLayout.from_dict({}, "task.yaml:params")
     with pytest.raises(ValueError, match=r"shape \(n, 9\)"):
         make_layout().split(torch.zeros(4, 8))

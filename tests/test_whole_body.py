@@ -20,7 +20,7 @@ from realize.controllers.fabric_jets import distance_jets
 from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.obstacles import BoxDistance
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.kinematics import whole_body_qpos_from_full
+from realize.fetch_joints import whole_body_qpos_from_full
 from realize.realization.config import RolloutConfig
 
 F64 = torch.float64

@@ -15,10 +15,11 @@ import math
 import torch
 from torch import Tensor
 
-from realize.kinematics import FINGERTIP_REACH
+from realize.fetch_body import FINGERTIP_REACH
+from realize.hemisphere import Hemisphere
 from realize.realization.actions.base import Template
 from realize.realization.context import StepContext
-from realize.regions import Hemisphere, Region
+from realize.regions import Region
 from realize.scene import quat_to_matrix
 
 PAD_HALF_WIDTH = 0.013  # m, half width of the finger pads across the closing axis (fetch.urdf)

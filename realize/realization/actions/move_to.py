@@ -13,9 +13,10 @@ from dataclasses import fields
 import torch
 from torch import Tensor
 
-from realize.controllers.astar import astar_world, path_to_waypoints
+from realize.controllers.astar import astar_world
 from realize.controllers.body import BASE_XY, YAW
 from realize.controllers.pid import PIDState, pid_init, pid_step
+from realize.controllers.waypoints import path_to_waypoints
 from realize.realization.actions.base import Outcome, Template
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure

@@ -1,0 +1,34 @@
+"""Results that a restructuring must not change: 4 small real runs against a committed fixture.
+
+The fixture (``tests/fixtures/golden_runs.json``) was recorded before the restructuring of
+issue #12 (``python tests/golden_runs.py``). Each run goes through the ``realize`` command as a
+user would; best cost, success share per iteration, best cost per iteration and the best
+parameter vector must be equal bit for bit (CPU runs are deterministic).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from golden_runs import FIXTURE, GOLDEN_RUNS, run_golden
+
+EXPECTED = json.loads(FIXTURE.read_text())
+
+
+@pytest.mark.parametrize("name", sorted(GOLDEN_RUNS))
+def test_results_unchanged(name: str, tmp_path: Path) -> None:
+    want = EXPECTED[name]
+    assert want["overrides"] == GOLDEN_RUNS[name], "the run's overrides changed: re-record the fixture on purpose"
+    got = run_golden(name, tmp_path / name)
+    for key, value in got.items():
+        assert value == want[key], f"{name}: {key} changed: {value!r} != {want[key]!r}"
+
+
+def test_fixture_is_not_trivial() -> None:
+    # every golden run found a feasible plan and its success share changed over iterations
+    for name, want in EXPECTED.items():
+        assert want["feasible"] and want["best_cost"] > 0, name
+        assert len(want["best_z"]) > 3 and len(set(want["success_per_iter"])) > 1, name
