@@ -61,7 +61,7 @@ def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False, repeat: int 
     """Realize Z ``repeat`` times in one newly built scene of len(Z) copies."""
     out = []
     with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
-        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
+        realizer = PlanRealizer.from_spec(spec, None, scene)
         for _ in range(repeat):
             res = realizer.rollout(Z, record=record)
             out.append(dict(res=res, **_readback(scene)))

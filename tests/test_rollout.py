@@ -103,7 +103,7 @@ def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False) -> dict[str,
     """Realize Z in a newly built scene of len(Z) copies; result plus simulator read-backs."""
     with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
         counter = StepCounter(scene)
-        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
+        realizer = PlanRealizer.from_spec(spec, None, scene)
         res = realizer.rollout(Z, record=record)
         return dict(res=res, calls=counter.calls, cube=scene.cube_pose(), base=scene.base_pose())
 
