@@ -1,4 +1,11 @@
-"""ManiSkill tasks and robots of realize. Importing this package registers them with gym."""
+"""ManiSkill tasks and robots of realize. Importing this package registers them with gym.
+
+What it does: registers ``RealizePickPlace-v1`` (``plain``/``wall``/``ramp`` worlds),
+``RealizeMoveAndPush-v1`` (the ``push`` world) and the ``fetch_omni`` robot, and maps a world
+variant to the task that builds it (``env_id_for``).
+What it doesn't: hold world geometry (``realize.geometry``) or batch copies for the realizer
+(``realize.scene``).
+"""
 
 from envs import fetch_omni  # noqa: F401
 from envs.move_and_push import ENV_ID as MOVE_AND_PUSH_ID, RealizeMoveAndPushEnv  # noqa: F401
@@ -6,5 +13,5 @@ from envs.pick_place import ENV_ID, RealizePickPlaceEnv  # noqa: F401
 
 
 def env_id_for(variant: str) -> str:
-    """The ManiSkill task id that builds a scene variant (``envs.geometry.VARIANTS``)."""
-    return MOVE_AND_PUSH_ID if variant == "push" else ENV_ID
+    """The ManiSkill task id that builds a scene variant (``realize.geometry.VARIANTS``)."""
+    return MOVE_AND_PUSH_ID if variant in RealizeMoveAndPushEnv.VARIANTS else ENV_ID

@@ -7,7 +7,7 @@ links, gripper materials and collision filtering) with
     world frame (so the base can move sideways like the paper's Dingo-O), torso + arm joints
     position-driven with absolute targets, head held, gripper fingers mimic position-driven.
 What it doesn't: decide targets. Controllers in ``realize/controllers`` compute them and the
-batched scene view (``realize/scene.py``) writes them to the drives.
+batched scene view (``realize.scene``) writes them to the drives.
 """
 
 from __future__ import annotations

@@ -6,11 +6,13 @@ small cube resting on its top; an open box (floor and four low walls, open top) 
 floor nearby. The cube must end up in the box. The intended way is to drive to the right side of
 the stick and push its upper part over towards the box, so that the cube falls in; the cube can
 also be picked off the stick top and placed into the box. Tables, if the scene config lists any,
-are plain obstacles. All geometry comes from an ``envs.geometry.GeometryCfg`` with
-``variant="push"`` (the Hydra ``scene=push`` config).
+are plain obstacles. All geometry comes from a ``realize.geometry.GeometryCfg`` with
+``variant="push"`` (the Hydra ``scene=push`` config), the ``geometry`` kwarg; without it the task
+builds its default push world (stick, cube and box of ``GeometryCfg``'s defaults, no tables). A
+geometry of another variant is refused before anything is built.
 
 **Parallelism.** As ``RealizePickPlace-v1`` (this task extends it): ``num_envs = N`` on PhysX
-GPU, or ``n_copies = N`` copies tiled in one PhysX CPU scene.
+GPU, or ``n_tiles = N`` copies tiled in one PhysX CPU scene.
 
 **Randomizations** (``reset(options=dict(randomize=...))``, off by default): those of
 ``RealizePickPlace-v1`` (the cube's xy offset on the stick top by up to ``cube_xy_noise`` m,
@@ -32,6 +34,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from envs.pick_place import RealizePickPlaceEnv
+from realize.geometry import GeometryCfg
 from realize.realization.goals import cube_in_container
 
 ENV_ID = "RealizeMoveAndPush-v1"
@@ -39,10 +42,12 @@ ENV_ID = "RealizeMoveAndPush-v1"
 
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizeMoveAndPushEnv(RealizePickPlaceEnv):
-    def __init__(self, *args: Any, **kwargs: Any):
-        super().__init__(*args, **kwargs)
-        if self.geometry.variant != "push" or self.geometry.stick is None:
-            raise ValueError(f"{ENV_ID} needs scene.variant = 'push', got {self.geometry.variant!r}")
+    TASK_ID = ENV_ID
+    VARIANTS = ("push",)
+
+    @classmethod
+    def default_geometry(cls) -> GeometryCfg:
+        return GeometryCfg(variant="push", tables=[])
 
     def _load_scene(self, options: dict):
         super()._load_scene(options)

@@ -5,10 +5,13 @@ arm, parallel gripper) starts in a free area. A small cube rests on ``table1``. 
 carry the cube to ``table2`` and then drive into the exit (rest) area. Between the tables there
 is room to drive; variants add a wall between them (``variant="wall"``) or a ramp from
 table 1's side down onto table 2 (``variant="ramp"``) down which a released cube can slide.
-All geometry comes from an ``envs.geometry.GeometryCfg`` (the Hydra ``scene`` config group).
+All geometry comes from a ``realize.geometry.GeometryCfg`` (the Hydra ``scene`` config group),
+the ``geometry`` kwarg (a ``GeometryCfg`` or a mapping of its keys; default: the plain world).
+This task builds the ``plain``, ``wall`` and ``ramp`` variants; ``push`` is
+``RealizeMoveAndPush-v1``'s (``envs.env_id_for`` maps a variant to its task).
 
 **Parallelism.** ``num_envs = N`` with the PhysX GPU backend gives ManiSkill's usual batched
-sub-scenes. On CPU, ManiSkill allows one env only, so ``n_copies = N`` tiles N copies of the
+sub-scenes. On CPU, ManiSkill allows one env only, so ``n_tiles = N`` tiles N copies of the
 whole world (robot, tables, cube) in ONE PhysX CPU scene, spaced so they can never touch, and
 stepped by one call. ``realize.scene.BatchedScene`` hides which of the two is used.
 
@@ -24,6 +27,7 @@ rectangle.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -39,7 +43,8 @@ from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import SceneConfig, SimConfig
 
 from envs import fetch_omni  # noqa: F401  (registers the agent)
-from envs.geometry import Box, GeometryCfg, SceneGeometry, build_geometry, geometry_cfg_from_dict
+from realize.config import ConfigError
+from realize.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
 from realize.realization.goals import base_in_rectangle, cube_on_table
 
 ENV_ID = "RealizePickPlace-v1"
@@ -64,12 +69,33 @@ def yaw_pitch_quat(yaw: float, pitch: float) -> list[float]:
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizePickPlaceEnv(BaseEnv):
     SUPPORTED_ROBOTS = ["fetch_omni"]
+    TASK_ID = ENV_ID  # the gym id (for messages)
+    VARIANTS: tuple[str, ...] = ("plain", "wall", "ramp")  # the geometry variants this task builds
+
+    @classmethod
+    def default_geometry(cls) -> GeometryCfg:
+        """The world ``gym.make`` builds without a ``geometry`` kwarg."""
+        return GeometryCfg()
+
+    @classmethod
+    def checked_geometry(cls, geometry: GeometryCfg | Mapping[str, Any] | None) -> GeometryCfg:
+        """The ``geometry`` kwarg as a checked ``GeometryCfg`` (None: ``default_geometry()``); a
+        variant this task does not build is refused here, before any scene is built."""
+        if geometry is None:
+            return cls.default_geometry()
+        cfg = geometry if isinstance(geometry, GeometryCfg) else GeometryCfg.from_mapping(geometry, "geometry")
+        if cfg.variant not in cls.VARIANTS:
+            raise ConfigError(
+                f"{cls.TASK_ID}: geometry.variant = {cfg.variant!r} is invalid: this task builds "
+                f"{list(cls.VARIANTS)} (leave geometry unset for its default world)"
+            )
+        return cfg
 
     def __init__(
         self,
         *args: Any,
-        geometry: GeometryCfg | dict | None = None,
-        n_copies: int = 1,
+        geometry: GeometryCfg | Mapping[str, Any] | None = None,
+        n_tiles: int = 1,
         solver_position_iterations: int = 15,
         solver_velocity_iterations: int = 1,
         cpu_workers: int = 0,
@@ -80,12 +106,12 @@ class RealizePickPlaceEnv(BaseEnv):
         robot_uids: str = "fetch_omni",
         **kwargs: Any,
     ):
-        if isinstance(n_copies, bool) or not isinstance(n_copies, int) or n_copies < 1:
-            raise ValueError(f"n_copies = {n_copies!r} is invalid: must be an integer >= 1")
-        gcfg = geometry if isinstance(geometry, GeometryCfg) else geometry_cfg_from_dict(geometry)
+        if isinstance(n_tiles, bool) or not isinstance(n_tiles, int) or n_tiles < 1:
+            raise ConfigError(f"n_tiles = {n_tiles!r} is invalid: must be an integer >= 1")
+        gcfg = self.checked_geometry(geometry)
         self.geometry: SceneGeometry = build_geometry(gcfg)
-        self.n_copies = n_copies
-        self.offsets = tile_offsets(n_copies, self.geometry.extent)
+        self.n_tiles = n_tiles
+        self.offsets = tile_offsets(n_tiles, self.geometry.extent)
         self.cube_xy_noise = cube_xy_noise
         self.robot_xy_noise = robot_xy_noise
         self._sim_settings = dict(
@@ -101,7 +127,7 @@ class RealizePickPlaceEnv(BaseEnv):
         )
         if robot_uids != "fetch_omni":
             raise ValueError(f"robot_uids = {robot_uids!r}: this task supports only 'fetch_omni'")
-        uids = "fetch_omni" if n_copies == 1 else tuple(["fetch_omni"] * n_copies)
+        uids = "fetch_omni" if n_tiles == 1 else tuple(["fetch_omni"] * n_tiles)
         kwargs.setdefault("control_mode", "pd_joint_pos_base_vel")
         super().__init__(*args, robot_uids=uids, **kwargs)
 
@@ -133,7 +159,7 @@ class RealizePickPlaceEnv(BaseEnv):
     def _load_agent(self, options: dict):
         sx, sy, _ = self.geometry.robot_start
         poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
-        super()._load_agent(options, poses if self.n_copies > 1 else poses[0])
+        super()._load_agent(options, poses if self.n_tiles > 1 else poses[0])
         # The robot's joint controllers compensate gravity (as Fetch's own do); the cube keeps it.
         for agent in self.agents:
             for link in agent.robot.get_links():
@@ -142,8 +168,8 @@ class RealizePickPlaceEnv(BaseEnv):
 
     @property
     def agents(self) -> list:
-        """The robot agents of every copy (one on GPU: it is batched itself)."""
-        return list(self.agent.agents) if self.n_copies > 1 else [self.agent]
+        """The robot agents of every tiled copy (one on GPU: it is batched itself)."""
+        return list(self.agent.agents) if self.n_tiles > 1 else [self.agent]
 
     def _build_box(self, box: Box, offset: np.ndarray, copy: int):
         b = self.scene.create_actor_builder()

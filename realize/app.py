@@ -486,8 +486,8 @@ def _iterate(
             scene = BatchedScene(spec.n_envs_max, spec.geometry_cfg, spec.sim)
             realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
             opt = CrossEntropyOptimizer(spec.task.layout, spec.ce, device=scene.device, state=state)
-            extra.update(backend=scene.backend, n_envs_scene=scene.n, setup_time_s=time.perf_counter() - t0)
-            log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n, scene.backend,
+            extra.update(backend=scene.backend, n_envs_scene=scene.n_envs, setup_time_s=time.perf_counter() - t0)
+            log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n_envs, scene.backend,
                      extra["setup_time_s"])
             rr_logger = _make_rerun_logger(spec, run_dir, start_it)
             figure_files = _figure_files(spec, run_dir)
@@ -622,11 +622,11 @@ def _iterate_halving(
             # one realizer per candidate on the same scene: every rollout starts with a reset,
             # which is history-free on CPU (a used scene equals a fresh one bit for bit)
             realizers = [PlanRealizer(t, scene, spec.rollout, seed=spec.seed) for t in tasks]
-            extra.update(backend=scene.backend, n_envs_scene=scene.n, setup_time_s=time.perf_counter() - t0)
+            extra.update(backend=scene.backend, n_envs_scene=scene.n_envs, setup_time_s=time.perf_counter() - t0)
             for i, t in enumerate(tasks):
                 log.info("candidate %d: %s", i, t.describe())
             log.info("%d candidate(s), halving budget %s; %d copies on %s (setup %.1f s)", len(tasks),
-                     budget.to_dict(), scene.n, scene.backend, extra["setup_time_s"])
+                     budget.to_dict(), scene.n_envs, scene.backend, extra["setup_time_s"])
             bar = tqdm(total=budget.total_iterations, desc="CE top-k", unit="it", dynamic_ncols=True,
                        disable=not spec.logging.progress, file=sys.stderr)
             while (job := sh.ask()) is not None:

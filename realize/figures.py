@@ -71,8 +71,8 @@ from matplotlib.patches import Ellipse, PathPatch, Polygon  # noqa: E402
 from matplotlib.path import Path as MplPath  # noqa: E402
 import numpy as np  # noqa: E402
 
-from envs.geometry import Box as ObstacleBox  # noqa: E402
-from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict  # noqa: E402
+from realize.geometry import Box as ObstacleBox  # noqa: E402
+from realize.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
 from realize.param_layout import ParamLayout  # noqa: E402
 from realize.regions import Fixed  # noqa: E402
 from realize.topdown import (  # noqa: E402
@@ -293,7 +293,7 @@ class RunData:
 
 def _scene_from_config(cfg: Mapping[str, Any]) -> tuple[ParamLayout, SceneGeometry, float] | None:
     try:
-        geometry = build_geometry(geometry_cfg_from_dict(cfg["scene"]))
+        geometry = build_geometry(GeometryCfg.from_mapping(cfg["scene"]))
         params = cfg.get("task", {}).get("params")
         if cfg.get("task_file"):
             import yaml

@@ -31,7 +31,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 from realize.param_layout import ParamLayout
 from realize.rerun_paths import (
     ENTITY_DIST,

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import rerun as rr
 
-from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 from realize.param_layout import ParamLayout
 from realize.rerun_paths import ENTITY_DIST, ENTITY_WORLD, entity, param_path
 from realize.topdown import (

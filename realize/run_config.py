@@ -29,10 +29,10 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 if TYPE_CHECKING:  # the library modules are imported where used: `realize` starts fast
-    from envs.geometry import GeometryCfg, SceneGeometry
+    from realize.geometry import GeometryCfg, SceneGeometry
     from realize.candidates import HalvingBudget
     from realize.cross_entropy import CEConfig
-    from realize.scene import SimSettings
+    from realize.scene.settings import SimSettings
     from realize.task import TaskSpec
 
 __all__ = [
@@ -164,14 +164,12 @@ def dataclass_from_dict(cls: type, d: Mapping[str, Any], prefix: str) -> Any:
 
 
 def sim_from_dict(d: Mapping[str, Any], prefix: str = "sim") -> SimSettings:
-    from realize.scene import SimSettings
+    from realize.scene.settings import SimSettings
 
-    s = dataclass_from_dict(SimSettings, d, prefix)
     try:
-        s.validate()
+        return SimSettings.from_mapping(d, prefix)
     except ValueError as e:
         raise ConfigError(str(e)) from None
-    return s
 
 
 def ce_from_dict(d: Mapping[str, Any], seed: int, prefix: str = "ce") -> CEConfig:
@@ -419,16 +417,17 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
                 f"(device=cuda goes with sim.backend=gpu, device=cpu with sim.backend=cpu)"
             )
         sim.backend = backend_for_device
-    if sim.backend == "gpu":
-        import torch
-
-        if not torch.cuda.is_available():
-            raise ConfigError(f"device = {device!r} / sim.backend = 'gpu' but torch sees no CUDA device; use device=cpu")
-
-    from envs.geometry import build_geometry, geometry_cfg_from_dict
+    from realize.scene.backends import resolve_backend
 
     try:
-        geometry_cfg = geometry_cfg_from_dict(_mapping(d.get("scene"), "scene"))
+        resolve_backend(sim.backend)  # refuses gpu without CUDA
+    except ValueError as e:
+        raise ConfigError(f"device = {device!r}: {e}") from None
+
+    from realize.geometry import GeometryCfg, build_geometry
+
+    try:
+        geometry_cfg = GeometryCfg.from_mapping(_mapping(d.get("scene"), "scene"), "scene")
         geometry = build_geometry(geometry_cfg)
     except ConfigError:
         raise

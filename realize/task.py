@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
-from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 from realize.param_layout import ParamLayout, region_from_dict
 from realize.regions import Box, Region
 

@@ -1,6 +1,6 @@
 """Top-down (ground-plane) geometry shared by the rerun logger and the paper figures.
 
-What it does: turns the static world (``envs.geometry.SceneGeometry``) and the parameter regions
+What it does: turns the static world (``realize.geometry.SceneGeometry``) and the parameter regions
 (``realize.regions``) into plain numpy polylines in the floor plane (x, y), so that the rerun
 recording (``realize.rerun_log``) and the matplotlib figures (``realize.figures``) draw exactly
 the same shapes:
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.geometry import Box as ObstacleBox
+from realize.geometry import Box as ObstacleBox
 from realize.hemisphere import Hemisphere
 from realize.param_layout import ParamLayout
 from realize.regions import Annulus, Fixed, Region

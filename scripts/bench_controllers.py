@@ -35,7 +35,7 @@ import torch
 import yaml
 
 from envs.fetch_omni import REST_QPOS
-from envs.geometry import GeometryCfg, build_geometry
+from realize.geometry import GeometryCfg, build_geometry
 from realize.controllers.astar import astar_world
 from realize.controllers.body import DOF
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes

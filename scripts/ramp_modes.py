@@ -31,7 +31,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from envs.geometry import SceneGeometry, build_geometry, geometry_cfg_from_dict  # noqa: E402
+from realize.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
 
 MODES = ("slide", "carry", "other", "none")
 MODE_OPTIONS = ("n_modes", "uniform_share", "rank_weighted", "knn_robust")
@@ -75,7 +75,7 @@ def rows_from(dirs: list[Path]) -> list[dict[str, Any]]:
         for f in sorted(d.rglob("result.json")):
             r = json.loads(f.read_text())
             cfg = r.get("config", {})
-            geometry = build_geometry(geometry_cfg_from_dict(cfg.get("scene")))
+            geometry = build_geometry(GeometryCfg.from_mapping(cfg.get("scene")))
             ce = cfg.get("ce", {})
             success = r.get("success_per_iter") or [math.nan]
             xy = release_point(r)

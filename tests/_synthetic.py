@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from envs.geometry import GeometryCfg, SceneGeometry, build_geometry
+from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
 from realize.cross_entropy import CEConfig, CrossEntropyOptimizer, EvalResult, IterationRecord
 from realize.figures import save_scene, save_trajectories
 from realize.param_layout import ParamLayout

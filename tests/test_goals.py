@@ -14,7 +14,7 @@ import math
 import pytest
 import torch
 
-from envs.geometry import GeometryCfg, build_geometry
+from realize.geometry import GeometryCfg, build_geometry
 from realize.realization.goals import (
     HEIGHT_TOL,
     base_in_rectangle,

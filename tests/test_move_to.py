@@ -21,7 +21,7 @@ from typing import Callable
 import pytest
 import torch
 
-from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 from realize.realization.actions import TEMPLATES
 from realize.realization.config import RolloutConfig
 from realize.realization.result import RolloutResult
@@ -102,12 +102,12 @@ def test_move_to_table2_annulus_from_the_start(wall_scene: BatchedScene, zone: s
     """move_to(Table2) from the start pose to points all around table 2 (also behind it)."""
     g = torch.Generator().manual_seed(0)
     geometry = wall_scene.geometry
-    Z = sample_goals(TABLE2, wall_scene.n, geometry, zone, g)
+    Z = sample_goals(TABLE2, wall_scene.n_envs, geometry, zone, g)
     res = _realize(wall_scene, {"Table2": TABLE2}, ["move_to(Table2)"], Z)
     worst = _check_paths(res, geometry)
     final = res.traj_base[:, -1]
     assert float((final - Z).norm(dim=1).max()) <= RolloutConfig().move_tolerance + 1e-6
-    print(f"move_to(Table2) x{wall_scene.n} ({zone} goals): all reached, min footprint clearance {worst:.3f} m, "
+    print(f"move_to(Table2) x{wall_scene.n_envs} ({zone} goals): all reached, min footprint clearance {worst:.3f} m, "
           f"{res.sim_steps} steps, {res.wall_time_s:.1f} s")
 
 
@@ -117,7 +117,7 @@ def test_move_around_the_wall_between_the_tables(wall_scene: BatchedScene) -> No
     g = torch.Generator().manual_seed(1)
     geometry = wall_scene.geometry
     wall = next(b for b in geometry.extras if b.name == "wall")
-    n = wall_scene.n
+    n = wall_scene.n_envs
     z1 = sample_goals(TABLE1, n, geometry, "clear", g, keep=lambda xy: xy[:, 1] > TABLE1["center"][1] + 0.3)
     z2 = sample_goals(TABLE2, n, geometry, "clear", g, keep=lambda xy: xy[:, 1] < TABLE2["center"][1] - 0.3)
     res = _realize(wall_scene, {"Table1": TABLE1, "Table2": TABLE2}, ["move_to(Table1)", "move_to(Table2)"],

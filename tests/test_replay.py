@@ -17,19 +17,11 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from realize.app import CONFIG_DIR
-from realize.replay import (
-    HookedScene,
-    ReplayError,
-    build_replay_spec,
-    cube_friction,
-    load_run,
-    replay,
-    set_cube_friction,
-    validate,
-)
+from realize.replay import ReplayError, build_replay_spec, load_run, replay
 from realize.results import RESULT_FILE, atomic_write_json
 from realize.run_config import build_run_spec
-from realize.scene import SimSettings
+from realize.scene import BatchedScene, EnvOptions, SimSettings
+from realize.validation import validate
 
 # a plan of the seed task that reaches the goal with the default configs
 FEASIBLE_Z = [-0.85, 1.2, 0.0, 1.2, 0.8925, -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
@@ -64,7 +56,7 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_load_run_and_spec(run_dir: Path) -> None:
     run = load_run(run_dir)
-    assert run.best_z == FEASIBLE_Z and run.best_cost == SAVED_COST and run.n_envs_scene == 1
+    assert run.best_z == FEASIBLE_Z and run.best_cost == SAVED_COST and run.n_envs_run == 1
     spec = build_replay_spec(run)
     assert spec.sim.backend == "cpu" and spec.task.layout.dim == len(FEASIBLE_Z)
 
@@ -97,17 +89,8 @@ def test_replay_reaches_the_goal(run_dir: Path) -> None:
     assert 300 < rep.cost < 1000
 
 
-def test_hooked_scene_reports_steps() -> None:
-    seen: list[int] = []
-    with HookedScene(1, sim=SIM, on_step=seen.append, every=2) as s:
-        s.reset()
-        for _ in range(5):
-            s.step()
-        assert seen == [0, 2, 4] and s.step_count == 5
-
-
 def test_randomized_reset_and_friction_per_copy() -> None:
-    with HookedScene(3, sim=SIM, randomize=True) as s:
+    with BatchedScene(3, sim=SIM, env=EnvOptions(randomize_resets=True)) as s:
         s.reset(seed=7)
         cube_a, base_a = s.cube_pose(), s.base_pose()
         s.reset(seed=7)
@@ -115,16 +98,16 @@ def test_randomized_reset_and_friction_per_copy() -> None:
         g = s.geometry
         nominal = torch.tensor(g.cube_pos[:2], dtype=torch.float32)
         off = (cube_a[:, :2] - nominal).abs()
-        assert (off.max(dim=1).values > 1e-4).all() and (off <= s.u.cube_xy_noise + 1e-4).all()
+        assert (off.max(dim=1).values > 1e-4).all() and (off <= s.cube_xy_noise + 1e-4).all()
         assert len({round(float(v), 5) for v in cube_a[:, 0]}) == 3  # each copy drew its own
         start_off = (base_a[:, :2] - torch.tensor(g.robot_start[:2])).abs()
-        assert (start_off <= s.u.robot_xy_noise + 1e-4).all() and (start_off.max(dim=1).values > 1e-4).all()
+        assert (start_off <= s.robot_xy_noise + 1e-4).all() and (start_off.max(dim=1).values > 1e-4).all()
 
-        mu = set_cube_friction(s, [0.2, 1.0, 1.0])
-        assert np.allclose(cube_friction(s), np.stack([mu, mu], axis=1))
+        mu = s.set_cube_friction([0.2, 1.0, 1.0]).numpy()
+        assert np.allclose(s.cube_friction().numpy(), np.stack([mu, mu], axis=1))
         assert np.allclose(mu, g.cube_friction * np.array([0.2, 1.0, 1.0]))
         with pytest.raises(ValueError):
-            set_cube_friction(s, [1.0, 1.0])
+            s.set_cube_friction([1.0, 1.0])
         # the same shove slides the slippery cube further along the table
         s.reset(seed=7)
         start = s.cube_pose()[:, :2]
@@ -165,3 +148,21 @@ def test_video_is_written_and_shows_the_scene(tmp_path: Path) -> None:
     assert frames.shape == (v.frames, 120, 160, 3)
     assert frames.std(axis=(1, 2, 3)).min() > 10  # not blank
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5  # the robot moved
+
+
+def test_push_scene_gets_its_camera_and_noise(tmp_path: Path) -> None:
+    """scene=push builds RealizeMoveAndPush-v1: the video camera and the validation noise reach
+    that task too (they used to be patched into the pick-and-place task's registry entry only)."""
+    import imageio.v2 as imageio
+
+    spec = build_run_spec(_config(["experiment=move_and_push"]))
+    z = spec.task.layout.sample_uniform(1, torch.Generator().manual_seed(0))[0].tolist()
+    d = _write_run(tmp_path / "push", ["experiment=move_and_push", "controller.max_time_s=0.5"], z=z)
+    rep = validate(d, replicas=2, seed=1, friction_range=None, cube_xy_noise=0.004, robot_xy_noise=0.01, write=False)
+    assert (rep.cube_xy_noise, rep.robot_xy_noise) == (0.004, 0.01)
+    out = tmp_path / "push.mp4"
+    v = replay(d, out, fps=10, every=5, width=96, height=64, hold_s=0.0).video
+    assert v is not None and (v.width, v.height) == (96, 64)
+    reader = imageio.get_reader(str(out))
+    assert reader.get_data(0).shape == (64, 96, 3)
+    reader.close()

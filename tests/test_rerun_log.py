@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from _synthetic import make_geometry, make_layout, run_synthetic
-from envs.geometry import Box as ObstacleBox
-from envs.geometry import GeometryCfg, build_geometry
+from realize.geometry import Box as ObstacleBox
+from realize.geometry import GeometryCfg, build_geometry
 from realize.hemisphere import Hemisphere
 from realize.rerun_log import RerunLogger
 from realize.rerun_paths import SCALAR_PATHS

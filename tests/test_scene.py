@@ -1,4 +1,4 @@
-"""The batched scene view on CPU: shapes, independence of copies, determinism, rendering, errors."""
+"""The batched scene on CPU: shapes, independence of copies, determinism, rendering, hooks, errors."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from envs.geometry import GeometryError
-from realize.scene import BatchedScene, SceneConfigError, SimSettings
+from realize.config import ConfigError
+from realize.geometry import GeometryCfg, build_geometry
+from realize.scene import BatchedScene, SimSettings
 
 SIM = SimSettings(backend="cpu")
 
@@ -16,7 +17,7 @@ def _drive(scene: BatchedScene, steps: int) -> None:
     """A fixed scripted motion: base drives diagonally while the arm swings."""
     q0 = scene.whole_body_q()
     for k in range(steps):
-        v = torch.zeros(scene.n, 3)
+        v = torch.zeros(scene.n_envs, 3)
         v[:, 0] = 0.3
         v[:, 1] = 0.1 * np.sin(k * 0.1)
         scene.set_base_velocity(v)
@@ -100,17 +101,19 @@ def test_renders_a_frame_to_png(tmp_path) -> None:
 @pytest.mark.parametrize(
     "geometry, sim, n, key",
     [
-        (dict(variant="zigzag"), SIM, 1, "scene.variant"),
-        (dict(robot_start=(0.0, 1.2, 0.0)), SIM, 1, "scene.robot_start"),
-        (None, SIM, 0, "n"),
-        (None, SimSettings(backend="cpu", sim_freq=100, control_freq=30), 1, "sim.sim_freq"),
-        (dict(exit_low=(2.0, 0.0), exit_high=(1.0, 1.0)), SIM, 1, "scene.exit_low"),
-        (dict(wrong_key=1), SIM, 1, "wrong_key"),
+        (dict(variant="zigzag"), {}, 1, "scene.variant"),
+        (dict(robot_start=(0.0, 1.2, 0.0)), {}, 1, "scene.robot_start"),
+        (None, {}, 0, "n_envs"),
+        (None, dict(sim_freq=100, control_freq=30), 1, "sim.sim_freq"),
+        (None, dict(backend="tpu"), 1, "sim.backend"),
+        (None, dict(cpu_workers=-1), 1, "sim.cpu_workers = -1 is invalid: must be >= 0"),
+        (dict(exit_low=(2.0, 0.0), exit_high=(1.0, 1.0)), {}, 1, "scene.exit_low"),
+        (dict(wrong_key=1), {}, 1, "wrong_key"),
     ],
 )
 def test_bad_input_names_the_key(geometry, sim, n, key) -> None:
-    with pytest.raises((GeometryError, SceneConfigError)) as e:
-        BatchedScene(n, geometry=geometry, sim=sim)
+    with pytest.raises(ConfigError) as e:
+        BatchedScene(n, geometry=geometry, sim=SimSettings(**dict(dict(backend="cpu"), **sim)))
     assert key in str(e.value)
 
 
@@ -152,7 +155,57 @@ def test_ramp_slides_a_released_cube_onto_table2() -> None:
 
 @pytest.mark.parametrize("key, value", [("ramp_drop", 0.8), ("ramp_friction", -0.1)])
 def test_bad_ramp_names_the_key(key: str, value: float) -> None:
-    from envs.geometry import build_geometry, geometry_cfg_from_dict
+    with pytest.raises(ConfigError, match=key):
+        build_geometry(GeometryCfg.from_mapping({"variant": "ramp", key: value}))
 
-    with pytest.raises(GeometryError, match=key):
-        build_geometry(geometry_cfg_from_dict({"variant": "ramp", key: value}))
+
+@pytest.mark.parametrize("d, key, words", [
+    ({"tables": [{"name": "t", "height": 2.0}]}, "scene.tables[0].height", "[0.3, 1.1]"),
+    ({"tables": [{"name": "t"}, {"name": "t", "center": [0.0, -1.2]}]}, "scene.tables", "unique"),
+    ({"cube_size": 0.2}, "scene.cube_size", "[0.02, 0.08]"),
+    ({"variant": "push", "tables": [], "stick_size": [0.3, 0.04, 0.7]}, "scene.stick_size", "<= 0.1"),
+    ({"variant": "push", "tables": [], "box_inner": [0.03, 0.4]}, "scene.box_inner", "larger than the cube"),
+    ({"box_wall_height": 0.0}, "scene.box_wall_height", "must be > 0"),
+    ({"bounds_low": [3.3, -3.0]}, "scene.bounds_low", "bounds_high"),
+])
+def test_geometry_config_errors(d: dict, key: str, words: str) -> None:
+    """``GeometryCfg`` is a ``Settings``: single values by field metadata, how parts fit by ``check``."""
+    with pytest.raises(ConfigError) as e:
+        GeometryCfg.from_mapping(d)
+    assert key in str(e.value) and words in str(e.value)
+
+
+def test_every_variant_builds_from_the_config_files() -> None:
+    import yaml
+
+    from realize.app import CONFIG_DIR
+
+    plain = yaml.safe_load((CONFIG_DIR / "scene" / "plain.yaml").read_text())
+    for variant in ("plain", "wall", "ramp", "push"):
+        d = dict(plain, variant=variant, **({"tables": []} if variant == "push" else {}))
+        g = build_geometry(GeometryCfg.from_mapping(d))
+        assert g.variant == variant and (g.stick is not None) == (variant == "push")
+
+
+def test_step_hooks_env_options_and_friction() -> None:
+    """What replay and validation use: step hooks, forced randomized resets with the task's noise,
+    per-copy cube friction (the scene builds its task from the scene's variant)."""
+    from realize.scene import EnvOptions
+
+    seen: list[int] = []
+    opts = EnvOptions(cube_xy_noise=0.03, randomize_resets=True)
+    with BatchedScene(2, sim=SIM, env=opts) as s:
+        s.add_step_hook(seen.append, every=2)
+        s.reset(seed=3)
+        for _ in range(5):
+            s.step()
+        assert seen == [0, 2, 4] and s.step_count == 5
+        assert s.cube_xy_noise == 0.03 and s.robot_xy_noise == pytest.approx(0.05)
+        off = (s.cube_pose()[:, :2] - torch.tensor(s.geometry.cube_pos[:2])).abs()
+        assert (off.max(dim=1).values > 1e-4).all()  # randomized although reset() did not ask
+        mu = s.set_cube_friction([0.5, 2.0])
+        assert torch.allclose(s.cube_friction(), torch.stack([mu, mu], dim=1).to(torch.float64))
+        with pytest.raises(ConfigError):
+            s.set_cube_friction([1.0])
+        with pytest.raises(ConfigError):
+            s.add_step_hook(seen.append, every=0)

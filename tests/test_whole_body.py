@@ -13,13 +13,13 @@ import pytest
 import torch
 
 from envs.fetch_omni import REST_QPOS
-from envs.geometry import GeometryCfg, build_geometry
 from realize.config import ConfigError
 from realize.controllers.body import DOF
 from realize.controllers.fabric_jets import distance_jets
 from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.obstacles import BoxDistance
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
+from realize.geometry import GeometryCfg, build_geometry
 from realize.fetch_joints import whole_body_qpos_from_full
 from realize.realization.config import RolloutConfig
 

@@ -12,13 +12,10 @@ wires these boxes into the fabric of ``realize.controllers.fabrics``).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import torch
 from torch import Tensor
 
-if TYPE_CHECKING:  # pragma: no cover
-    from envs.geometry import SceneGeometry
+from realize.geometry import SceneGeometry
 
 # columns of one obstacle-box row
 BOX_CENTER = slice(0, 3)  # centre x, y, z (m)

@@ -26,11 +26,11 @@ from typing import ClassVar
 import torch
 from torch import Tensor
 
-from envs.geometry import SceneGeometry
 from realize.config import ConfigError, Settings, setting
 from realize.controllers.body import BASE_XY, DOF, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
+from realize.geometry import SceneGeometry
 from realize.kinematics import FetchKinematics
 
 # spheres that may touch a table top while grasping or placing a cube lying on it

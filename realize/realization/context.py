@@ -66,7 +66,7 @@ class StepContext:
                  occupancy: Tensor):
         self.scene, self.cfg, self.fabric = scene, cfg, fabric
         self.grid, self.occupancy = grid, occupancy
-        self.n_envs, self.device = scene.n, scene.device
+        self.n_envs, self.device = scene.n_envs, scene.device
         self.dt = scene.control_dt
         n, dev = self.n_envs, self.device
         self.base_cmd = torch.zeros(n, N_BASE, device=dev)

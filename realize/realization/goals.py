@@ -10,22 +10,20 @@ fallback ranks infeasible plans by (m, 0 where it holds geometrically):
   * ``goal_reached``: a task's ``GoalSpec`` (every given condition) and the summed distance.
 Positions are in one copy's local frame: (N, 3) cube centres, (N,) cube speeds, (N, 2) bases.
 What it doesn't: read the simulator (callers pass tensors), or decide when a goal is read
-(the rollout reads it ``goal_settle_s`` after a plan's last action). It imports only torch
-and ``realize.regions`` at run time, so the tasks in ``envs`` can import it.
+(the rollout reads it ``goal_settle_s`` after a plan's last action). It imports only torch and
+light realize modules (geometry, regions, task), so the tasks in ``envs`` can import it.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import torch
 from torch import Tensor
 
+from realize.geometry import SceneGeometry
 from realize.regions import DEFAULT_TOL, Box, Region
-
-if TYPE_CHECKING:  # pragma: no cover
-    from envs.geometry import SceneGeometry
-    from realize.task import GoalSpec
+from realize.task import GoalSpec
 
 REST_SPEED = 0.05  # m/s, the cube counts as resting at or below this (``controller.rest_speed``)
 HEIGHT_TOL = 0.02  # m, a cube on a table rests within this of its resting height

@@ -55,7 +55,7 @@ class Rollout:
         scene, task = realizer.scene, realizer.task
         self.realizer, self.scene, self.task, self.cfg = realizer, scene, task, realizer.cfg
         self.templates = realizer.templates
-        n, dev = scene.n, realizer.device
+        n, dev = scene.n_envs, realizer.device
         self.n_envs, self.device, self.m = n, dev, Z.shape[0]
         scene.reset(seed=realizer.seed)
         self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy)
@@ -291,7 +291,7 @@ class PlanRealizer:
                                               padding=self.cfg.astar.padding + g.robot_radius).to(self.device)
         self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
                                       dtype=fabric_dtype)
-        self.templates: dict[str, Template] = {name: cls(scene.n, self.device) for name, cls in TEMPLATES.items()}
+        self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}
         self.last: RolloutResult | None = None
 
     @classmethod
@@ -305,7 +305,7 @@ class PlanRealizer:
     def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
         """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it."""
         t0 = time.perf_counter()
-        n, m = self.scene.n, Z.shape[0]
+        n, m = self.scene.n_envs, Z.shape[0]
         if Z.ndim != 2 or Z.shape[1] != self.layout.dim:
             raise ValueError(f"Z must be (M, {self.layout.dim}), got {tuple(Z.shape)}")
         if m > n:

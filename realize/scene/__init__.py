@@ -1,0 +1,25 @@
+"""The batched scene: N realizations of a task simulated at once, behind one interface.
+
+Modules:
+  * ``batched``: ``BatchedScene``, what the realizer sees ((N, ...) tensors in a copy's local
+    frame, target writes, step, reset, freeze, step hooks, per-copy friction, render);
+  * ``settings``: ``SimSettings`` (the ``sim`` config group), ``EnvOptions`` and ``Camera``
+    (what the task env is built with besides);
+  * ``physics``: the contract a simulator backend fulfils (``PhysicsBackend``) and the task
+    construction both backends share;
+  * ``backends``: which backend runs (``open_backend``), ``cpu_tiled`` (N copies tiled in one
+    PhysX CPU scene) and ``gpu`` (ManiSkill ``num_envs = N`` on PhysX GPU): the only modules
+    that ask which backend runs.
+This package's namespace offers the names the rest of realize uses.
+What it doesn't: decide anything (controllers and the rollout do), or hold world geometry
+(``realize.geometry``) or the ManiSkill tasks (``envs``).
+"""
+
+from realize.scene.batched import BatchedScene, SceneSpec, StepHook, quat_to_matrix
+from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN
+from realize.scene.settings import Camera, EnvOptions, SimSettings
+
+__all__ = [
+    "BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix", "SimSettings", "EnvOptions", "Camera",
+    "ARM_JOINTS", "BASE_JOINTS", "FINGER_JOINTS", "GRIPPER_CLOSED", "GRIPPER_OPEN",
+]

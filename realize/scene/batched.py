@@ -1,0 +1,295 @@
+"""The batched scene: N realizations of the task simulated at once, seen as (N, ...) tensors.
+
+What it does: ``BatchedScene(n_envs, geometry, sim, env=...)`` opens the backend ``sim.backend``
+resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, or ManiSkill's
+``num_envs = N`` on PhysX GPU) and is the one interface the realizer sees, whatever runs:
+  * reads: base pose, whole-body joint state, end-effector pose, cube pose and velocity, whether
+    the gripper holds the cube (finger contact forces), all in one copy's local frame (the frame
+    of ``realize.geometry``), so nothing above it sees tile offsets;
+  * writes: base velocity commands, torso/arm joint targets, the gripper opening; ``step``
+    advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
+  * step hooks (``add_step_hook``: a video writer renders there), per-copy cube friction and the
+    ``EnvOptions`` the task is built with (render camera, reset noise, forced randomization),
+    for replay and validation; ``render`` gives copy 0's frame.
+What it doesn't: decide anything (controllers compute the targets, the rollout runs actions),
+or ask which backend runs (``backend``/``deterministic`` only report it).
+
+Whole-body joint vector ``q`` (11): base x, base y, base yaw, torso, then the 7 arm joints
+(shoulder_pan, shoulder_lift, upperarm_roll, elbow_flex, forearm_roll, wrist_flex, wrist_roll).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+import torch
+
+from realize.config import ConfigError
+from realize.geometry import GeometryCfg, SceneGeometry
+from realize.scene.backends import open_backend
+from realize.scene.physics import ARM_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN, WHOLE_BODY_JOINTS
+from realize.scene.settings import EnvOptions, SimSettings
+
+__all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
+
+StepHook = Callable[[int], None]
+
+
+class SceneSpec(Protocol):
+    """What ``BatchedScene.from_spec`` reads of a run spec."""
+
+    geometry_cfg: GeometryCfg
+    sim: SimSettings
+
+
+def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
+    """(..., 4) wxyz unit quaternions -> (..., 3, 3) rotation matrices."""
+    w, x, y, z = q.unbind(-1)
+    return torch.stack(
+        [
+            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        ],
+        dim=-1,
+    ).reshape(q.shape[:-1] + (3, 3))
+
+
+class BatchedScene:
+    """N copies of the task's world, read and written as (N, ...) tensors.
+
+    Args:
+        n_envs: number of parallel realizations (>= 1).
+        geometry: the world (a ``realize.geometry.GeometryCfg`` or a mapping of the ``scene``
+            group's keys; None: the defaults).
+        sim: physics settings (None: the defaults).
+        env: what the task is built and reset with besides (render camera, reset noise, forced
+            randomization; None: as registered).
+    """
+
+    def __init__(self, n_envs: int, geometry: GeometryCfg | Mapping[str, Any] | None = None,
+                 sim: SimSettings | None = None, *, env: EnvOptions | None = None):
+        if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
+            raise ConfigError(
+                f"n_envs = {n_envs!r} is invalid: the number of parallel plans (ce.n_envs) must be an integer >= 1"
+            )
+        self.sim = sim or SimSettings()
+        self.options = env or EnvOptions()
+        gcfg = geometry if isinstance(geometry, GeometryCfg) else GeometryCfg.from_mapping(geometry)
+        self.n_envs = n_envs
+        self._impl = open_backend(n_envs, gcfg, self.sim, self.options)
+        self.backend: str = self._impl.name
+        self.deterministic: bool = self._impl.deterministic
+        self.env, self.u, self.device = self._impl.env, self._impl.u, self._impl.device
+        self.geometry: SceneGeometry = self.u.geometry
+        self.substeps = self.sim.sim_freq // self.sim.control_freq
+        self.control_dt = 1.0 / self.sim.control_freq
+        self._start_xy = torch.tensor(self.geometry.robot_start[:2], dtype=torch.float32, device=self.device)
+        names = list(self.u.agents[0].robot.active_joints_map.keys())
+        self.joint_names = names
+        self._wb_idx = torch.tensor([names.index(j) for j in WHOLE_BODY_JOINTS], device=self.device)
+        self._finger_idx = torch.tensor([names.index(j) for j in FINGER_JOINTS], device=self.device)
+        self._base_cmd = torch.zeros(n_envs, 3, device=self.device)
+        self._arm_target = torch.zeros(n_envs, len(ARM_JOINTS), device=self.device)
+        self._arm_vel_target = torch.zeros(n_envs, len(ARM_JOINTS), device=self.device)
+        self._grip_target = torch.full((n_envs,), GRIPPER_OPEN, device=self.device)
+        self._frozen = torch.zeros(n_envs, dtype=torch.bool, device=self.device)
+        self._hooks: list[tuple[StepHook, int]] = []
+        self.step_count = 0  # control steps since the last reset
+
+    @classmethod
+    def from_spec(cls, spec: SceneSpec, n_envs: int, env: EnvOptions | None = None) -> BatchedScene:
+        """The scene of a run spec (its ``geometry_cfg`` and ``sim``) with ``n_envs`` copies."""
+        return cls(n_envs, spec.geometry_cfg, spec.sim, env=env)
+
+    # ------------------------------------------------------------------ reset, hooks
+    def add_step_hook(self, hook: StepHook, every: int = 1) -> None:
+        """Call ``hook(step)`` after every ``reset`` (step 0) and after every ``every``-th control
+        step since the last reset (the physics of that step already simulated)."""
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ConfigError(f"every = {every!r} is invalid: must be an integer >= 1")
+        self._hooks.append((hook, every))
+
+    def reset(self, seed: int = 0, randomize: bool = False) -> None:
+        """Put every copy back in the task's initial state (same state for all unless randomize,
+        or ``env.randomize_resets``). Resets are history-free on a deterministic backend: a
+        rollout in a used scene equals one in a fresh scene bit for bit."""
+        self._frozen.zero_()
+        self.env.reset(seed=seed, options=dict(randomize=randomize or self.options.randomize_resets))
+        self._impl.after_reset()
+        q = self.whole_body_q()
+        self._base_cmd.zero_()
+        self._arm_target = q[:, 3:].clone()
+        self._arm_vel_target = torch.zeros_like(self._arm_target)
+        self._grip_target.fill_(GRIPPER_OPEN)
+        self._apply_targets()
+        self.step_count = 0
+        for hook, _ in self._hooks:
+            hook(0)
+
+    # ------------------------------------------------------------------ reads
+    def qpos(self) -> torch.Tensor:
+        """(N, 15) every active joint, in ManiSkill Fetch's joint order (``self.joint_names``)."""
+        return self._impl.qpos()
+
+    def qvel(self) -> torch.Tensor:
+        return self._impl.qvel()
+
+    def whole_body_q(self) -> torch.Tensor:
+        """(N, 11) base x, y (local frame), yaw, torso, 7 arm joints."""
+        q = self.qpos()[:, self._wb_idx]
+        return torch.cat([q[:, :2] + self._start_xy, q[:, 2:]], dim=1)
+
+    def whole_body_qd(self) -> torch.Tensor:
+        return self.qvel()[:, self._wb_idx]
+
+    def base_pose(self) -> torch.Tensor:
+        """(N, 3) base x, y (local frame) and yaw."""
+        return self.whole_body_q()[:, :3]
+
+    def finger_width(self) -> torch.Tensor:
+        """(N,) sum of the two finger joint positions (m): 0.1 fully open."""
+        return self.qpos()[:, self._finger_idx].sum(dim=1)
+
+    def ee_pose(self) -> torch.Tensor:
+        """(N, 7) gripper_link position (local frame) and wxyz quaternion."""
+        return self._impl.ee_pose()
+
+    def cube_pose(self) -> torch.Tensor:
+        """(N, 7) cube position (local frame) and wxyz quaternion."""
+        return self._impl.cube_pose()
+
+    def cube_velocity(self) -> torch.Tensor:
+        """(N, 6) cube linear and angular velocity."""
+        return self._impl.cube_velocity()
+
+    def finger_cube_forces(self) -> torch.Tensor:
+        """(N, 2) magnitude of the contact force (N) between each finger and the cube."""
+        return self._impl.finger_cube_forces()
+
+    def holds_cube(self) -> torch.Tensor:
+        """(N,) bool: both fingers press on the cube with at least ``sim.grasp_min_force``."""
+        return (self.finger_cube_forces() >= self.sim.grasp_min_force).all(dim=1)
+
+    @property
+    def frozen(self) -> torch.Tensor:
+        return self._frozen.clone()
+
+    @property
+    def cube_xy_noise(self) -> float:
+        """Amplitude (m) of the cube's xy noise of a randomized reset."""
+        return float(self.u.cube_xy_noise)
+
+    @property
+    def robot_xy_noise(self) -> float:
+        """Amplitude (m) of the robot start's xy noise of a randomized reset."""
+        return float(self.u.robot_xy_noise)
+
+    # ------------------------------------------------------------------ writes
+    def set_base_velocity(self, v_world: torch.Tensor) -> None:
+        """(N, 3) base velocity in the local/world frame: vx, vy (m/s), yaw rate (rad/s)."""
+        self._base_cmd = v_world.detach().to(self.device, torch.float32)
+
+    def set_base_velocity_robot_frame(self, v_robot: torch.Tensor) -> None:
+        """(N, 3) base velocity in the robot frame: forward, left (m/s), yaw rate (rad/s)."""
+        yaw = self.base_pose()[:, 2]
+        c, s = torch.cos(yaw), torch.sin(yaw)
+        vx = c * v_robot[:, 0] - s * v_robot[:, 1]
+        vy = s * v_robot[:, 0] + c * v_robot[:, 1]
+        self.set_base_velocity(torch.stack([vx, vy, v_robot[:, 2]], dim=1))
+
+    def set_arm_targets(self, q_target: torch.Tensor, qd_target: torch.Tensor | None = None) -> None:
+        """(N, 8) torso + 7 arm joint position targets (rad, m), and optional velocity targets."""
+        self._arm_target = q_target.detach().to(self.device, torch.float32)
+        self._arm_vel_target = (torch.zeros_like(self._arm_target) if qd_target is None
+                                else qd_target.detach().to(self.device, torch.float32))
+
+    def set_gripper(self, closed: torch.Tensor) -> None:
+        """(N,) bool: close (True) or open (False) the gripper."""
+        c = closed.to(self.device, torch.bool)
+        self._grip_target = torch.where(c, torch.tensor(GRIPPER_CLOSED, device=self.device),
+                                        torch.tensor(GRIPPER_OPEN, device=self.device))
+
+    def hold_still(self, mask: torch.Tensor | None = None) -> None:
+        """Zero base velocity and freeze torso/arm at their current positions for masked copies."""
+        q = self.whole_body_q()
+        m = torch.ones(self.n_envs, dtype=torch.bool, device=self.device) if mask is None else mask
+        self._base_cmd = torch.where(m[:, None], torch.zeros_like(self._base_cmd), self._base_cmd)
+        self._arm_target = torch.where(m[:, None], q[:, 3:], self._arm_target)
+        self._arm_vel_target = torch.where(m[:, None], torch.zeros_like(self._arm_vel_target), self._arm_vel_target)
+
+    def freeze(self, mask: torch.Tensor) -> None:
+        """Stop simulating the robots of the masked copies (finished or failed plans): zero their
+        velocities and put them to sleep until the next reset where the backend can (CPU: a
+        sleeping articulation costs almost nothing); elsewhere this only holds them still."""
+        new = mask.to(self.device, torch.bool) & ~self._frozen
+        if not bool(new.any()):
+            return
+        self._frozen |= new
+        idx = torch.nonzero(new).flatten().tolist()
+        self._base_cmd[new] = 0.0
+        self._impl.freeze(idx)
+
+    def _apply_targets(self) -> None:
+        self._impl.apply_targets(self._base_cmd, self._arm_target, self._arm_vel_target, self._grip_target,
+                                 self._frozen)
+
+    def step(self) -> None:
+        """Write the pending targets and advance physics by one control period; then the step hooks."""
+        self._apply_targets()
+        self._impl.step(self.substeps)
+        self.step_count += 1
+        for hook, every in self._hooks:
+            if self.step_count % every == 0:
+                hook(self.step_count)
+
+    # ------------------------------------------------------------------ perturbations, what-ifs, tests
+    def cube_friction(self) -> torch.Tensor:
+        """(N, 2) static and dynamic friction of each copy's cube (float64; CPU backend)."""
+        return self._impl.cube_friction()
+
+    def set_cube_friction(self, factors: torch.Tensor | np.ndarray | Sequence[float]) -> torch.Tensor:
+        """Scale each copy's cube friction (static and dynamic) by ``factors`` (N,) from the scene's
+        configured value ``geometry.cube_friction``; returns the (N,) friction now set (float64).
+
+        PhysX combines the friction of two touching shapes by averaging (its default), so the
+        friction of a cube-finger or cube-table contact moves by half the cube's change. Set once
+        per scene (a loop over the copies on CPU), not per step."""
+        f = torch.as_tensor(np.asarray(factors, dtype=np.float64)).reshape(-1)
+        if len(f) != self.n_envs:
+            raise ConfigError(f"{len(f)} friction factors for {self.n_envs} copies")
+        if not bool(torch.isfinite(f).all()) or bool((f <= 0).any()):
+            raise ConfigError(f"friction factors must be finite and > 0, got {f.tolist()}")
+        values = float(self.geometry.cube_friction) * f
+        self._impl.set_cube_friction(values)
+        return values
+
+    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
+        """Give one copy's cube a linear velocity (used to check that copies are independent)."""
+        self._impl.push_cube(copy, velocity)
+
+    def place_cube(self, positions: torch.Tensor) -> None:
+        """Teleport every copy's cube to ``positions`` (N, 3) in its copy's local frame, axis-aligned
+        and at rest (tests and what-if checks: where does a cube dropped here end up?)."""
+        self._impl.place_cube(torch.as_tensor(positions, dtype=torch.float32).reshape(self.n_envs, 3).cpu())
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray:
+        """(H, W, 3) uint8 frame of copy 0 from the task's render camera."""
+        self.u.scene.update_render()
+        frame = self.env.render()
+        if isinstance(frame, torch.Tensor):
+            frame = frame.cpu().numpy()
+        frame = np.asarray(frame)
+        return frame[0] if frame.ndim == 4 else frame
+
+    def close(self) -> None:
+        self._impl.close()
+
+    def __enter__(self) -> BatchedScene:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()

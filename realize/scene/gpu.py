@@ -1,0 +1,108 @@
+"""The CUDA backend: ManiSkill's own batching, ``num_envs = N`` sub-scenes on PhysX GPU.
+
+What it does: builds the task with ``num_envs = N`` on ``physx_cuda``; every read is one batched
+ManiSkill tensor (each sub-scene has its own frame, so poses are local already), targets are
+written with ManiSkill's batched drive setters and applied by PhysX GPU, and after the substeps
+the GPU buffers are fetched once.
+What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
+copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
+the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from realize.config import ConfigError
+from realize.geometry import GeometryCfg
+from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, PhysicsBackend, make_task
+from realize.scene.settings import EnvOptions, SimSettings
+
+__all__ = ["GpuBackend"]
+
+_NO_FRICTION = ("per-copy cube friction needs the CPU backend: PhysX GPU fixes materials when the scene is "
+                "built (use sim.backend=cpu, or no friction range)")
+
+
+class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machines only
+    """N ManiSkill sub-scenes on PhysX GPU (see the module docstring)."""
+
+    name = "gpu"
+    deterministic = False
+
+    def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions):
+        self.n_envs, self.sim = n_envs, sim
+        self.env = make_task(geometry, sim, options, num_envs=n_envs, sim_backend="physx_cuda")
+        self.device = torch.device("cuda")
+        self.u = self.env.unwrapped
+        agent = self.u.agents[0]
+        self._robot = agent.robot
+        self._agent = agent
+        self._cube = self.u.cubes[0]
+        self._ee_link = agent.tcp
+        joints = {j.name: j for j in self._robot.get_active_joints()}
+        self._base_j = [joints[j] for j in BASE_JOINTS]
+        self._arm_j = [joints[j] for j in ARM_JOINTS]
+        self._finger_j = [joints[j] for j in FINGER_JOINTS]
+
+    def after_reset(self) -> None:
+        pass
+
+    def qpos(self) -> torch.Tensor:
+        return self._robot.get_qpos().clone()
+
+    def qvel(self) -> torch.Tensor:
+        return self._robot.get_qvel().clone()
+
+    def ee_pose(self) -> torch.Tensor:
+        return self._ee_link.pose.raw_pose.clone()
+
+    def cube_pose(self) -> torch.Tensor:
+        return self._cube.pose.raw_pose.clone()
+
+    def cube_velocity(self) -> torch.Tensor:
+        return torch.cat([self._cube.linear_velocity, self._cube.angular_velocity], dim=1)
+
+    def finger_cube_forces(self) -> torch.Tensor:
+        fingers = (self._agent.finger1_link, self._agent.finger2_link)
+        return torch.stack(
+            [self.u.scene.get_pairwise_contact_forces(f, self._cube).norm(dim=1) for f in fingers], dim=1
+        )
+
+    def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
+                      grip: torch.Tensor, frozen: torch.Tensor) -> None:
+        r = self._robot
+        r.set_joint_drive_velocity_targets(base_vel, self._base_j)
+        r.set_joint_drive_targets(arm, self._arm_j)
+        r.set_joint_drive_velocity_targets(arm_vel, self._arm_j)
+        r.set_joint_drive_targets(grip[:, None].repeat(1, 2), self._finger_j)
+        px = self.u.scene.px
+        px.gpu_apply_articulation_target_position()
+        px.gpu_apply_articulation_target_velocity()
+
+    def step(self, substeps: int) -> None:
+        for _ in range(substeps):
+            self.u.scene.px.step()
+        self.u.scene._gpu_fetch_all()
+
+    def freeze(self, copies: list[int]) -> None:
+        """Nothing to do: the zeroed base targets and held arm targets keep them still."""
+
+    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
+        v = self._cube.linear_velocity.clone()
+        v[copy] = torch.tensor(velocity, device=self.device)
+        self._cube.set_linear_velocity(v)
+
+    def place_cube(self, positions: torch.Tensor) -> None:
+        pose = self._cube.pose.raw_pose.clone()
+        pose[:, :3] = positions.to(self.device)  # every GPU sub-scene has its own frame
+        pose[:, 3:] = torch.tensor([1.0, 0.0, 0.0, 0.0], device=self.device)
+        self._cube.set_pose(pose)
+        self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+
+    def cube_friction(self) -> torch.Tensor:
+        raise ConfigError(_NO_FRICTION)
+
+    def set_cube_friction(self, values: torch.Tensor) -> None:
+        raise ConfigError(_NO_FRICTION)

@@ -1,0 +1,151 @@
+"""What a simulator backend gives the batched scene, and what both backends share.
+
+What it does:
+  * ``PhysicsBackend``: the contract of a backend (``realize.scene.cpu_tiled``,
+    ``realize.scene.gpu``): raw per-copy reads in a copy's local frame (joint state, gripper and
+    cube poses, cube velocity, finger-cube contact forces), drive-target writes, physics
+    substeps, putting finished copies to sleep, history-free resets, per-copy cube friction and
+    test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
+  * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
+    variant, ``envs.env_id_for``) with the physics settings and the ``EnvOptions`` (render camera,
+    reset noise) as ``gym.make`` kwargs; each backend adds its own (tiles or ``num_envs``).
+  * the robot's joint and link names the scene reads and drives, and the gripper targets.
+What it doesn't: pick a backend (``realize.scene.backends``), or hold the backend-independent
+logic of the scene (whole-body vectors, target bookkeeping, step hooks: ``realize.scene.batched``).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import torch
+from mani_skill.utils import sapien_utils
+
+import envs  # registers the tasks
+from realize.fetch_joints import WHOLE_BODY_JOINT_NAMES
+from realize.geometry import GeometryCfg
+from realize.scene.settings import EnvOptions, SimSettings
+
+__all__ = [
+    "BASE_JOINTS", "ARM_JOINTS", "WHOLE_BODY_JOINTS", "FINGER_JOINTS", "FINGER_LINKS", "EE_LINK",
+    "GRIPPER_OPEN", "GRIPPER_CLOSED", "PhysicsBackend", "make_task",
+]
+
+BASE_JOINTS = WHOLE_BODY_JOINT_NAMES[:3]  # x, y, yaw
+ARM_JOINTS = WHOLE_BODY_JOINT_NAMES[3:]  # torso + 7 arm joints
+WHOLE_BODY_JOINTS = BASE_JOINTS + ARM_JOINTS
+FINGER_JOINTS = ("l_gripper_finger_joint", "r_gripper_finger_joint")
+FINGER_LINKS = ("l_gripper_finger_link", "r_gripper_finger_link")
+EE_LINK = "gripper_link"
+GRIPPER_OPEN, GRIPPER_CLOSED = 0.05, -0.01  # finger joint targets (m); closed < 0 squeezes
+
+
+def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, **backend_kwargs: Any) -> Any:
+    """``gym.make`` the task that builds ``geometry``'s world, with ``sim``'s physics, the
+    ``options`` that are set (the rest stays the task's) and the backend's own kwargs."""
+    kwargs: dict[str, Any] = dict(
+        geometry=geometry,
+        obs_mode="none",
+        sim_freq=sim.sim_freq,
+        control_freq=sim.control_freq,
+        solver_position_iterations=sim.solver_position_iterations,
+        solver_velocity_iterations=sim.solver_velocity_iterations,
+        render_mode="rgb_array",
+    )
+    cam = options.camera
+    if cam is not None:
+        render: dict[str, Any] = {}
+        if cam.width is not None:
+            render["width"] = int(cam.width)
+        if cam.height is not None:
+            render["height"] = int(cam.height)
+        if cam.eye is not None and cam.target is not None:
+            render["pose"] = sapien_utils.look_at(eye=list(map(float, cam.eye)), target=list(map(float, cam.target)))
+        if render:
+            kwargs["human_render_camera_configs"] = {"render_camera": render}
+    if options.cube_xy_noise is not None:
+        kwargs["cube_xy_noise"] = options.cube_xy_noise
+    if options.robot_xy_noise is not None:
+        kwargs["robot_xy_noise"] = options.robot_xy_noise
+    return gym.make(envs.env_id_for(geometry.variant), **backend_kwargs, **kwargs)
+
+
+class PhysicsBackend(ABC):
+    """One simulator backend under ``BatchedScene``: N copies of the task's world.
+
+    Attributes every backend sets: ``env`` (the gym env), ``u`` (the unwrapped ManiSkill task),
+    ``device`` (where its tensors live), ``n_envs``. Poses are in a copy's local frame
+    (``realize.geometry``'s), position then wxyz quaternion, float32."""
+
+    name: ClassVar[str]  # "cpu" | "gpu": what run reports and logs call the backend
+    deterministic: ClassVar[bool]  # same seed, same result, bit for bit
+
+    env: Any
+    u: Any
+    device: torch.device
+    n_envs: int
+    sim: SimSettings
+
+    @abstractmethod
+    def after_reset(self) -> None:
+        """Called after the task's reset, before anything is read: backend book-keeping."""
+
+    @abstractmethod
+    def qpos(self) -> torch.Tensor:
+        """(N, 15) every active joint, in ManiSkill Fetch's joint order."""
+
+    @abstractmethod
+    def qvel(self) -> torch.Tensor:
+        """(N, 15) joint velocities, same order."""
+
+    @abstractmethod
+    def ee_pose(self) -> torch.Tensor:
+        """(N, 7) gripper_link pose."""
+
+    @abstractmethod
+    def cube_pose(self) -> torch.Tensor:
+        """(N, 7) cube pose."""
+
+    @abstractmethod
+    def cube_velocity(self) -> torch.Tensor:
+        """(N, 6) cube linear and angular velocity."""
+
+    @abstractmethod
+    def finger_cube_forces(self) -> torch.Tensor:
+        """(N, 2) magnitude of the contact force (N) between each finger and the cube."""
+
+    @abstractmethod
+    def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
+                      grip: torch.Tensor, frozen: torch.Tensor) -> None:
+        """Write drive targets: base velocities (N, 3), torso+arm positions and velocities
+        (N, 8), finger positions (N,); copies in ``frozen`` (N,) may be skipped (asleep)."""
+
+    @abstractmethod
+    def step(self, substeps: int) -> None:
+        """Advance physics by ``substeps`` simulation steps (one control period)."""
+
+    @abstractmethod
+    def freeze(self, copies: list[int]) -> None:
+        """Stop simulating the robots of ``copies`` until the next reset (their base targets are
+        already zero): sleep where the backend can, else nothing."""
+
+    @abstractmethod
+    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
+        """Give one copy's cube a linear velocity (tests: copies are independent)."""
+
+    @abstractmethod
+    def place_cube(self, positions: torch.Tensor) -> None:
+        """Teleport every copy's cube to ``positions`` (N, 3, CPU float32), axis-aligned, at rest."""
+
+    @abstractmethod
+    def cube_friction(self) -> torch.Tensor:
+        """(N, 2) static and dynamic friction of each copy's cube (float64)."""
+
+    @abstractmethod
+    def set_cube_friction(self, values: torch.Tensor) -> None:
+        """Give copy i's cube the friction ``values[i]`` (static = dynamic; (N,) float64)."""
+
+    def close(self) -> None:
+        self.env.close()

@@ -1,0 +1,80 @@
+"""Settings of the batched scene: physics (the Hydra ``sim`` group) and what the task env is built with.
+
+What it does:
+  * ``SimSettings``: backend, physics and control rates, solver iterations, CPU threads, the
+    contact force that counts as holding the cube. Bounds and choices are field metadata
+    (``realize.config.setting``); ``sim_freq`` must be a multiple of ``control_freq`` (``check``).
+  * ``EnvOptions``: what the ManiSkill task is built and reset with besides geometry and physics:
+    the render ``Camera`` (videos), the reset noise amplitudes (validation perturbations) and
+    whether every reset randomizes. Defaults leave the task as registered.
+What it doesn't: build anything (``realize.scene.backends`` does), or know which backend runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from realize.config import ConfigError, Settings, setting
+
+__all__ = ["BACKENDS", "SimSettings", "Camera", "EnvOptions"]
+
+BACKENDS = ("auto", "cpu", "gpu")
+
+
+@dataclass
+class SimSettings(Settings):
+    """Physics settings (the Hydra ``sim`` group). Every field is a config key."""
+
+    config_key: ClassVar[str] = "sim"
+
+    backend: str = setting("auto", choices=BACKENDS)  # auto: gpu where torch sees CUDA, else cpu
+    sim_freq: int = setting(60, ge=1)
+    control_freq: int = setting(20, ge=1)
+    solver_position_iterations: int = setting(10, ge=1)
+    solver_velocity_iterations: int = setting(1, ge=0)
+    cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
+    grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"
+    torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
+
+    def check(self, where: str) -> None:
+        if self.sim_freq % self.control_freq:
+            raise ConfigError(
+                f"{where}.sim_freq = {self.sim_freq}, {where}.control_freq = {self.control_freq}: both must be "
+                ">= 1 and sim_freq a multiple of control_freq"
+            )
+
+
+@dataclass
+class Camera(Settings):
+    """The task's render camera (videos): frame size (None: the task camera's), and a pose
+    looking from ``eye`` at ``target`` (both None: the task camera's own pose)."""
+
+    config_key: ClassVar[str] = "camera"
+
+    width: int | None = setting(640, ge=16)
+    height: int | None = setting(480, ge=16)
+    eye: tuple[float, float, float] | None = None
+    target: tuple[float, float, float] | None = None
+
+    def check(self, where: str) -> None:
+        if (self.eye is None) != (self.target is None):
+            raise ConfigError(f"{where}.eye = {self.eye!r}, {where}.target = {self.target!r}: a camera pose "
+                              "needs both eye and target")
+
+
+@dataclass
+class EnvOptions(Settings):
+    """What the ManiSkill task is built and reset with besides geometry and physics.
+
+    ``camera``: the render camera (None: the task's). ``cube_xy_noise`` / ``robot_xy_noise``:
+    reset noise amplitudes in m (None: the task's defaults). ``randomize_resets``: every
+    ``reset`` applies the task's randomization (cube xy/yaw, robot start xy), whatever the caller
+    asks (the realizer resets without it)."""
+
+    config_key: ClassVar[str] = "env"
+
+    camera: Camera | None = None
+    cube_xy_noise: float | None = setting(None, ge=0)
+    robot_xy_noise: float | None = setting(None, ge=0)
+    randomize_resets: bool = False
