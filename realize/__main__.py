@@ -1,6 +1,6 @@
-"""``python -m realize [overrides]``: the same as the ``realize`` console script."""
+"""``python -m realize [overrides]``: the same as the ``realize`` console script (``realize.cli``)."""
 
-from realize.app import main
+from realize.cli import main
 
 if __name__ == "__main__":
     main()

@@ -2,172 +2,47 @@
 
 The PDDL planner ranks plans by symbolic cost, but the cheapest symbolic plan need not be the
 cheapest to realize. With ``task.planner.top_k = k > 1`` the run realizes up to k candidate
-plans and spends one sample budget on them by successive halving (Karnin et al., 2013).
-
-Budget rule
------------
-Let ``N = ce.n_envs`` (samples per CE iteration), ``T = ce.iterations`` and ``K`` the number of
-distinct candidates the planner returned (``1 <= K <= k``; fewer than k is normal).
-
-* The whole run simulates at most ``T x N`` samples, exactly the budget of a single-plan run
-  with the same ``ce`` settings (less only if a candidate's search converges early,
-  ``ce.converge_std``).
-* Halving rounds ``r = 0, 1, ...`` run while more than one candidate survives, with
-  ``S_0 = K`` and ``S_{r+1} = ceil(S_r / 2)`` survivors. In round ``r`` every survivor runs
-  ``m`` CE iterations of ``N`` samples, each continuing its own search where it stopped; then the
-  survivors are ranked and the ``floor(S_r / 2)`` worst are dropped (``dropped_round = r``).
-* The last survivor, the winner, runs the remaining ``T - m * sum_r S_r`` iterations (plus any
-  iterations that converged candidates left unspent).
-* ``m = task.planner.round_iterations``; ``null`` (default) picks the largest ``m`` that leaves
-  the winner at least ``m`` final iterations, ``m = max(1, floor(T / (sum_r S_r + 1)))``.
-  The rounds must fit: ``m * sum_r S_r <= T``, else ``BudgetError`` (before any simulation).
-
-Example: ``T = 10``, ``K = 3``: survivors 3 then 2 (sum 5), ``m = floor(10 / 6) = 1``; round 0
-costs 3 iterations, round 1 costs 2, the winner then runs 5 more (7 of the 10 in all).
+plans and spends one sample budget on them by successive halving (Karnin et al., 2013); the
+budget rule (rounds, survivors, the winner's share) is in ``realize.budget``.
 
 Ranking (after each round; ties keep the planner's order): candidates with a feasible sample
 come first, by their best feasible cost; the others follow, ranked as the CE fallback ranks
-infeasible samples (``realize.cross_entropy.rank_samples``), by their best sample's progress,
+infeasible samples (``realize.ce.ranking.rank_samples``), by their best sample's progress,
 here as a share of the plan's actions (plans differ in length), descending, then its distance
 to success ascending.
 
 Each candidate has its own ``CrossEntropyOptimizer`` over its own ``ParamLayout`` (only the
 parameters its plan uses), seeded ``ce.seed + SEED_STRIDE * index``: candidate 0 draws the same
 samples as a single-plan run of the same seed (when its plan binds all the task's parameters).
-All candidates are realized one batch at a time in the same scene (``realize.app``), which is
+All candidates are realized one batch at a time in the same scene (``realize.loop``), which is
 valid because every rollout starts with a history-free reset.
 
 What it doesn't: simulate (the caller passes an evaluator ``(candidate index, Z) -> EvalResult``
-or drives ``ask``/``tell``), plan symbolically (``realize.pddl``), write files (``realize.app``),
-or resume a halving run from a checkpoint (``to_dict`` records the states, nothing reads them).
+or drives ``ask``/``tell``), plan symbolically (``realize.pddl``) or write files (``realize.sinks``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import torch
 from torch import Tensor
 
-from realize.cross_entropy import CEConfig, CEState, CrossEntropyOptimizer, EvalResult, IterationRecord
+from realize.budget import HalvingBudget
+from realize.ce.config import CEConfig
+from realize.ce.optimizer import CrossEntropyOptimizer
+from realize.ce.state import CEState, IterationRecord
 from realize.param_layout import ParamLayout
+from realize.run_dir.build import halving_doc
+from realize.run_dir.summaries import CandidateSummary, best_params
+from realize.searcher import Batch, EvalResult, SearchReport
 
-__all__ = [
-    "BudgetError",
-    "HalvingBudget",
-    "plan_budget",
-    "CandidateSpec",
-    "Candidate",
-    "SuccessiveHalving",
-    "candidate_key",
-    "SEED_STRIDE",
-]
+__all__ = ["CandidateSpec", "Candidate", "SuccessiveHalving", "candidate_key", "SEED_STRIDE", "HALVING_KIND"]
 
 SEED_STRIDE = 1_000_003  # candidate i's CE seed: ce.seed + SEED_STRIDE * i
-
-
-class BudgetError(ValueError):
-    """The sample budget cannot cover the halving rounds; the message names the keys."""
-
-
-# --------------------------------------------------------------------------------------------
-# budget
-# --------------------------------------------------------------------------------------------
-
-
-def _survivors(k: int) -> tuple[int, ...]:
-    """Survivors per halving round for ``k`` candidates: k, ceil(k/2), ... down to 2 (none for 1)."""
-    out = []
-    while k > 1:
-        out.append(k)
-        k = (k + 1) // 2
-    return tuple(out)
-
-
-@dataclass(frozen=True)
-class HalvingBudget:
-    """The schedule of one halving run (see the module docstring for the rule).
-
-    ``survivors[r]`` candidates run ``round_iterations`` CE iterations each in round ``r``;
-    the winner then runs ``final_iterations``. ``n_samples`` samples per iteration."""
-
-    n_candidates: int
-    total_iterations: int
-    n_samples: int
-    round_iterations: int
-    survivors: tuple[int, ...]
-
-    @property
-    def n_rounds(self) -> int:
-        return len(self.survivors)
-
-    @property
-    def round_total(self) -> int:
-        """CE iterations the halving rounds take together (all candidates)."""
-        return self.round_iterations * sum(self.survivors)
-
-    @property
-    def final_iterations(self) -> int:
-        """CE iterations left to the winner after the rounds (nominal: no early convergence)."""
-        return self.total_iterations - self.round_total
-
-    @property
-    def total_samples(self) -> int:
-        """The run's sample budget: ``total_iterations x n_samples``, as a single-plan run."""
-        return self.total_iterations * self.n_samples
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "n_candidates": self.n_candidates,
-            "total_iterations": self.total_iterations,
-            "n_samples_per_iteration": self.n_samples,
-            "total_samples": self.total_samples,
-            "round_iterations": self.round_iterations,
-            "survivors_per_round": list(self.survivors),
-            "final_iterations": self.final_iterations,
-        }
-
-
-def plan_budget(
-    n_candidates: int,
-    total_iterations: int,
-    n_samples: int,
-    round_iterations: int | None = None,
-    *,
-    keys: tuple[str, str, str] = ("task.planner.top_k", "ce.iterations", "task.planner.round_iterations"),
-) -> HalvingBudget:
-    """The halving schedule for ``n_candidates``; ``BudgetError`` naming ``keys`` (candidates,
-    iterations, round iterations) if the rounds do not fit into ``total_iterations``."""
-    k_key, t_key, m_key = keys
-    if n_candidates < 1:
-        raise BudgetError(f"{k_key} = {n_candidates} is invalid: must be >= 1")
-    if total_iterations < 1 or n_samples < 1:
-        raise BudgetError(f"{t_key} = {total_iterations} / n_samples = {n_samples}: both must be >= 1")
-    surv = _survivors(n_candidates)
-    s = sum(surv)
-    if round_iterations is None:
-        m = max(1, total_iterations // (s + 1))
-    else:
-        if round_iterations < 1:
-            raise BudgetError(f"{m_key} = {round_iterations} is invalid: must be >= 1 (or null: automatic)")
-        m = round_iterations
-    if m * s > total_iterations:
-        rounds = " + ".join(str(x) for x in surv)
-        raise BudgetError(
-            f"{t_key} = {total_iterations} is too small for {k_key} = {n_candidates}: the halving rounds "
-            f"need {m} x ({rounds}) = {m * s} CE iterations ({m_key} = {m} per survivor and round); "
-            f"raise {t_key} to >= {m * s} or lower {k_key}"
-            + ("" if round_iterations is None else f" or {m_key}")
-        )
-    return HalvingBudget(n_candidates, total_iterations, n_samples, m, surv)
-
-
-# --------------------------------------------------------------------------------------------
-# candidates
-# --------------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -194,7 +69,7 @@ def candidate_key(state: CEState, n_actions: int) -> tuple[float, float, float, 
 
 @dataclass
 class Candidate:
-    """A candidate's search and bookkeeping. ``records`` are its ``IterationRecord.summary()``."""
+    """A candidate's search and bookkeeping (iterations and samples spent, round dropped)."""
 
     index: int
     spec: CandidateSpec
@@ -202,7 +77,6 @@ class Candidate:
     iterations: int = 0
     samples: int = 0
     dropped_round: int | None = None
-    records: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def state(self) -> CEState:
@@ -212,51 +86,42 @@ class Candidate:
     def key(self) -> tuple[float, float, float, float]:
         return candidate_key(self.optimizer.state, self.spec.n_actions)
 
-    def best_params(self) -> dict[str, dict[str, float]] | None:
-        """The best sample split by parameter, ``{name: {coord: value}}`` (None before any)."""
-        z = self.optimizer.state.best_z
-        if z is None:
-            return None
-        layout = self.spec.layout
-        out: dict[str, dict[str, float]] = {}
-        for name, part in layout.split(z.reshape(1, -1)).items():
-            coords = layout.regions[name].coord_names
-            out[name] = {c: float(v) for c, v in zip(coords, part[0].tolist())}
-        return out
-
-    def summary(self) -> dict[str, Any]:
-        """Plain values for result.json (non-finite cost -> None)."""
+    def summary(self) -> CandidateSummary:
+        """This candidate's plan, best sample (best cost ``inf`` unless feasible) and spending."""
         s = self.optimizer.state
         feasible = bool(s.best_feasible)
-        return {
-            "index": self.index,
-            "plan": self.spec.plan,
-            "n_actions": self.spec.n_actions,
-            "columns": self.spec.layout.column_names,
-            "feasible": feasible,
-            "best_cost": float(s.best_cost) if feasible and math.isfinite(s.best_cost) else None,
-            "best_iteration": s.best_iteration if s.best_z is not None else None,
-            "best_params": self.best_params(),
-            "best_z": None if s.best_z is None else s.best_z.tolist(),
-            "iterations": self.iterations,
-            "samples": self.samples,
-            "dropped_round": self.dropped_round,
-            "converged": bool(s.converged),
-        }
+        return CandidateSummary(
+            index=self.index,
+            plan=self.spec.plan,
+            n_actions=self.spec.n_actions,
+            columns=self.spec.layout.column_names,
+            feasible=feasible,
+            best_cost=float(s.best_cost) if feasible else math.inf,
+            best_iteration=s.best_iteration if s.best_z is not None else None,
+            best_params=best_params(self.spec.layout, s.best_z),
+            best_z=None if s.best_z is None else s.best_z.tolist(),
+            iterations=self.iterations,
+            samples=self.samples,
+            dropped_round=self.dropped_round,
+            converged=bool(s.converged),
+        )
 
 
 Evaluate = Callable[[int, Tensor], EvalResult]
 OnIteration = Callable[[Candidate, IterationRecord], "bool | None"]
+HALVING_KIND = "successive_halving"  # the "kind" of its state_dict (a checkpoint's ce_state)
 
 
 class SuccessiveHalving:
-    """Ask/tell successive halving over candidate plans, each with its own CE search.
+    """Ask/tell successive halving over candidate plans, each with its own CE search
+    (a ``realize.searcher.Searcher``).
 
-    ``ask()`` returns ``(candidate index, Z)`` for the next CE iteration, or ``None`` when the
-    budget is spent; ``tell(result)`` gives that candidate's evaluation back and returns its
-    ``IterationRecord``; rounds end (and the worse half is dropped) inside ``tell``.
+    ``ask()`` returns the next CE iteration's ``Batch`` (``candidate`` = its index), or ``None``
+    when the budget is spent; ``tell(result)`` gives that candidate's evaluation back and
+    returns its ``IterationRecord``; rounds end (and the worse half is dropped) inside ``tell``.
     ``run(evaluate)`` loops. Candidates run one after the other within a round, ``m``
-    iterations each, in the planner's order.
+    iterations each, in the planner's order. ``state_dict``/``load_state_dict`` round-trip
+    every candidate's CE state and the halving position (resuming a top-k run).
     """
 
     def __init__(
@@ -265,6 +130,7 @@ class SuccessiveHalving:
         config: CEConfig,
         budget: HalvingBudget,
         device: torch.device | str | None = None,
+        top_k: int | None = None,
     ) -> None:
         if not candidates:
             raise ValueError("SuccessiveHalving needs at least one candidate plan")
@@ -272,10 +138,11 @@ class SuccessiveHalving:
             raise ValueError(f"budget is for {budget.n_candidates} candidates, got {len(candidates)}")
         if config.schedule != "constant":
             raise ValueError(f"successive halving needs ce.schedule = 'constant', got {config.schedule!r}")
-        if config.n_samples != budget.n_samples:
-            raise ValueError(f"budget is for {budget.n_samples} samples per iteration, ce has {config.n_samples}")
+        if config.n_envs != budget.n_envs:
+            raise ValueError(f"budget is for {budget.n_envs} samples per iteration, ce has {config.n_envs}")
         self.budget = budget
         self.config = config
+        self.top_k = len(candidates) if top_k is None else top_k  # plans asked of the planner (reports only)
         self.candidates: list[Candidate] = []
         for i, spec in enumerate(candidates):
             # a candidate never runs more than the whole budget: CE's own stop is never the limit
@@ -301,6 +168,10 @@ class SuccessiveHalving:
     @property
     def done(self) -> bool:
         return self._current is None
+
+    @property
+    def iterations_done(self) -> int:
+        return self.spent_iterations
 
     @property
     def in_final(self) -> bool:
@@ -354,21 +225,23 @@ class SuccessiveHalving:
         self._pos = 0
         self._in_round = [0] * len(self.candidates)
 
-    def ask(self) -> tuple[int, Tensor] | None:
-        """``(candidate index, Z (N, D_i))`` for the next iteration, or ``None`` when done."""
+    def ask(self) -> Batch | None:
+        """The next iteration's batch (``candidate``: its index; ``Z (N, D_i)``), ``None`` when done."""
         if self._current is None:
             return None
-        return self._current, self.candidates[self._current].optimizer.ask()
+        batch = self.candidates[self._current].optimizer.ask()
+        assert batch is not None  # _advance only points at candidates whose search goes on
+        batch.candidate = self._current
+        return batch
 
-    def tell(self, result: EvalResult) -> IterationRecord:
+    def tell(self, result: EvalResult, eval_time: float = math.nan) -> IterationRecord:
         """The evaluation of the last ``ask``'s batch; returns the candidate's record."""
         if self._current is None:
             raise RuntimeError("tell() after the budget is spent")
         c = self.candidates[self._current]
-        rec = c.optimizer.tell(result)
+        rec = c.optimizer.tell(result, eval_time=eval_time)
         c.iterations += 1
-        c.samples += rec.n_samples
-        c.records.append(rec.summary())
+        c.samples += rec.n_envs
         self._in_round[c.index] += 1
         self._advance()
         return rec
@@ -376,39 +249,57 @@ class SuccessiveHalving:
     def run(self, evaluate: Evaluate, on_iteration: OnIteration | None = None) -> Candidate:
         """Loop ask -> ``evaluate(index, Z)`` -> tell until done; returns the winner.
         ``on_iteration(candidate, record)`` returning True stops early (the leader is returned)."""
-        while (job := self.ask()) is not None:
-            i, Z = job
-            rec = self.tell(evaluate(i, Z))
+        while (batch := self.ask()) is not None:
+            i = batch.candidate
+            assert i is not None
+            rec = self.tell(evaluate(i, batch.Z))
             if on_iteration is not None and on_iteration(self.candidates[i], rec):
                 break
         return self.candidates[self.leader]
 
-    # ---- reports -------------------------------------------------------------------------
+    # ---- reports and checkpoints ---------------------------------------------------------
 
-    def summary(self) -> dict[str, Any]:
-        """Plain values: budget, spending, round, winner/leader and every candidate."""
-        w = self.winner
-        return {
-            "budget": self.budget.to_dict(),
-            "spent_iterations": self.spent_iterations,
-            "spent_samples": self.spent_samples,
-            "round": min(self.round, self.budget.n_rounds),
-            "leader": self.leader,
-            "winner": None if w is None else {"index": w, "plan": self.candidates[w].spec.plan},
-            "candidates": [c.summary() for c in self.candidates],
-        }
+    def report(self) -> SearchReport:
+        lead = self.leader
+        return SearchReport(lead=lead, state=self.candidates[lead].optimizer.state,
+                            round=min(self.round, self.budget.n_rounds), halving=halving_doc(self, self.top_k))
 
-    def to_dict(self) -> dict[str, Any]:
-        """Every candidate's CE state and the halving position (a record; no resume reads it)."""
+    def state_dict(self) -> dict[str, Any]:
+        """Every candidate's CE state and the halving position, as plain JSON data."""
         return {
-            "kind": "successive_halving",
+            "kind": HALVING_KIND,
+            "plans": [c.spec.plan for c in self.candidates],
             "round": self.round,
             "survivors": list(self.survivors),
             "position": self._pos,
             "in_round": list(self._in_round),
             "candidates": [
                 {"iterations": c.iterations, "samples": c.samples, "dropped_round": c.dropped_round,
-                 "ce_state": c.optimizer.state.to_dict()}
+                 "ce_state": c.optimizer.state_dict()}
                 for c in self.candidates
             ],
         }
+
+    def load_state_dict(self, d: Mapping[str, Any]) -> None:
+        """Continue from ``state_dict()`` output; ``ValueError`` if it is not of these candidates."""
+        if d.get("kind") != HALVING_KIND:
+            raise ValueError(f"not a successive-halving state (kind {d.get('kind')!r})")
+        plans = [c.spec.plan for c in self.candidates]
+        try:
+            cands = list(d["candidates"])
+            if len(cands) != len(plans) or list(d.get("plans", plans)) != plans:
+                raise ValueError(f"its candidate plans {d.get('plans', len(cands))} are not this run's {plans}")
+            for c, cd in zip(self.candidates, cands):
+                c.optimizer.load_state_dict(cd["ce_state"])
+                c.iterations, c.samples = int(cd["iterations"]), int(cd["samples"])
+                c.dropped_round = None if cd["dropped_round"] is None else int(cd["dropped_round"])
+            self.round, self._pos = int(d["round"]), int(d["position"])
+            self.survivors = [int(i) for i in d["survivors"]]
+            self._in_round = [int(i) for i in d["in_round"]]
+        except (KeyError, TypeError) as e:
+            raise ValueError(f"malformed successive-halving state ({type(e).__name__}: {e})") from None
+        if not self.survivors or not set(self.survivors) <= set(range(len(plans))) \
+                or len(self._in_round) != len(plans):
+            raise ValueError("malformed successive-halving state (survivors / in_round)")
+        self._current = None
+        self._advance()

@@ -13,7 +13,7 @@ How it hooks into the rollout without copying it: the video writer is a step hoo
 ``PlanRealizer.rollout`` runs unchanged, for every scene variant (the scene picks its task).
 A top-k run (``task.planner.top_k > 1``) replays its leading candidate (the winner once
 decided): ``best_z`` belongs to that candidate's plan and parameters.
-What it doesn't: search (``realize.app``), perturb anything (``realize.validation``), or write
+What it doesn't: search (``realize.run``), perturb anything (``realize.validation``), or write
 to the run directory.
 
 A replay on CPU of a run made on CPU uses the same seed and initial state, but the run
@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from realize.geometry import SceneGeometry
-from realize.results import RESULT_FILE
+from realize.run_dir.names import RESULT_FILE
 from realize.run_config import RunSpec, build_run_spec
 from realize.scene import BatchedScene, Camera, EnvOptions
 

@@ -47,7 +47,7 @@ from realize.rerun_scene import log_static_scene, log_trajectories, log_world_sa
 from realize.topdown import ellipse_params, iteration_colors, param_xy, planar_params, success_colors, to_numpy
 
 if TYPE_CHECKING:  # avoid importing the simulator stack just for a type
-    from realize.cross_entropy import IterationRecord
+    from realize.ce.state import IterationRecord
     from realize.realization.result import RolloutResult
 
 __all__ = ["RerunLogger"]
@@ -254,7 +254,7 @@ class RerunLogger:
 
     def _log_text(self, record: IterationRecord, rollout: RolloutResult | None) -> None:
         msg = (
-            f"iteration {record.iteration}: {record.n_feasible}/{record.n_samples} successful "
+            f"iteration {record.iteration}: {record.n_feasible}/{record.n_envs} successful "
             f"({100 * record.success_share:.1f} %), best cost {record.best_cost:.1f}, "
             f"sampled {record.sampled_from}, refit {record.refit}"
         )

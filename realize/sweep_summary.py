@@ -11,6 +11,8 @@ rebuilds it once more.
 
 Columns: ``job, overrides, status, error, feasible, best_cost, wall_time_s,
 iterations_done, interrupted, run_dir``. ``status`` is ``done``, ``failed`` or ``interrupted``.
+Both files are read and written through ``realize.run_dir.directory.RunDir`` (``JobStatusDoc``,
+``ResultDoc``/``FailureDoc``).
 What it doesn't: run or retry jobs, or read anything but JSON files (no unpickling).
 """
 
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 import csv
 import io
-import json
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -28,11 +30,13 @@ from hydra.types import RunMode
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from realize.results import RESULT_FILE, atomic_write_text, read_json
+from realize.run_dir.directory import RunDir
+from realize.run_dir.jsonio import atomic_write_text
+from realize.run_dir.names import JOB_STATUS_FILE
+from realize.run_dir.summaries import JobStatusDoc
 
-__all__ = ["SweepSummary", "write_summary", "JOB_STATUS_FILE", "COLUMNS"]
+__all__ = ["SweepSummary", "write_summary", "COLUMNS"]
 
-JOB_STATUS_FILE = "job_status.json"
 COLUMNS = (
     "job",
     "overrides",
@@ -53,31 +57,39 @@ def _one_line(text: str, limit: int = 500) -> str:
 
 
 def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
-    job_dir = status_file.parent
-    st = read_json(status_file) or {}
-    res = read_json(job_dir / RESULT_FILE) or {}
-    status = st.get("status", "failed")
-    error = res.get("error") or st.get("error") or ""
-    if status == "done" and res.get("status") == "failed":
+    job = RunDir(status_file.parent)
+    st = job.job_status() or JobStatusDoc(job_num=None)
+    try:
+        res = job.result()
+    except (KeyError, TypeError, ValueError, AttributeError):  # a malformed result: the job's own status
+        res = None
+    status = st.status
+    error = (res.error if res is not None else None) or st.error or ""
+    if status == "done" and res is not None and res.status == "failed":
         status = "failed"
-    if status == "done" and res.get("interrupted"):
+    if status == "done" and res is not None and res.interrupted:
         status = "interrupted"
     try:
-        rel = str(job_dir.relative_to(sweep_dir))
+        rel = str(job.path.relative_to(sweep_dir))
     except ValueError:
-        rel = str(job_dir)
-    return {
-        "job": st.get("job_num", ""),
-        "overrides": " ".join(st.get("overrides", [])),
+        rel = str(job.path)
+    row: dict[str, Any] = {
+        "job": "" if st.job_num is None else st.job_num,
+        "overrides": " ".join(st.overrides),
         "status": status,
         "error": _one_line(error) if error else "",
-        "feasible": res.get("feasible", ""),
-        "best_cost": "" if res.get("best_cost") is None else res.get("best_cost"),
-        "wall_time_s": "" if res.get("wall_time_s") is None else round(float(res["wall_time_s"]), 3),
-        "iterations_done": res.get("iterations_done", ""),
-        "interrupted": res.get("interrupted", ""),
+        "feasible": "", "best_cost": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
         "run_dir": rel,
     }
+    if res is not None:
+        row.update(
+            feasible=res.feasible,
+            best_cost=res.best_cost if math.isfinite(res.best_cost) else "",
+            wall_time_s=round(res.wall_time_s, 3) if math.isfinite(res.wall_time_s) else "",
+            iterations_done=res.iterations_done,
+            interrupted=res.interrupted,
+        )
+    return row
 
 
 def write_summary(sweep_dir: Path | str, filename: str = "summary.csv") -> Path:
@@ -146,13 +158,13 @@ class SweepSummary(Callback):
         if not ok:
             err = job_return._return_value  # the exception (reading .return_value would re-raise)
             error = f"{type(err).__name__}: {err}" if err is not None else "unknown error"
-        status = {
-            "job_num": int(hydra.job.num) if hydra.job.get("num") is not None else None,
-            "overrides": [str(o) for o in (job_return.overrides or [])],
-            "status": "done" if ok else "failed",
-            "error": error,
-        }
-        atomic_write_text(job_dir / JOB_STATUS_FILE, json.dumps(status, indent=2) + "\n")
+        status = JobStatusDoc(
+            job_num=int(hydra.job.num) if hydra.job.get("num") is not None else None,
+            overrides=[str(o) for o in (job_return.overrides or [])],
+            status="done" if ok else "failed",
+            error=error,
+        )
+        RunDir(job_dir).write_job_status(status)
         self._update(Path(str(hydra.sweep.dir)))
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:

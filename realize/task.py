@@ -3,7 +3,8 @@ the goal predicate psi_g and the final cost, parsed and checked from a task conf
 
 What it does: turns a mapping such as ``configs/task/pick_place.yaml`` into a ``TaskSpec`` and
 checks every name against the scene and the action templates, with errors that name the file
-and key. A plan is written as strings ``"move_to(Table1)"`` or as ``{move_to: [Table1]}``.
+and key (``realize.config.ConfigError``). A plan is written as strings ``"move_to(Table1)"`` or
+as ``{move_to: [Table1]}``.
 What it doesn't: simulate (``realize.rollout``), or plan symbolically (``realize.pddl``; the
 resulting actions enter here through ``plan_from_actions``).
 """
@@ -14,13 +15,10 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
+from realize.config import ConfigError
 from realize.geometry import SceneGeometry
 from realize.param_layout import ParamLayout, region_from_dict
 from realize.regions import Box, Region
-
-
-class TaskError(ValueError):
-    """A task config is invalid; the message names the file and key."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +67,7 @@ def parse_action(item: Any, where: str) -> ActionSpec:
     if isinstance(item, str):
         m = _CALL.match(item)
         if not m:
-            raise TaskError(f"{where}: cannot parse action {item!r}; write it as name(Param, ...)")
+            raise ConfigError(f"{where}: cannot parse action {item!r}; write it as name(Param, ...)")
         args = tuple(a.strip() for a in m.group(2).split(",") if a.strip())
         return ActionSpec(m.group(1), args)
     if isinstance(item, Mapping) and len(item) == 1:
@@ -77,26 +75,26 @@ def parse_action(item: Any, where: str) -> ActionSpec:
         if isinstance(args, str):
             args = [args]
         return ActionSpec(str(name), tuple(str(a) for a in args))
-    raise TaskError(f"{where}: an action is a string 'name(Param)' or a one-key mapping, got {item!r}")
+    raise ConfigError(f"{where}: an action is a string 'name(Param)' or a one-key mapping, got {item!r}")
 
 
 def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mapping[str, Any], where: str) -> None:
     """Every action names a known template with parameters of the right kind."""
     if not plan:
-        raise TaskError(f"{where}: the plan is empty")
+        raise ConfigError(f"{where}: the plan is empty")
     for i, a in enumerate(plan):
         key = f"{where}[{i}]"
         if a.template not in templates:
-            raise TaskError(f"{key}: unknown action template {a.template!r} in {a}; known: {sorted(templates)}")
+            raise ConfigError(f"{key}: unknown action template {a.template!r} in {a}; known: {sorted(templates)}")
         tpl = templates[a.template]
         if len(a.params) != tpl.n_params:
-            raise TaskError(f"{key}: {a.template} takes {tpl.n_params} parameter(s), got {len(a.params)} in {a}")
+            raise ConfigError(f"{key}: {a.template} takes {tpl.n_params} parameter(s), got {len(a.params)} in {a}")
         for p in a.params:
             if p not in layout.names:
-                raise TaskError(f"{key}: {a} is bound to undefined parameter {p!r}; defined: {layout.names}")
+                raise ConfigError(f"{key}: {a} is bound to undefined parameter {p!r}; defined: {layout.names}")
             region = layout.regions[p]
             if not tpl.accepts(region):
-                raise TaskError(
+                raise ConfigError(
                     f"{key}: parameter {p!r} ({type(region).__name__}, dim {region.dim}) does not fit "
                     f"{a.template}: {tpl.param_doc}")
 
@@ -105,53 +103,53 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
                    source: str = "task") -> TaskSpec:
     """Build and check a TaskSpec. ``source`` names the file for error messages."""
     if not isinstance(d, Mapping):
-        raise TaskError(f"{source}: a task config is a mapping, got {type(d).__name__}")
+        raise ConfigError(f"{source}: a task config is a mapping, got {type(d).__name__}")
     allowed = {"name", "params", "plan", "goal", "final_cost", "planner"}
     unknown = set(d) - allowed
     if unknown:
-        raise TaskError(f"{source}: unknown keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+        raise ConfigError(f"{source}: unknown keys {sorted(unknown)}; allowed: {sorted(allowed)}")
     for key in ("params", "goal"):
         if key not in d:
-            raise TaskError(f"{source}: missing key {key!r}")
+            raise ConfigError(f"{source}: missing key {key!r}")
     params = d["params"]
     if not isinstance(params, Mapping) or not params:
-        raise TaskError(f"{source}:params must be a non-empty mapping of name -> region")
+        raise ConfigError(f"{source}:params must be a non-empty mapping of name -> region")
     regions: dict[str, Region] = {}
     for name, rd in params.items():
         try:
             regions[str(name)] = region_from_dict(dict(rd), where=f"{source}:params.{name}")
-        except TaskError:
+        except ConfigError:
             raise
         except (ValueError, TypeError, KeyError) as e:
-            raise TaskError(str(e)) from None
+            raise ConfigError(str(e)) from None
     layout = ParamLayout(regions)
     planner = dict(d.get("planner") or {})
     plan_items = d.get("plan")
     if plan_items is None and not planner.get("enabled", False):
-        raise TaskError(f"{source}: missing key 'plan' (or enable planner: {{enabled: true, ...}})")
+        raise ConfigError(f"{source}: missing key 'plan' (or enable planner: {{enabled: true, ...}})")
     plan = [parse_action(it, f"{source}:plan[{i}]") for i, it in enumerate(plan_items or [])]
     if plan:
         check_plan(plan, layout, templates, f"{source}:plan")
     goal_d = d["goal"]
     if not isinstance(goal_d, Mapping):
-        raise TaskError(f"{source}:goal must be a mapping")
+        raise ConfigError(f"{source}:goal must be a mapping")
     g_unknown = set(goal_d) - {"cube_on", "base_in", "cube_in_box"}
     if g_unknown:
-        raise TaskError(f"{source}:goal: unknown predicates {sorted(g_unknown)}; allowed: cube_on, base_in, cube_in_box")
+        raise ConfigError(f"{source}:goal: unknown predicates {sorted(g_unknown)}; allowed: cube_on, base_in, cube_in_box")
     goal = GoalSpec(**{k: (str(v) if v is not None else None) for k, v in goal_d.items()})
     tables = [t.name for t in scene.tables]
     if goal.cube_on is not None and goal.cube_on not in tables:
-        raise TaskError(f"{source}:goal.cube_on names unknown object {goal.cube_on!r}; tables: {tables}")
+        raise ConfigError(f"{source}:goal.cube_on names unknown object {goal.cube_on!r}; tables: {tables}")
     if goal.base_in is not None:
         if goal.base_in not in regions:
-            raise TaskError(f"{source}:goal.base_in names unknown parameter {goal.base_in!r}; defined: {list(regions)}")
+            raise ConfigError(f"{source}:goal.base_in names unknown parameter {goal.base_in!r}; defined: {list(regions)}")
         r = regions[goal.base_in]
         if not (isinstance(r, Box) and r.dim == 2):
-            raise TaskError(f"{source}:goal.base_in: {goal.base_in!r} must be a 2-D box region")
+            raise ConfigError(f"{source}:goal.base_in: {goal.base_in!r} must be a 2-D box region")
     if goal.cube_in_box is not None:
         containers = [b.name for b in getattr(scene, "containers", ())]
         if goal.cube_in_box not in containers:
-            raise TaskError(f"{source}:goal.cube_in_box names unknown object {goal.cube_in_box!r}; containers: {containers}")
+            raise ConfigError(f"{source}:goal.cube_in_box names unknown object {goal.cube_in_box!r}; containers: {containers}")
     final_cost = float(d.get("final_cost", 0.0))
     return TaskSpec(str(d.get("name", "task")), layout, plan, goal, final_cost, source, planner)
 

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from realize.replay import ReplayError, best_z_rows, build_replay_spec, load_run
-from realize.results import RESULT_FILE, atomic_write_json
+from realize.run_dir.jsonio import atomic_write_json
+from realize.run_dir.names import RESULT_FILE
 from realize.scene import BatchedScene, EnvOptions
 
 __all__ = ["ValidationReport", "validate", "write_validation"]

@@ -4,7 +4,7 @@ Usage: python scripts/fig2.py RUN_DIR [--iterations 0 4 9] [--out PNG] [--max-pl
 
 Reads RUN_DIR/trajectories_iter{k}.npz (written by the app when trajectories are recorded),
 history.npz and scene.json (or the config in result.json); writes the PNG and the CSV of the
-plotted points next to it (default RUN_DIR/figures/fig2.{png,csv}). See realize/figures.py.
+plotted points next to it (default RUN_DIR/figures/fig2.{png,csv}). See realize/figures/fig2.py.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.figures import fig2  # noqa: E402
+from realize.figures.fig2 import fig2  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

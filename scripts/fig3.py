@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.figures import fig3  # noqa: E402
+from realize.figures.fig3 import fig3  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -19,7 +19,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.figures import fig4, find_run_dirs, launch_runs, run_status  # noqa: E402
+from realize.figures.fig4 import fig4, find_run_dirs  # noqa: E402
+from realize.figures.launch import launch_runs, run_status  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

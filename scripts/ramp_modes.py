@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import re
 import sys
@@ -32,17 +31,19 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
 from realize.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
+from realize.run_dir.directory import RunDir  # noqa: E402
+from realize.run_dir.names import RESULT_FILE  # noqa: E402
+from realize.run_dir.result_doc import FailureDoc, ResultDoc  # noqa: E402
 
 MODES = ("slide", "carry", "other", "none")
 MODE_OPTIONS = ("n_modes", "uniform_share", "rank_weighted", "knn_robust")
 
 
-def release_point(result: dict[str, Any]) -> tuple[float, float] | None:
+def release_point(result: ResultDoc) -> tuple[float, float] | None:
     """(x, y) of the best plan's place parameter (a box region: the release point itself; a
     hemisphere: its centre, the place point, is fixed by the task, so the pre-pose is used)."""
-    params = result.get("best_params") or {}
-    plan = result.get("plan") or ""
-    plan = ", ".join(plan) if isinstance(plan, list) else str(plan)
+    params = result.best_params or {}
+    plan = result.plan or ""
     names = [args.split(",")[0].strip() for tpl, args in re.findall(r"(\w+)\(([^)]*)\)", plan) if tpl == "place"]
     for name in names or [n for n in params if n.lower().startswith("cube_p")]:
         p = params.get(name)
@@ -51,10 +52,11 @@ def release_point(result: dict[str, Any]) -> tuple[float, float] | None:
     return None
 
 
-def mode_of(result: dict[str, Any], geometry: SceneGeometry) -> str:
-    if result.get("status", "done") != "done":  # running, interrupted or failed: not counted as a mode
-        return str(result.get("status"))
-    if not result.get("feasible"):
+def mode_of(result: ResultDoc | FailureDoc, geometry: SceneGeometry) -> str:
+    status = result.status or "done"  # a document that does not say counts as finished
+    if status != "done":  # running, interrupted or failed: not counted as a mode
+        return status
+    if not result.feasible or not isinstance(result, ResultDoc):
         return "none"
     xy = release_point(result)
     if xy is None:
@@ -72,19 +74,22 @@ def rows_from(dirs: list[Path]) -> list[dict[str, Any]]:
     for d in dirs:
         if not d.exists():
             raise FileNotFoundError(f"{d}: no such directory")
-        for f in sorted(d.rglob("result.json")):
-            r = json.loads(f.read_text())
-            cfg = r.get("config", {})
+        for f in sorted(d.rglob(RESULT_FILE)):
+            r = RunDir(f.parent).result()
+            if r is None:
+                raise ValueError(f"{f}: not a JSON object")
+            cfg = r.config or {}
             geometry = build_geometry(GeometryCfg.from_mapping(cfg.get("scene")))
             ce = cfg.get("ce", {})
-            success = r.get("success_per_iter") or [math.nan]
-            xy = release_point(r)
+            done = isinstance(r, ResultDoc)
+            success = (r.success_per_iter if done else []) or [math.nan]
+            xy = release_point(r) if done else None
             rows.append({
-                "run": str(f.parent), "scene": geometry.variant, "seed": r.get("seed"),
-                "feasible": bool(r.get("feasible")), "best_cost": r.get("best_cost"),
+                "run": str(f.parent), "scene": geometry.variant, "seed": r.seed if done else None,
+                "feasible": bool(r.feasible), "best_cost": r.best_cost if math.isfinite(r.best_cost) else None,
                 "mode": mode_of(r, geometry), "release_x": xy[0] if xy else None,
                 "release_y": xy[1] if xy else None, "success_iter0": success[0],
-                "success_last": success[-1], "wall_time_s": r.get("wall_time_s"),
+                "success_last": success[-1], "wall_time_s": r.wall_time_s if math.isfinite(r.wall_time_s) else None,
                 **{k: ce.get(k) for k in MODE_OPTIONS},
             })
     return rows

@@ -5,7 +5,7 @@ read from ``--task-file``, default ``configs/task/pick_place.yaml``) through the
 ``realize`` command uses (``realize.run_config.build_run_spec``), draws ``--n`` parameter vectors
 uniformly over the task's regions exactly as the cross-entropy search draws iteration 0 (one CPU
 ``torch.Generator`` seeded with ``--seed``, the CE dtype), realizes them all at once in one
-batched scene and prints where they fail: failure reasons, per-action success shares (of all
+batched scene (``realize.realizers.open_realization``, as a run does) and prints where they fail: failure reasons, per-action success shares (of all
 plans and of the plans that reached the action), and, for grasps, success against the angle
 between the base position and the grasp approach around the cube.
 It ends with two lines::
@@ -13,7 +13,7 @@ It ends with two lines::
     iteration0_success: X     (share of feasible plans, 0..1)
     rollout_wall_s: Y         (seconds spent in the rollout, scene build excluded)
 
-What it doesn't: refit anything (that is ``realize`` / ``realize.cross_entropy``).
+What it doesn't: refit anything (that is ``realize`` / ``realize.ce``).
 
 Usage::
 
@@ -41,7 +41,10 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from realize.run_config import REPO_ROOT, ConfigError, RunSpec, build_run_spec  # noqa: E402
+from realize.config import ConfigError  # noqa: E402
+from realize.paths import CONFIG_DIR  # noqa: E402
+from realize.realizers import open_realization  # noqa: E402
+from realize.run_config import RunSpec, build_run_spec  # noqa: E402
 
 
 def load_spec(task_file: str, seed: int, device: str, overrides: Sequence[str] = ()) -> RunSpec:
@@ -49,7 +52,7 @@ def load_spec(task_file: str, seed: int, device: str, overrides: Sequence[str] =
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    with initialize_config_dir(config_dir=str(REPO_ROOT / "configs"), version_base="1.3", job_name="uniform_success"):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="uniform_success"):
         cfg = compose(config_name="config",
                       overrides=[f"task_file={task_file}", f"seed={seed}", f"device={device}", *overrides])
     plain = OmegaConf.to_container(cfg, resolve=True)
@@ -132,17 +135,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
 
-    from realize.realization.rollout import PlanRealizer
-    from realize.scene import BatchedScene
-
     gen = torch.Generator(device="cpu")
     gen.manual_seed(args.seed)
-    Z = spec.task.layout.sample_uniform(args.n, gen, spec.ce.torch_dtype)
+    Z = spec.task.layout.sample_uniform(args.n, gen, spec.placement.dtype)
 
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
-    scene = BatchedScene(args.n, spec.geometry_cfg, spec.sim)
-    realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=args.seed)
+    scene, (realizer,) = open_realization(spec, n_envs=args.n)  # seeded with spec.seed = --seed
     build_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     res = realizer.rollout(Z)

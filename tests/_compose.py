@@ -7,7 +7,7 @@ from typing import Any, Iterator
 import pytest
 import torch
 
-from realize.app import CONFIG_DIR
+from realize.paths import CONFIG_DIR
 
 
 def compose_config(*overrides: str, job_name: str = "tests") -> dict[str, Any]:

@@ -4,23 +4,27 @@ A real ``CrossEntropyOptimizer`` runs on the seed task's parameter layout with a
 (a plan "succeeds" when its parameters are close enough to a hand-picked good plan); a fake
 rollout gives each sample straight-line base and end-effector trajectories through its
 parameters, cut short where the plan fails. ``write_run_dir`` stores all of it in the files the
-app writes (``result.json``, ``history.npz``, ``scene.json``, ``trajectories_iter{k}.npz``).
+app writes (``result.json``, ``history.npz``, ``scene.json``, ``trajectories_iter{k}.npz``),
+through the same writers (``realize.run_dir``).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import torch
 
+from realize.ce.config import CEConfig
+from realize.ce.optimizer import CrossEntropyOptimizer
+from realize.ce.state import IterationRecord
 from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
-from realize.cross_entropy import CEConfig, CrossEntropyOptimizer, EvalResult, IterationRecord
-from realize.figures import save_scene, save_trajectories
 from realize.param_layout import ParamLayout
+from realize.run_dir.directory import RunDir
+from realize.run_dir.history import History
+from realize.run_dir.result_doc import ResultDoc
+from realize.searcher import EvalResult
 
 PARAMS = {
     "Table1": {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25},
@@ -136,11 +140,11 @@ def run_synthetic(n: int = 60, iterations: int = 4, n_elite: int = 6, seed: int 
     """A real CE run over the toy evaluator; keeps records, rollouts and the sampling
     distribution (mean, std) each iteration drew from (None, None for the uniform one)."""
     layout, geometry = make_layout(), make_geometry()
-    opt = CrossEntropyOptimizer(layout, CEConfig(n_samples=n, n_elite=n_elite, iterations=iterations, seed=seed))
+    opt = CrossEntropyOptimizer(layout, CEConfig(n_envs=n, n_elite=n_elite, iterations=iterations, seed=seed))
     out = SyntheticRun(layout, geometry)
     prev: tuple[torch.Tensor | None, torch.Tensor | None] = (None, None)
     while not opt.done:
-        Z = opt.ask()
+        Z = opt.ask().Z
         ro = fake_rollout(layout, geometry, Z, T)
         rec = opt.tell(EvalResult(ro.cost, ro.feasible, ro.progress, ro.distance))
         out.records.append(rec)
@@ -150,45 +154,32 @@ def run_synthetic(n: int = 60, iterations: int = 4, n_elite: int = 6, seed: int 
     return out
 
 
-def _f(x: float) -> float | None:
-    return x if math.isfinite(x) else None
-
-
 def write_run_dir(run: SyntheticRun, run_dir: Path, trajectories: bool = True, scene: bool = True) -> Path:
-    """Store ``run`` as an app run directory (format documented in ``realize.figures``)."""
-    run_dir.mkdir(parents=True, exist_ok=True)
+    """Store ``run`` as an app run directory (formats documented in ``realize.run_dir``)."""
+    rd = RunDir(run_dir)
     recs = run.records
-    d = run.layout.dim
-    arrays: dict[str, np.ndarray] = {
-        "column_names": np.asarray(run.layout.column_names, dtype=str),
-        "iteration": np.arange(len(recs)),
-        "n_samples": np.asarray([r.n_samples for r in recs]),
-        "success_share": np.asarray([r.success_share for r in recs]),
-        "best_cost": np.asarray([r.best_cost for r in recs]),
-        "mean": np.stack([np.full(d, np.nan) if r.mean is None else r.mean.numpy() for r in recs]),
-        "std": np.stack([np.full(d, np.nan) if r.std is None else r.std.numpy() for r in recs]),
-    }
-    for i, r in enumerate(recs):
-        arrays[f"Z_{i:03d}"] = r.Z.numpy()
-        arrays[f"cost_{i:03d}"] = r.cost.numpy()
-        arrays[f"feasible_{i:03d}"] = r.feasible.numpy()
-        arrays[f"elite_idx_{i:03d}"] = r.elite_idx.numpy()
-    np.savez_compressed(run_dir / "history.npz", **arrays)
-    result = {
-        "status": "done",
-        "feasible": any(r.n_feasible > 0 for r in recs),
-        "best_cost": _f(recs[-1].best_cost),
-        "success_per_iter": [r.success_share for r in recs],
-        "best_cost_per_iter": [_f(r.best_cost) for r in recs],
-        "wall_time_s": 1.0,
-        "config": {"scene": {}, "task": {"params": PARAMS}, "controller": {"astar": {"padding": 0.2}}},
-    }
-    (run_dir / "result.json").write_text(json.dumps(result, indent=2))
+    history = History(run.layout.column_names)
+    for r in recs:
+        history.append({"Z": r.Z, "cost": r.cost, "feasible": r.feasible, "elite_idx": r.elite_idx},
+                       n_envs=r.n_envs, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean,
+                       std=r.std)
+    rd.write_history(history)
+    feasible = any(r.n_feasible > 0 for r in recs)
+    rd.write_result(ResultDoc(
+        status="done",
+        feasible=feasible,
+        best_cost=recs[-1].best_cost if feasible else math.inf,
+        iterations_done=len(recs),
+        success_per_iter=[r.success_share for r in recs],
+        best_cost_per_iter=[r.best_cost for r in recs],
+        wall_time_s=1.0,
+        config={"scene": {}, "task": {"params": PARAMS}, "controller": {"astar": {"padding": 0.2}}},
+    ))
     if scene:
-        save_scene(run_dir, run.layout, run.geometry, padding=0.2)
+        rd.write_scene(run.layout, run.geometry, padding=0.2)
     if trajectories:
         for r, ro in zip(recs, run.rollouts):
             best = int(r.elite_idx[0]) if r.elite_idx.numel() else -1
-            save_trajectories(run_dir, r.iteration, ro.traj_base, ro.traj_ee, ro.feasible, best, Z=r.Z,
-                              cost=ro.cost, progress=ro.progress, traj_t=ro.traj_t)
+            rd.write_trajectories(r.iteration, ro.traj_base, ro.traj_ee, ro.feasible, best, Z=r.Z, cost=ro.cost,
+                                  progress=ro.progress, traj_t=ro.traj_t)
     return run_dir

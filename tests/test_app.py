@@ -20,18 +20,17 @@ import yaml
 from hydra import compose, initialize_config_dir
 
 import realize.scene
-from realize.app import CONFIG_DIR, preflight, run
-from realize.results import (
-    CHECKPOINT_FILE,
-    HISTORY_FILE,
-    RESULT_FILE,
-    CheckpointError,
-    History,
-    load_checkpoint,
-    load_history,
-)
-from realize.run_config import ConfigError, build_run_spec
-from realize.sweep_summary import COLUMNS, JOB_STATUS_FILE, write_summary
+from realize.cli import preflight
+from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
+from realize.run import run
+from realize.run_config import build_run_spec
+from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
+from realize.run_dir.directory import RunDir
+from realize.run_dir.history import History, load_history
+from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE
+from realize.run_dir.result_doc import ResultDoc
+from realize.sweep_summary import COLUMNS, write_summary
 
 REPO = CONFIG_DIR.parent
 PY = sys.executable
@@ -96,21 +95,23 @@ def no_sim(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_default_config_validates_without_simulating(no_sim: None) -> None:
     spec = build_run_spec(plain([]))
-    assert spec.ce.n_samples == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
+    assert spec.ce.n_envs == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
     assert spec.task.describe() == "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
     assert spec.task.layout.names == ["Table1", "Cube_g", "Table2", "Cube_p", "Exit"]
-    assert asdict(spec.sim) == asdict(realize.scene.SimSettings())  # the yaml spells out the defaults
-    assert spec.n_envs_max == 200
+    # the yaml spells out the defaults; the backend is resolved at the edge (device=auto)
+    assert asdict(spec.sim) == dict(asdict(realize.scene.SimSettings()), backend=spec.placement.backend)
+    assert spec.placement.backend in ("cpu", "gpu") and spec.placement.device.type in ("cpu", "cuda")
+    assert spec.placement.dtype == spec.ce.torch_dtype
 
 
 def test_experiment_presets() -> None:
     seed = build_run_spec(plain(["experiment=seed_paper"]))
-    assert (seed.ce.n_samples, seed.ce.n_elite, seed.ce.iterations) == (200, 10, 10)
+    assert (seed.ce.n_envs, seed.ce.n_elite, seed.ce.iterations) == (200, 10, 10)
     journal = build_run_spec(plain(["experiment=journal", "scene=wall"]))
     assert journal.ce.schedule == "linear"
-    assert journal.ce.n_samples_at(0) == 3000 and journal.ce.n_samples_at(19) == 300
+    assert journal.ce.n_envs_at(0) == 3000 and journal.ce.n_envs_at(19) == 300
     assert (journal.ce.n_elite, journal.ce.iterations) == (50, 20)
-    assert journal.n_envs_max == 3000
+    assert journal.ce.n_envs == 3000  # the scene's size: the schedule only shrinks the batch
     assert journal.geometry.variant == "wall" and journal.geometry.extras[0].name == "wall"
     assert build_run_spec(plain(["scene=ramp"])).geometry.extras[0].name == "ramp"
 
@@ -127,7 +128,7 @@ def test_ramp_ablation_sweep_composes() -> None:
     changed = {}
     for arm in arms:
         spec = build_run_spec(plain(["experiment=ramp_ablation", f"ablation={arm}"]))
-        assert spec.geometry.variant == "ramp" and spec.ce.n_samples == 64
+        assert spec.geometry.variant == "ramp" and spec.ce.n_envs == 64
         assert "Cube_p" in spec.task.layout.names and spec.task.layout.regions["Cube_p"].dim == 3
         changed[arm] = {k for k in ("n_modes", "uniform_share", "rank_weighted", "knn_robust")
                         if getattr(spec.ce, k) != getattr(base, k)}
@@ -181,6 +182,7 @@ BAD = [
     (["ce.n_envs=4", "ce.n_elite=5"], ["ce.n_elite = 5", "ce.n_envs = 4"]),
     (["ce.iterations=0"], ["ce.iterations = 0"]),
     (["ce.schedule=linear"], ["ce.n_envs_end"]),
+    (["ce.schedule=linear", "ce.n_envs_end=300"], ["ce.n_envs_end = 300", "ce.n_envs = 4"]),
     (["ce.fallback=magic"], ["ce.fallback", "magic"]),
     (["+ce.n_samples=3"], ["ce", "n_samples"]),
     (["+task.foo=1"], ["task", "foo"]),
@@ -341,6 +343,18 @@ def test_tiny_run_writes_results(tmp_path: Path) -> None:
     assert (tmp_path / "scene.json").is_file()
     with np.load(tmp_path / "trajectories_iter1.npz", allow_pickle=False) as tr:
         assert tr["traj_base"].shape[0] == 4 and tr["traj_base"].shape[2] == 2
+    # the typed reader sees the same run, and writes back the same document
+    rd = RunDir(tmp_path)
+    doc = rd.result()
+    assert isinstance(doc, ResultDoc) and doc.to_json() == res
+    assert doc.n_envs == 4 and doc.backend == "cpu" and doc.n_envs_per_iter == [4, 4]
+    assert [r.success_share for r in rd.checkpoint().records] == doc.success_per_iter
+    assert [r.best_cost for r in rd.checkpoint().records] == doc.best_cost_per_iter
+    plan = rd.best_plan()
+    assert plan.best_z == res["best_z"] and plan.config == res["config"] and plan.leader is None
+    assert rd.load_history().column_names == doc.columns and rd.trajectory_iterations() == [0, 1]
+    scene = rd.scene()
+    assert scene is not None and scene.layout.column_names == doc.columns
 
 
 def _compare(a: Path, b: Path) -> None:
@@ -495,7 +509,7 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     h = History(["a.x", "a.y"])
     for i in range(3):
         h.append({"Z": np.full((2 + i, 2), float(i)), "cost": np.arange(2 + i, dtype=float)},
-                 n_samples=2 + i, success_share=0.5, best_cost=float("inf") if i == 0 else 10.0 - i,
+                 n_envs=2 + i, success_share=0.5, best_cost=float("inf") if i == 0 else 10.0 - i,
                  mean=None if i == 0 else np.ones(2), std=None if i == 0 else np.ones(2))
     h.save(tmp_path / HISTORY_FILE)
     back = load_history(tmp_path / HISTORY_FILE, keep=2)
@@ -504,8 +518,8 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     assert np.isnan(back.arrays()["mean"][0]).all()
     # a mixture: the heaviest mode in mean/std (I, D), every mode in mode_* (I, k, D)
     mix = History(["a.x", "a.y"])
-    mix.append({"cost": np.zeros(2)}, n_samples=2, success_share=0.0, best_cost=float("inf"), mean=None, std=None)
-    mix.append({"cost": np.zeros(2)}, n_samples=2, success_share=1.0, best_cost=1.0,
+    mix.append({"cost": np.zeros(2)}, n_envs=2, success_share=0.0, best_cost=float("inf"), mean=None, std=None)
+    mix.append({"cost": np.zeros(2)}, n_envs=2, success_share=1.0, best_cost=1.0,
                mean=np.array([[0.0, 0.0], [5.0, 5.0]]), std=np.array([[1.0, 1.0], [2.0, 2.0]]),
                weights=np.array([0.25, 0.75]))
     mix.save(tmp_path / "mix.npz")
@@ -516,7 +530,7 @@ def test_history_roundtrip_without_pickle(tmp_path: Path) -> None:
     np.testing.assert_array_equal(a["mode_weight"][1], [0.25, 0.75])
     assert "mode_mean" not in back.arrays()  # single-mode runs keep the old file layout
     bad = History(["x"])
-    bad.append({"bad": np.array([object()])}, n_samples=1, success_share=0, best_cost=0, mean=None, std=None)
+    bad.append({"bad": np.array([object()])}, n_envs=1, success_share=0, best_cost=0, mean=None, std=None)
     with pytest.raises(TypeError, match="object"):
         bad.save(tmp_path / "x.npz")
 

@@ -9,17 +9,15 @@ import math
 import pytest
 import torch
 
-from realize.candidates import (
-    SEED_STRIDE,
-    BudgetError,
-    CandidateSpec,
-    SuccessiveHalving,
-    candidate_key,
-    plan_budget,
-)
-from realize.cross_entropy import CEConfig, CEState, CrossEntropyOptimizer, EvalResult
+from realize.budget import plan_budget
+from realize.candidates import SEED_STRIDE, CandidateSpec, SuccessiveHalving, candidate_key
+from realize.ce.config import CEConfig
+from realize.ce.optimizer import CrossEntropyOptimizer
+from realize.ce.state import CEState
+from realize.config import ConfigError
 from realize.param_layout import ParamLayout
 from realize.regions import Box
+from realize.searcher import EvalResult
 
 F64 = torch.float64
 
@@ -51,7 +49,7 @@ def fake(base: list[float], feasible: list[bool] | None = None, progress: list[f
     return evaluate
 
 
-CE = CEConfig(n_samples=16, n_elite=4, iterations=10, seed=3)
+CE = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=3)
 
 
 # ---------------------------------------------------------------- the budget rule
@@ -75,13 +73,13 @@ def test_schedule(k: int, T: int, m: int | None, survivors: tuple, m_auto: int, 
 
 
 def test_budget_errors_name_the_keys() -> None:
-    with pytest.raises(BudgetError, match=r"ce.iterations = 4 is too small for task.planner.top_k = 3.*1 x \(3 \+ 2\) = 5"):
+    with pytest.raises(ConfigError, match=r"ce.iterations = 4 is too small for task.planner.top_k = 3.*1 x \(3 \+ 2\) = 5"):
         plan_budget(3, 4, 16)
-    with pytest.raises(BudgetError, match=r"task.planner.round_iterations = 3.*or task.planner.round_iterations"):
+    with pytest.raises(ConfigError, match=r"task.planner.round_iterations = 3.*or task.planner.round_iterations"):
         plan_budget(2, 5, 16, 3)
-    with pytest.raises(BudgetError, match=r"round_iterations = 0 is invalid"):
+    with pytest.raises(ConfigError, match=r"round_iterations = 0 is invalid"):
         plan_budget(2, 5, 16, 0)
-    with pytest.raises(BudgetError, match=r"top_k = 0 is invalid"):
+    with pytest.raises(ConfigError, match=r"top_k = 0 is invalid"):
         plan_budget(0, 5, 16)
 
 
@@ -91,33 +89,34 @@ def test_budget_errors_name_the_keys() -> None:
 def test_cheapest_realized_candidate_wins_even_when_not_first() -> None:
     base = [50.0, 10.0, 30.0]  # the planner's first plan is the most expensive to realize
     calls: list[tuple[int, int]] = []
-    b = plan_budget(3, 10, CE.n_samples)
+    b = plan_budget(3, 10, CE.n_envs)
     sh = SuccessiveHalving(specs(3), CE, b)
     won = sh.run(fake(base, calls=calls))
     assert won.index == 1 and sh.winner == 1 and sh.done
     # round 0: everyone one iteration, in planner order; the worst (0) is dropped;
     # round 1: 1 and 2 one iteration each, 2 is dropped; the winner runs the remaining 5
     assert [i for i, _ in calls] == [0, 1, 2, 1, 2] + [1] * 5
-    assert {n for _, n in calls} == {CE.n_samples}
+    assert {n for _, n in calls} == {CE.n_envs}
     c = sh.candidates
     assert [x.dropped_round for x in c] == [0, None, 1]
     assert [x.iterations for x in c] == [1, 7, 2]
     assert [x.samples for x in c] == [16, 112, 32]
     # budget accounting: exactly the single-plan budget
     assert sh.spent_iterations == 10 and sh.spent_samples == b.total_samples == 10 * 16
-    assert len(c[1].records) == 7 and c[1].records[-1]["iteration"] == 6
-    s = sh.summary()
-    assert s["winner"] == {"index": 1, "plan": "plan1"} and s["spent_samples"] == 160
-    assert [x["dropped_round"] for x in s["candidates"]] == [0, None, 1]
-    assert s["candidates"][1]["feasible"] and 10.0 <= s["candidates"][1]["best_cost"] < 10.5
-    assert set(s["candidates"][1]["best_params"]) == {"P0", "P1"}  # its own parameters
-    assert len(s["candidates"][2]["best_z"]) == 6
+    assert c[1].optimizer.iterations_done == 7
+    rep = sh.report()
+    s = rep.halving
+    assert rep.lead == 1 and s.winner.to_json() == {"index": 1, "plan": "plan1"} and s.spent_samples == 160
+    assert [x.dropped_round for x in s.candidates] == [0, None, 1]
+    assert s.candidates[1].feasible and 10.0 <= s.candidates[1].best_cost < 10.5
+    assert set(s.candidates[1].best_params) == {"P0", "P1"}  # its own parameters
+    assert len(s.candidates[2].best_z) == 6
 
 
 def test_survivor_continues_its_own_search() -> None:
     """A candidate that survives a round picks up its CE where it stopped: its samples are those
     of one uninterrupted CE run (candidate 0 with the run's seed, others with their own)."""
-    b = plan_budget(2, 6, CE.n_samples, 2)  # rounds 2 x 2, winner 2 more
+    b = plan_budget(2, 6, CE.n_envs, 2)  # rounds 2 x 2, winner 2 more
     sh = SuccessiveHalving(specs(2), CE, b)
     seen: dict[int, list[torch.Tensor]] = {0: [], 1: []}
 
@@ -128,10 +127,10 @@ def test_survivor_continues_its_own_search() -> None:
     sh.run(evaluate)
     assert len(seen[0]) == 2 and len(seen[1]) == 4
     for i in (0, 1):
-        cfg = CEConfig(n_samples=16, n_elite=4, iterations=6, seed=CE.seed + SEED_STRIDE * i)
+        cfg = CEConfig(n_envs=16, n_elite=4, iterations=6, seed=CE.seed + SEED_STRIDE * i)
         ref = CrossEntropyOptimizer(specs(2)[i].layout, cfg)
         for Z in seen[i]:
-            assert torch.equal(ref.ask(), Z)
+            assert torch.equal(ref.ask().Z, Z)
             ref.tell(fake([5.0, 1.0])(i, Z))
 
 
@@ -140,14 +139,14 @@ def test_feasible_before_infeasible_and_progress_share() -> None:
     # candidate 3 is feasible but expensive: it must rank first anyway
     feas = [False, False, False, True]
     prog = [0.0, 2.0, 3.0, 0.0]
-    sh = SuccessiveHalving(specs(4), CE, plan_budget(4, 10, CE.n_samples))
+    sh = SuccessiveHalving(specs(4), CE, plan_budget(4, 10, CE.n_envs))
     sh.run(fake([0.0, 0.0, 0.0, 1000.0], feasible=feas, progress=prog))
     c = sh.candidates
     # n_actions are 3, 4, 5, 6: progress shares 0, 2/4, 3/5 -> round 0 keeps 3 and 2
     assert c[3].dropped_round is None and sh.winner == 3
     assert c[0].dropped_round == 0 and c[1].dropped_round == 0 and c[2].dropped_round == 1
-    assert c[3].summary()["best_cost"] >= 1000.0
-    assert c[0].summary()["best_cost"] is None and c[0].summary()["feasible"] is False
+    assert c[3].summary().best_cost >= 1000.0
+    assert c[0].summary().to_json()["best_cost"] is None and c[0].summary().feasible is False
 
 
 def test_candidate_key() -> None:
@@ -164,28 +163,28 @@ def test_candidate_key() -> None:
 
 def test_fewer_candidates_than_top_k_and_a_single_one() -> None:
     # the planner returned one plan although top_k asked for more: a plain CE run of the budget
-    sh = SuccessiveHalving(specs(1), CE, plan_budget(1, 4, CE.n_samples))
+    sh = SuccessiveHalving(specs(1), CE, plan_budget(1, 4, CE.n_envs))
     assert sh.winner == 0 and sh.in_final
     won = sh.run(fake([2.0]))
     assert won.index == 0 and won.iterations == 4 and won.dropped_round is None
-    assert sh.spent_samples == 4 * CE.n_samples
+    assert sh.spent_samples == 4 * CE.n_envs
 
 
 def test_ties_keep_planner_order_and_stop_callback() -> None:
-    sh = SuccessiveHalving(specs(2), CE, plan_budget(2, 4, CE.n_samples, 1))
+    sh = SuccessiveHalving(specs(2), CE, plan_budget(2, 4, CE.n_envs, 1))
     sh.run(lambda i, Z: EvalResult(cost=torch.full((Z.shape[0],), 7.0, dtype=F64),
                                    feasible=torch.ones(Z.shape[0], dtype=torch.bool)))
     assert sh.winner == 0 and sh.candidates[1].dropped_round == 0
 
-    sh = SuccessiveHalving(specs(3), CE, plan_budget(3, 10, CE.n_samples))
+    sh = SuccessiveHalving(specs(3), CE, plan_budget(3, 10, CE.n_envs))
     seen = []
     sh.run(fake([3.0, 2.0, 1.0]), on_iteration=lambda c, rec: seen.append(c.index) or len(seen) == 2)
     assert seen == [0, 1] and not sh.done and sh.winner is None and sh.spent_iterations == 2
-    assert sh.summary()["winner"] is None and sh.leader == 1
+    assert sh.report().halving.winner is None and sh.leader == 1
 
 
 def test_converged_candidates_leave_their_iterations_to_the_winner() -> None:
-    cfg = CEConfig(n_samples=16, n_elite=4, iterations=10, seed=0, converge_std=0.5, min_std=0.01)
+    cfg = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=0, converge_std=0.5, min_std=0.01)
     sh = SuccessiveHalving(specs(2), cfg, plan_budget(2, 10, 16))  # m = 3
     sh.run(fake([1.0, 2.0]))
     assert sh.spent_iterations <= 10 and sh.spent_samples == 16 * sh.spent_iterations
@@ -195,8 +194,39 @@ def test_converged_candidates_leave_their_iterations_to_the_winner() -> None:
 def test_bad_construction() -> None:
     with pytest.raises(ValueError, match="budget is for 3 candidates"):
         SuccessiveHalving(specs(2), CE, plan_budget(3, 10, 16))
-    lin = CEConfig(n_samples=16, n_elite=4, iterations=10, schedule="linear", n_samples_end=8)
+    lin = CEConfig(n_envs=16, n_elite=4, iterations=10, schedule="linear", n_envs_end=8)
     with pytest.raises(ValueError, match="schedule"):
         SuccessiveHalving(specs(2), lin, plan_budget(2, 10, 16))
     with pytest.raises(ValueError, match="at least one"):
         SuccessiveHalving([], CE, plan_budget(1, 10, 16))
+
+
+def test_state_dict_round_trip_resumes_the_halving_exactly() -> None:
+    """A halving run paused after any iteration and restored from its JSON state into a fresh
+    ``SuccessiveHalving`` asks for the same batches and ends with the same winner and numbers."""
+    import json
+
+    base = [50.0, 10.0, 30.0]
+    b = plan_budget(3, 10, CE.n_envs)
+    ref_calls: list[tuple[int, torch.Tensor]] = []
+    ref = SuccessiveHalving(specs(3), CE, b)
+    ref.run(lambda i, Z: ref_calls.append((i, Z.clone())) or fake(base)(i, Z))
+    for pause in (1, 3, 4, 7):
+        sh = SuccessiveHalving(specs(3), CE, b)
+        for _ in range(pause):
+            batch = sh.ask()
+            sh.tell(fake(base)(batch.candidate, batch.Z))
+        again = SuccessiveHalving(specs(3), CE, b)
+        again.load_state_dict(json.loads(json.dumps(again_state := sh.state_dict())))
+        assert again.state_dict() == again_state and again.iterations_done == pause
+        k = pause
+        while (batch := again.ask()) is not None:
+            i, Z = ref_calls[k]
+            assert batch.candidate == i and torch.equal(batch.Z, Z)
+            again.tell(fake(base)(batch.candidate, batch.Z))
+            k += 1
+        assert k == len(ref_calls) and again.winner == ref.winner
+        assert again.report().halving.to_json() == ref.report().halving.to_json()
+    other = SuccessiveHalving(specs(2), CE, plan_budget(2, 10, CE.n_envs))
+    with pytest.raises(ValueError, match="not this run's"):
+        other.load_state_dict(ref.state_dict())

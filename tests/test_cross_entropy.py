@@ -1,4 +1,4 @@
-"""Tests for realize.cross_entropy on toy cost functions (no simulator)."""
+"""Tests for the cross-entropy search (realize.ce) on toy cost functions (no simulator)."""
 
 from __future__ import annotations
 
@@ -8,20 +8,15 @@ import math
 import pytest
 import torch
 
-from realize.cross_entropy import (
-    CEConfig,
-    CEState,
-    CrossEntropyOptimizer,
-    EvalResult,
-    kmeans,
-    knn_mean,
-    mode_counts,
-    optimize,
-    rank_samples,
-)
+from realize.ce.config import CEConfig
+from realize.ce.mixture import kmeans, mode_counts
+from realize.ce.optimizer import CrossEntropyOptimizer, optimize
+from realize.ce.ranking import knn_mean, rank_samples
+from realize.ce.state import CEState
 from realize.hemisphere import Hemisphere
 from realize.param_layout import ParamLayout
 from realize.regions import Annulus, Box, Fixed
+from realize.searcher import EvalResult
 
 F64 = torch.float64
 
@@ -45,7 +40,7 @@ def quadratic(target):
 
 def test_shifted_quadratic_minimum():
     target = [1.3, -2.1]
-    res = optimize(box_layout(), quadratic(target), CEConfig(n_samples=200, n_elite=10, iterations=15, seed=1))
+    res = optimize(box_layout(), quadratic(target), CEConfig(n_envs=200, n_elite=10, iterations=15, seed=1))
     t = torch.tensor(target, dtype=F64)
     assert res.best_feasible
     assert float((res.best_z - t).norm()) < 0.05
@@ -61,7 +56,7 @@ def test_constrained_optimum_on_boundary():
     def evaluate(Z):
         return EvalResult(cost=(Z**2).sum(1), feasible=Z.sum(1) >= 1.0)
 
-    res = optimize(box_layout(-3, 3), evaluate, CEConfig(n_samples=300, n_elite=15, iterations=20, seed=2))
+    res = optimize(box_layout(-3, 3), evaluate, CEConfig(n_envs=300, n_elite=15, iterations=20, seed=2))
     assert res.best_feasible and float(res.best_z.sum()) >= 1.0
     assert float((res.best_z - torch.tensor([0.5, 0.5], dtype=F64)).norm()) < 0.08
     assert abs(res.best_cost - 0.5) < 0.02
@@ -75,7 +70,7 @@ def test_constrained_optimum_interior_with_sparse_feasible_set():
         d = (Z - c).norm(dim=1)
         return EvalResult(cost=((Z - target) ** 2).sum(1), feasible=d <= 1.0, progress=-d)
 
-    res = optimize(box_layout(-5, 5), evaluate, CEConfig(n_samples=200, n_elite=10, iterations=15, seed=3))
+    res = optimize(box_layout(-5, 5), evaluate, CEConfig(n_envs=200, n_elite=10, iterations=15, seed=3))
     assert res.best_feasible
     assert float((res.best_z - target).norm()) < 0.05
     assert 0.0 < res.history[0].success_share < 0.1
@@ -99,7 +94,7 @@ def test_mixed_regions_problem():
         cost = (p["base"] - goal_base).norm(dim=1) + (p["grasp"] - goal_grasp).norm(dim=1)
         return EvalResult(cost=cost, feasible=torch.ones(Z.shape[0], dtype=torch.bool))
 
-    res = optimize(lay, evaluate, CEConfig(n_samples=200, n_elite=10, iterations=15, seed=4))
+    res = optimize(lay, evaluate, CEConfig(n_envs=200, n_elite=10, iterations=15, seed=4))
     assert torch.allclose(res.best_params["base"][0], torch.tensor([1.0, 0.0], dtype=F64), atol=0.03)
     assert torch.allclose(res.best_params["grasp"][0], torch.tensor([0.0, 0.2, 1.0], dtype=F64), atol=0.03)
     assert float(res.best_params["torso"][0, 0]) == 0.3
@@ -116,7 +111,7 @@ def noisy_problem(Z):
 
 
 def test_same_seed_identical_and_different_seed_differs():
-    cfg = CEConfig(n_samples=64, n_elite=8, iterations=6, seed=7)
+    cfg = CEConfig(n_envs=64, n_elite=8, iterations=6, seed=7)
     a = optimize(box_layout(), noisy_problem, cfg)
     b = optimize(box_layout(), noisy_problem, CEConfig(**cfg.to_dict()))
     for ha, hb in zip(a.history, b.history):
@@ -127,7 +122,7 @@ def test_same_seed_identical_and_different_seed_differs():
 
 
 def test_resume_from_json_state_is_bit_identical():
-    cfg = CEConfig(n_samples=50, n_elite=5, iterations=8, seed=11, uniform_share=0.2)
+    cfg = CEConfig(n_envs=50, n_elite=5, iterations=8, seed=11, uniform_share=0.2)
     full = optimize(box_layout(), noisy_problem, cfg)
 
     saved: dict = {}
@@ -149,32 +144,62 @@ def test_resume_from_json_state_is_bit_identical():
 
 
 def test_ask_tell_matches_run_and_ask_is_repeatable():
-    cfg = CEConfig(n_samples=40, n_elite=4, iterations=3, seed=5)
+    cfg = CEConfig(n_envs=40, n_elite=4, iterations=3, seed=5)
     opt = CrossEntropyOptimizer(box_layout(), cfg)
     recs = []
     while not opt.done:
-        Z = opt.ask()
-        assert torch.equal(Z, opt.ask())  # same pending batch
+        Z = opt.ask().Z
+        assert torch.equal(Z, opt.ask().Z)  # same pending batch
         recs.append(opt.tell(noisy_problem(Z)))
     ref = optimize(box_layout(), noisy_problem, cfg)
     for a, b in zip(recs, ref.history):
         assert torch.equal(a.Z, b.Z)
     with pytest.raises(RuntimeError, match="ask"):
         opt.tell(noisy_problem(Z))
+    assert opt.ask() is None  # done
+
+
+def test_batches_carry_the_distribution_they_were_drawn_from():
+    opt = CrossEntropyOptimizer(box_layout(), CEConfig(n_envs=40, n_elite=4, iterations=3, seed=5))
+    first = opt.ask()
+    assert first.candidate is None and first.mean is None and first.std is None and first.weights is None
+    rec = opt.tell(noisy_problem(first.Z))
+    second = opt.ask()
+    assert torch.equal(second.mean, rec.mean) and torch.equal(second.std, rec.std)
+
+
+def test_state_dict_round_trip_continues_bit_identically():
+    """The Searcher protocol's checkpoint: state_dict -> JSON -> load_state_dict in a fresh
+    optimizer draws the samples the uninterrupted one draws."""
+    cfg = CEConfig(n_envs=30, n_elite=4, iterations=5, seed=3, n_modes=2, uniform_share=0.1)
+    full = optimize(box_layout(), noisy_problem, cfg)
+    opt = CrossEntropyOptimizer(box_layout(), cfg)
+    for _ in range(2):
+        Z = opt.ask().Z
+        opt.tell(noisy_problem(Z))
+    again = CrossEntropyOptimizer(box_layout(), cfg)
+    again.load_state_dict(json.loads(json.dumps(opt.state_dict())))
+    assert again.iterations_done == 2
+    rest = again.run(noisy_problem)
+    for hf, hr in zip(full.history[2:], rest.history):
+        assert torch.equal(hf.Z, hr.Z)
+    assert torch.equal(full.best_z, rest.best_z) and torch.equal(full.weights, rest.weights)
+    with pytest.raises(ValueError, match="malformed CE state"):
+        again.load_state_dict({"iteration": 1})
 
 
 # ---------------------------------------------------------------- schedule, fallback, stats
 
 
 def test_linear_schedule_counts():
-    cfg = CEConfig(n_samples=100, n_samples_end=20, schedule="linear", n_elite=5, iterations=5)
-    assert [cfg.n_samples_at(i) for i in range(5)] == [100, 80, 60, 40, 20]
+    cfg = CEConfig(n_envs=100, n_envs_end=20, schedule="linear", n_elite=5, iterations=5)
+    assert [cfg.n_envs_at(i) for i in range(5)] == [100, 80, 60, 40, 20]
     res = optimize(box_layout(), quadratic([0.0, 0.0]), cfg)
-    assert [h.n_samples for h in res.history] == [100, 80, 60, 40, 20]
-    journal = CEConfig(n_samples=3000, n_samples_end=300, schedule="linear", n_elite=50, iterations=20)
-    assert journal.n_samples_at(0) == 3000 and journal.n_samples_at(19) == 300
-    with pytest.raises(ValueError, match=r"ce\.n_elite \(30\).*only 20 at iteration 4"):
-        CEConfig(n_samples=100, n_samples_end=20, schedule="linear", n_elite=30, iterations=5)
+    assert [h.n_envs for h in res.history] == [100, 80, 60, 40, 20]
+    journal = CEConfig(n_envs=3000, n_envs_end=300, schedule="linear", n_elite=50, iterations=20)
+    assert journal.n_envs_at(0) == 3000 and journal.n_envs_at(19) == 300
+    with pytest.raises(ValueError, match=r"ce\.n_elite = 30 is invalid: .*<= ce\.n_envs_end = 20"):
+        CEConfig(n_envs=100, n_envs_end=20, schedule="linear", n_elite=30, iterations=5)
 
 
 def test_fallback_progress_when_nothing_feasible_at_iteration_0():
@@ -185,9 +210,9 @@ def test_fallback_progress_when_nothing_feasible_at_iteration_0():
             cost=(Z**2).sum(1), feasible=Z[:, 0] > 4.98, progress=torch.floor(Z[:, 0]), distance=-Z[:, 0]
         )
 
-    cfg = CEConfig(n_samples=100, n_elite=10, iterations=6, seed=0, fallback="progress")
+    cfg = CEConfig(n_envs=100, n_elite=10, iterations=6, seed=0, fallback="progress")
     opt = CrossEntropyOptimizer(box_layout(), cfg)
-    Z = opt.ask()
+    Z = opt.ask().Z
     res0 = evaluate(Z)
     assert not bool(res0.feasible.any())
     rec = opt.tell(res0)
@@ -205,7 +230,7 @@ def test_fallback_feasible_only_keeps_uniform_then_refits():
     def evaluate_none(Z):
         return EvalResult(cost=Z[:, 0], feasible=torch.zeros(Z.shape[0], dtype=torch.bool))
 
-    cfg = CEConfig(n_samples=50, n_elite=10, iterations=3, seed=0, fallback="feasible_only")
+    cfg = CEConfig(n_envs=50, n_elite=10, iterations=3, seed=0, fallback="feasible_only")
     res = optimize(box_layout(), evaluate_none, cfg)
     assert [h.refit for h in res.history] == ["kept"] * 3
     assert [h.sampled_from for h in res.history] == ["uniform"] * 3
@@ -217,18 +242,18 @@ def test_fallback_feasible_only_keeps_uniform_then_refits():
         return EvalResult(cost=Z[:, 0], feasible=feas)
 
     opt = CrossEntropyOptimizer(box_layout(), cfg)
-    Z = opt.ask()
+    Z = opt.ask().Z
     rec = opt.tell(evaluate_few(Z))
     assert rec.refit == "feasible_only" and rec.elite_idx.numel() == 3
     assert torch.allclose(rec.mean, Z[:3].mean(0))
 
-    keep = CEConfig(n_samples=50, n_elite=10, iterations=2, seed=0, fallback="keep")
+    keep = CEConfig(n_envs=50, n_elite=10, iterations=2, seed=0, fallback="keep")
     res = optimize(box_layout(), evaluate_few, keep)
     assert [h.refit for h in res.history] == ["kept", "kept"] and res.best_feasible
 
 
 def test_best_cost_never_increases_and_is_global_best():
-    cfg = CEConfig(n_samples=60, n_elite=6, iterations=10, seed=3, alpha=0.7)
+    cfg = CEConfig(n_envs=60, n_elite=6, iterations=10, seed=3, alpha=0.7)
     res = optimize(box_layout(), noisy_problem, cfg)
     best = [h.best_cost for h in res.history]
     assert all(b2 <= b1 for b1, b2 in zip(best, best[1:]))
@@ -239,8 +264,8 @@ def test_best_cost_never_increases_and_is_global_best():
     assert torch.equal(res.history[it].Z[row], res.best_z)
     h = res.history[-1]
     assert h.elite_cost_min <= h.elite_cost_mean <= h.elite_cost_max
-    assert h.success_share == h.n_feasible / h.n_samples
-    json.dumps(h.summary())
+    assert h.success_share == h.n_feasible / h.n_envs
+    json.dumps(h.summary().to_json(), allow_nan=False)
 
 
 def test_rank_samples_order():
@@ -254,18 +279,18 @@ def test_rank_samples_order():
 
 
 def test_min_std_floor_and_convergence_stop():
-    cfg = CEConfig(n_samples=100, n_elite=10, iterations=50, seed=0, min_std=0.01, converge_std=0.02)
+    cfg = CEConfig(n_envs=100, n_elite=10, iterations=50, seed=0, min_std=0.01, converge_std=0.02)
     res = optimize(box_layout(), quadratic([0.5, 0.5]), cfg)
     assert res.converged and len(res.history) < 50
     assert float(res.std.min()) >= 0.01 and float(res.std.max()) < 0.02
     lay = ParamLayout({"a": Fixed([1.0]), "b": Box([0.0], [1.0])})
-    res = optimize(lay, quadratic([1.0, 0.2]), CEConfig(n_samples=50, n_elite=5, iterations=4, min_std=0.05))
+    res = optimize(lay, quadratic([1.0, 0.2]), CEConfig(n_envs=50, n_elite=5, iterations=4, min_std=0.05))
     assert float(res.std[0]) == 0.05  # the fixed column sits at the floor
     assert bool((res.history[-1].Z[:, 0] == 1.0).all())
 
 
 def test_uniform_share_and_rank_weighted():
-    cfg = CEConfig(n_samples=100, n_elite=10, iterations=8, seed=2, uniform_share=0.25, rank_weighted=True)
+    cfg = CEConfig(n_envs=100, n_elite=10, iterations=8, seed=2, uniform_share=0.25, rank_weighted=True)
     res = optimize(box_layout(), quadratic([-1.0, 2.0]), cfg)
     assert float((res.best_z - torch.tensor([-1.0, 2.0], dtype=F64)).norm()) < 0.1
     last = res.history[-1].Z
@@ -275,8 +300,8 @@ def test_uniform_share_and_rank_weighted():
 
 def test_alpha_smoothing_blends_with_previous():
     """The first refit blends with the moments of the uniform batch it was fitted on."""
-    a = optimize(box_layout(), quadratic([3.0, 3.0]), CEConfig(n_samples=50, n_elite=5, iterations=1, seed=0))
-    b = optimize(box_layout(), quadratic([3.0, 3.0]), CEConfig(n_samples=50, n_elite=5, iterations=1, seed=0, alpha=0.5))
+    a = optimize(box_layout(), quadratic([3.0, 3.0]), CEConfig(n_envs=50, n_elite=5, iterations=1, seed=0))
+    b = optimize(box_layout(), quadratic([3.0, 3.0]), CEConfig(n_envs=50, n_elite=5, iterations=1, seed=0, alpha=0.5))
     Z0 = a.history[0].Z
     assert torch.allclose(b.mean, 0.5 * a.mean + 0.5 * Z0.mean(0))
     assert torch.allclose(b.std, 0.5 * a.std + 0.5 * Z0.std(0, correction=0))
@@ -284,7 +309,7 @@ def test_alpha_smoothing_blends_with_previous():
 
 def test_callback_sees_every_iteration():
     seen = []
-    optimize(box_layout(), quadratic([0, 0]), CEConfig(n_samples=20, n_elite=2, iterations=4),
+    optimize(box_layout(), quadratic([0, 0]), CEConfig(n_envs=20, n_elite=2, iterations=4),
              on_iteration=lambda rec, st: seen.append((rec.iteration, st.iteration)))
     assert seen == [(0, 1), (1, 2), (2, 3), (3, 4)]
 
@@ -295,24 +320,25 @@ def test_callback_sees_every_iteration():
 @pytest.mark.parametrize(
     "kwargs, msg",
     [
-        ({"iterations": 0}, r"ce\.iterations must be >= 1"),
-        ({"n_elite": 300}, r"ce\.n_elite \(300\) must be <="),
-        ({"n_elite": 0}, r"ce\.n_elite must be >= 1"),
-        ({"fallback": "magic"}, r"ce\.fallback must be one of"),
-        ({"schedule": "cosine"}, r"ce\.schedule must be one of"),
-        ({"schedule": "linear"}, r"ce\.n_samples_end"),
-        ({"n_samples_end": 50}, r"ce\.n_samples_end .*only used with schedule 'linear'"),
+        ({"iterations": 0}, r"ce\.iterations = 0 is invalid: must be >= 1"),
+        ({"n_elite": 300}, r"ce\.n_elite = 300 is invalid: must be <= ce\.n_envs = 200"),
+        ({"n_elite": 0}, r"ce\.n_elite = 0 is invalid: must be >= 1"),
+        ({"fallback": "magic"}, r"ce\.fallback = 'magic' is invalid: allowed"),
+        ({"schedule": "cosine"}, r"ce\.schedule = 'cosine' is invalid: allowed"),
+        ({"schedule": "linear"}, r"ce\.n_envs_end"),
+        ({"n_envs_end": 50}, r"ce\.n_envs_end .*only used with schedule 'linear'"),
         ({"alpha": 0.0}, r"ce\.alpha"),
         ({"min_std": -1.0}, r"ce\.min_std"),
         ({"converge_std": 1e-4}, r"ce\.converge_std .* must be > ce\.min_std"),
         ({"uniform_share": 1.0}, r"ce\.uniform_share"),
-        ({"n_modes": 0}, r"ce\.n_modes must be >= 1"),
+        ({"n_modes": 0}, r"ce\.n_modes = 0 is invalid: must be >= 1"),
         ({"n_modes": 11}, r"ce\.n_modes \(11\) must be <= ce\.n_elite \(10\)"),
-        ({"knn_robust": -1}, r"ce\.knn_robust must be >= 0"),
+        ({"knn_robust": -1}, r"ce\.knn_robust = -1 is invalid: must be >= 0"),
         ({"knn_robust": 201}, r"ce\.knn_robust \(201\) must be <= the number of samples"),
-        ({"n_modes": 1.5}, r"ce\.n_modes must be an integer"),
+        ({"n_modes": 1.5}, r"ce\.n_modes = 1\.5 is invalid: must be an integer"),
         ({"failure_cost": float("nan")}, r"ce\.failure_cost"),
-        ({"n_samples": 2.5}, r"ce\.n_samples must be an integer"),
+        ({"n_envs": 2.5}, r"ce\.n_envs = 2\.5 is invalid: must be an integer"),
+        ({"schedule": "linear", "n_envs_end": 300}, r"ce\.n_envs_end = 300 is invalid: must be <= ce\.n_envs = 200"),
         ({"dtype": "float16"}, r"ce\.dtype"),
     ],
 )
@@ -322,17 +348,17 @@ def test_config_validation_names_key(kwargs, msg):
 
 
 def test_config_from_dict():
-    cfg = CEConfig.from_dict({"n_samples": 3000.0, "n_samples_end": 300, "schedule": "linear", "n_elite": 50, "iterations": 20})
-    assert cfg.n_samples == 3000 and cfg.n_samples_at(19) == 300
-    assert CEConfig.from_dict(cfg.to_dict()) == cfg
+    cfg = CEConfig.from_mapping({"n_envs": 3000.0, "n_envs_end": 300, "schedule": "linear", "n_elite": 50, "iterations": 20})
+    assert cfg.n_envs == 3000 and cfg.n_envs_at(19) == 300
+    assert CEConfig.from_mapping(cfg.to_dict()) == cfg
     with pytest.raises(ValueError, match=r"^configs/ce/x\.yaml: unknown key\(s\) \['n_elites'\]"):
-        CEConfig.from_dict({"n_elites": 5}, where="configs/ce/x.yaml")
+        CEConfig.from_mapping({"n_elites": 5}, where="configs/ce/x.yaml")
     with pytest.raises(ValueError, match=r"^configs/ce/x\.yaml\.n_elite"):
-        CEConfig.from_dict({"n_elite": 500}, where="configs/ce/x.yaml")
+        CEConfig.from_mapping({"n_elite": 500}, where="configs/ce/x.yaml")
 
 
 def test_bad_eval_result_shape_and_bad_state():
-    opt = CrossEntropyOptimizer(box_layout(), CEConfig(n_samples=10, n_elite=2, iterations=1))
+    opt = CrossEntropyOptimizer(box_layout(), CEConfig(n_envs=10, n_elite=2, iterations=1))
     opt.ask()
     with pytest.raises(ValueError, match=r"EvalResult\.feasible: expected shape \(10,\)"):
         opt.tell(EvalResult(cost=torch.zeros(10), feasible=torch.ones(9, dtype=torch.bool)))
@@ -366,7 +392,7 @@ def test_two_modes_keep_both_minima_single_gaussian_does_not():
     kept = {1: 0, 2: 0}
     for seed in range(10):
         for k in (1, 2):
-            cfg = CEConfig(n_samples=200, n_elite=20, iterations=6, seed=seed, n_modes=k, alpha=0.7)
+            cfg = CEConfig(n_envs=200, n_elite=20, iterations=6, seed=seed, n_modes=k, alpha=0.7)
             res = optimize(box_layout(), bimodal, cfg)
             kept[k] += min(mode_shares(res.history[-1].Z)) > 0.2
             if k == 2:
@@ -381,9 +407,9 @@ def test_two_modes_keep_both_minima_single_gaussian_does_not():
 
 def test_two_modes_fit_one_normal_per_cluster():
     """One refit from a uniform batch: the 10 elites split 5/5 between the minima."""
-    cfg = CEConfig(n_samples=400, n_elite=10, iterations=2, seed=0, n_modes=2)
+    cfg = CEConfig(n_envs=400, n_elite=10, iterations=2, seed=0, n_modes=2)
     opt = CrossEntropyOptimizer(box_layout(), cfg)
-    Z = opt.ask()
+    Z = opt.ask().Z
     rec = opt.tell(bimodal(Z))
     elite = Z[rec.elite_idx]
     at_a = elite[:, 0] < 0
@@ -391,14 +417,14 @@ def test_two_modes_fit_one_normal_per_cluster():
     assert torch.allclose(torch.tensor(means[0], dtype=F64), elite[at_a].mean(0))
     assert torch.allclose(torch.tensor(means[1], dtype=F64), elite[~at_a].mean(0))
     assert sorted(rec.weights.tolist()) == pytest.approx(sorted([at_a.to(F64).mean().item(), 1 - at_a.to(F64).mean().item()]))
-    Z1 = opt.ask()  # rows of mode 0 first, then mode 1, counts from the weights
+    Z1 = opt.ask().Z  # rows of mode 0 first, then mode 1, counts from the weights
     n0 = int(mode_counts(rec.weights, 400)[0])
     c0 = rec.mean[0]
     assert float((Z1[:n0] - c0).norm(dim=1).max()) < float((Z1[n0:] - c0).norm(dim=1).min())
 
 
 def test_two_modes_same_seed_identical_and_resume_from_json():
-    cfg = CEConfig(n_samples=60, n_elite=8, iterations=6, seed=3, n_modes=3, alpha=0.8, rank_weighted=True,
+    cfg = CEConfig(n_envs=60, n_elite=8, iterations=6, seed=3, n_modes=3, alpha=0.8, rank_weighted=True,
                    uniform_share=0.1)
     a = optimize(box_layout(), noisy_problem, cfg)
     b = optimize(box_layout(), noisy_problem, CEConfig(**cfg.to_dict()))
@@ -430,7 +456,7 @@ def test_two_modes_same_seed_identical_and_resume_from_json():
                                                                mean=torch.zeros(2), std=torch.ones(2)))
     with pytest.raises(ValueError, match=r"state\.mean: expected shape \(2,\)"):
         CrossEntropyOptimizer(box_layout(), CEConfig(), state=state)
-    assert "weights" not in optimize(box_layout(), quadratic([0, 0]), CEConfig(n_samples=20, n_elite=2,
+    assert "weights" not in optimize(box_layout(), quadratic([0, 0]), CEConfig(n_envs=20, n_elite=2,
                                                                                  iterations=2)).state.to_dict()
 
 
@@ -443,18 +469,18 @@ def test_mixture_with_fewer_distinct_elites_than_modes():
         feas[:2] = True
         return EvalResult(cost=Z[:, 0], feasible=feas)
 
-    cfg = CEConfig(n_samples=30, n_elite=5, iterations=2, seed=0, n_modes=4, fallback="feasible_only")
+    cfg = CEConfig(n_envs=30, n_elite=5, iterations=2, seed=0, n_modes=4, fallback="feasible_only")
     opt = CrossEntropyOptimizer(box_layout(), cfg)
-    Z = opt.ask()
+    Z = opt.ask().Z
     Z_same = Z.clone()
     Z_same[1] = Z_same[0]
-    opt._pending = (Z_same, *opt._pending[1:])  # two identical feasible rows
+    opt._pending[0].Z = Z_same  # two identical feasible rows
     rec = opt.tell(evaluate(Z_same))
     assert rec.refit == "feasible_only"
     assert rec.weights.tolist() == [1.0, 0.0, 0.0, 0.0]
     assert torch.equal(rec.mean[0], Z_same[0]) and bool((rec.std[0] == cfg.min_std).all())
     assert torch.allclose(rec.mean[1:], Z_same.mean(0).expand(3, 2))
-    Z1 = opt.ask()
+    Z1 = opt.ask().Z
     assert bool(((Z1 - Z_same[0]).norm(dim=1) < 0.01).all())
 
 
@@ -491,8 +517,8 @@ def test_knn_robust_prefers_wide_basin_plain_ce_the_spike():
     wide basin; both report the spike sample (cost 0) as the best single sample."""
     lay = ParamLayout({"p": Box([-5.0], [5.0])})
     for seed in range(10):
-        plain = optimize(lay, spike_and_basin, CEConfig(n_samples=200, n_elite=5, iterations=8, seed=seed))
-        robust = optimize(lay, spike_and_basin, CEConfig(n_samples=200, n_elite=5, iterations=8, seed=seed,
+        plain = optimize(lay, spike_and_basin, CEConfig(n_envs=200, n_elite=5, iterations=8, seed=seed))
+        robust = optimize(lay, spike_and_basin, CEConfig(n_envs=200, n_elite=5, iterations=8, seed=seed,
                                                           knn_robust=20))
         assert abs(float(plain.mean[0]) - 2.5) < 0.1, seed
         assert abs(float(robust.mean[0]) + 2.0) < 0.1, seed
@@ -500,7 +526,7 @@ def test_knn_robust_prefers_wide_basin_plain_ce_the_spike():
         h = robust.history[0]
         assert h.robust_cost is not None and h.best_idx == int(torch.argmin(h.cost))
         assert h.elite_idx[0] != h.best_idx  # elites follow the robust score, the best stays the best
-        again = optimize(lay, spike_and_basin, CEConfig(n_samples=200, n_elite=5, iterations=8, seed=seed,
+        again = optimize(lay, spike_and_basin, CEConfig(n_envs=200, n_elite=5, iterations=8, seed=seed,
                                                          knn_robust=20))
         assert all(torch.equal(x.Z, y.Z) for x, y in zip(robust.history, again.history))
 
@@ -520,18 +546,18 @@ def test_knn_mean_and_failure_cost():
     Z = torch.tensor([[0.0], [0.1], [0.2], [5.0], [5.1], [5.2]], dtype=F64)
     feas = torch.tensor([True, False, False, True, True, True])
     cost = torch.tensor([1.0, 9.0, 9.0, 2.0, 2.0, 2.0], dtype=F64)
-    cfg = CEConfig(n_samples=6, n_elite=2, iterations=1, knn_robust=3, failure_cost=100.0)
+    cfg = CEConfig(n_envs=6, n_elite=2, iterations=1, knn_robust=3, failure_cost=100.0)
     opt = CrossEntropyOptimizer(lay, cfg)
     opt.ask()
-    opt._pending = (Z, *opt._pending[1:])
+    opt._pending[0].Z = Z
     rec = opt.tell(EvalResult(cost=cost, feasible=feas))
     assert rec.robust_cost[0].item() == pytest.approx(67.0)
     assert sorted(rec.elite_idx.tolist()) == [3, 4] and rec.best_idx == 0
     # the failure cost may come from the evaluator; without any, infeasible rows are an error
-    cfg2 = CEConfig(n_samples=6, n_elite=2, iterations=1, knn_robust=3)
+    cfg2 = CEConfig(n_envs=6, n_elite=2, iterations=1, knn_robust=3)
     opt = CrossEntropyOptimizer(lay, cfg2)
     opt.ask()
-    opt._pending = (Z, *opt._pending[1:])
+    opt._pending[0].Z = Z
     rec = opt.tell(EvalResult(cost=cost, feasible=feas, failure_cost=100.0))
     assert rec.robust_cost[0].item() == pytest.approx(67.0)
     opt = CrossEntropyOptimizer(lay, cfg2)
@@ -549,7 +575,7 @@ def test_cuda_evaluator_gets_device_tensors_and_same_samples():
         seen.append(Z.device.type)
         return quadratic([0.0, 0.0])(Z.cpu())
 
-    cfg = CEConfig(n_samples=30, n_elite=3, iterations=3, seed=1)
+    cfg = CEConfig(n_envs=30, n_elite=3, iterations=3, seed=1)
     g = optimize(box_layout(), evaluate, cfg, device="cuda")
     c = optimize(box_layout(), quadratic([0.0, 0.0]), cfg)
     assert seen == ["cuda"] * 3

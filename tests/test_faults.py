@@ -10,9 +10,8 @@ import pytest
 import torch
 
 from realize.realization.context import StepContext
-from realize.realization.rollout import PlanRealizer
+from realize.realizers import open_realization
 from realize.run_config import build_run_spec
-from realize.scene import BatchedScene
 from tests.test_rollout import GOOD, SEED_TASK, compose_config
 
 N, BAD = 8, 3
@@ -24,8 +23,8 @@ def test_nan_targets_in_one_plan_leave_the_other_seven_unchanged(monkeypatch: py
     Z = spec.task.layout.sample_uniform(N, torch.Generator().manual_seed(11), dtype=torch.float64)
     Z[0] = torch.tensor(GOOD, dtype=torch.float64)
     Z[BAD] = torch.tensor(GOOD, dtype=torch.float64)  # a plan that succeeds without the fault
-    with BatchedScene(N, spec.geometry_cfg, spec.sim) as scene:
-        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
+    scene, (realizer,) = open_realization(spec, n_envs=N)
+    with scene:
         clean = realizer.rollout(Z, record=True)
 
         original = StepContext.run_fabric

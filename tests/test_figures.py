@@ -1,5 +1,5 @@
 """Tests for realize.figures and scripts/fig{2,3,4}.py on run directories built from a synthetic
-CE run in the app's file format (tests/_synthetic.py)."""
+CE run in the app's file format (tests/_synthetic.py), and the figure inputs of realize.run_dir."""
 
 from __future__ import annotations
 
@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 
 from _synthetic import PARAMS, run_synthetic, write_run_dir
-from realize import figures as F
+from realize.figures.fig2 import fig2
+from realize.figures.fig3 import fig3, sampling_distributions
+from realize.figures.fig4 import fig4, find_run_dirs
+from realize.param_layout import ParamLayout
+from realize.run_dir.directory import RunDir
+from realize.run_dir.history import History
+from realize.run_dir.names import SCENE_FILE
+from realize.run_dir.scene_files import load_trajectories, save_scene, save_trajectories
 
 REPO = Path(__file__).resolve().parents[1]
 TESTS = Path(__file__).resolve().parent
@@ -49,7 +56,7 @@ def run_dir(synthetic, tmp_path_factory):
 
 
 def test_fig2_png_and_csv(run_dir, synthetic):
-    png, csv_path = F.fig2(run_dir, [0, 3], max_points=20)
+    png, csv_path = fig2(run_dir, [0, 3], max_points=20)
     assert png == run_dir / "figures" / "fig2.png" and csv_path == png.with_suffix(".csv")
     _png_ok(png)
     rows = _rows(csv_path)
@@ -58,7 +65,7 @@ def test_fig2_png_and_csv(run_dir, synthetic):
         rec = synthetic.records[k]
         mine = [r for r in rows if r["iteration"] == str(k)]
         base = [r for r in mine if r["series"] == "base"]
-        assert len({r["sample"] for r in base}) == rec.n_samples
+        assert len({r["sample"] for r in base}) == rec.n_envs
         assert max(int(r["step"]) for r in base) <= 20
         ee = [r for r in mine if r["series"] == "ee"]
         assert ee and {r["sample"] for r in ee} == {str(int(rec.elite_idx[0]))}
@@ -71,17 +78,17 @@ def test_fig2_png_and_csv(run_dir, synthetic):
 
 
 def test_fig2_default_iterations_cap_and_errors(run_dir, tmp_path):
-    png, csv_path = F.fig2(run_dir, out_png=tmp_path / "f2.png", max_plans=5)
+    png, csv_path = fig2(run_dir, out_png=tmp_path / "f2.png", max_plans=5)
     _png_ok(png)
     rows = _rows(csv_path)
     assert sorted({int(r["iteration"]) for r in rows}) == [0, 2, 3]
     assert len({(r["iteration"], r["sample"]) for r in rows if r["series"] == "base"}) == 3 * 5
     with pytest.raises(FileNotFoundError, match="trajectories_iter7.npz"):
-        F.fig2(run_dir, [7], out_png=tmp_path / "x.png")
+        fig2(run_dir, [7], out_png=tmp_path / "x.png")
 
 
 def test_fig3_png_and_csv(run_dir, synthetic):
-    png, csv_path = F.fig3(run_dir)
+    png, csv_path = fig3(run_dir)
     _png_ok(png)
     rows = _rows(csv_path)
     layout = synthetic.layout
@@ -103,32 +110,32 @@ def test_fig3_png_and_csv(run_dir, synthetic):
 
 def test_scene_from_result_config(synthetic, tmp_path):
     d = write_run_dir(synthetic, tmp_path / "noscene", scene=False)
-    assert not (d / F.SCENE_FILE).exists()
-    data = F.load_run(d)
-    assert data.layout is not None and data.layout.to_dict() == F.ParamLayout.from_dict(PARAMS).to_dict()
-    assert data.geometry == synthetic.geometry and data.padding == 0.2
-    _png_ok(F.fig2(d, [1])[0])
+    assert not (d / SCENE_FILE).exists()
+    scene = RunDir(d).scene()
+    assert scene is not None and scene.layout.to_dict() == ParamLayout.from_dict(PARAMS).to_dict()
+    assert scene.geometry == synthetic.geometry and scene.padding == 0.2
+    _png_ok(fig2(d, [1])[0])
     # a run dir without any scene description: a clear error
     (d / "result.json").write_text(json.dumps({"success_per_iter": [0.1], "best_cost_per_iter": [None]}))
     with pytest.raises(FileNotFoundError, match="scene.json"):
-        F.fig2(d, [1])
+        fig2(d, [1])
 
 
 def test_scene_json_round_trip(synthetic, tmp_path):
-    F.save_scene(tmp_path, synthetic.layout, synthetic.geometry, padding=0.35)
-    data = F.load_run(write_run_dir(synthetic, tmp_path, trajectories=False, scene=False))
-    assert data.geometry == synthetic.geometry and data.padding == 0.35
+    save_scene(tmp_path, synthetic.layout, synthetic.geometry, padding=0.35)
+    scene = RunDir(write_run_dir(synthetic, tmp_path, trajectories=False, scene=False)).scene()
+    assert scene is not None and scene.geometry == synthetic.geometry and scene.padding == 0.35
 
 
 def test_save_trajectories_validates(tmp_path):
     base = np.zeros((3, 5, 2))
     with pytest.raises(ValueError, match="traj_ee"):
-        F.save_trajectories(tmp_path, 0, base, np.zeros((3, 4, 3)), np.ones(3, bool), 0)
+        save_trajectories(tmp_path, 0, base, np.zeros((3, 4, 3)), np.ones(3, bool), 0)
     with pytest.raises(ValueError, match="feasible"):
-        F.save_trajectories(tmp_path, 0, base, np.zeros((3, 5, 3)), np.ones(2, bool), 0)
-    p = F.save_trajectories(tmp_path, 4, base, np.zeros((3, 5, 3)), np.ones(3, bool), 1)
+        save_trajectories(tmp_path, 0, base, np.zeros((3, 5, 3)), np.ones(2, bool), 0)
+    p = save_trajectories(tmp_path, 4, base, np.zeros((3, 5, 3)), np.ones(3, bool), 1)
     assert p.name == "trajectories_iter4.npz"
-    t = F.load_trajectories(tmp_path, 4)
+    t = load_trajectories(tmp_path, 4)
     assert t["traj_base"].dtype == np.float32 and int(t["best"]) == 1 and "Z" not in t
 
 
@@ -139,7 +146,7 @@ def test_fig4_mean_and_band(tmp_path):
     doc = json.loads((dirs[0] / "result.json").read_text())
     doc["best_cost_per_iter"][0] = None
     (dirs[0] / "result.json").write_text(json.dumps(doc))
-    png, csv_path = F.fig4(F.find_run_dirs([tmp_path]), tmp_path / "out" / "fig4.png")
+    png, csv_path = fig4(find_run_dirs([tmp_path]), tmp_path / "out" / "fig4.png")
     _png_ok(png)
     rows = _rows(csv_path)
     assert len(rows) == 3
@@ -153,19 +160,18 @@ def test_fig4_mean_and_band(tmp_path):
     assert rows[0]["cost_seed0"] == ""
 
 
-def test_history_written_by_results_module_loads(synthetic, tmp_path):
-    results = pytest.importorskip("realize.results")
-    h = results.History(synthetic.layout.column_names)
+def test_history_written_by_the_history_writer_loads(synthetic, tmp_path):
+    h = History(synthetic.layout.column_names)
     for r in synthetic.records:
         h.append({"Z": r.Z, "cost": r.cost, "feasible": r.feasible, "elite_idx": r.elite_idx},
-                 n_samples=r.n_samples, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean, std=r.std)
-    h.save(tmp_path / "history.npz")
-    F.save_scene(tmp_path, synthetic.layout, synthetic.geometry)
-    data = F.load_run(tmp_path)
-    m, s, kinds = data.sampling_distributions()
+                 n_envs=r.n_envs, success_share=r.success_share, best_cost=r.best_cost, mean=r.mean, std=r.std)
+    rd = RunDir(tmp_path)
+    rd.write_history(h)
+    rd.write_scene(synthetic.layout, synthetic.geometry)
+    m, s, kinds = sampling_distributions(rd.history_arrays())
     assert kinds[0] == "uniform" and kinds[-1] == "final" and np.isfinite(m).all()
-    np.testing.assert_allclose(data.success_per_iter(), [r.success_share for r in synthetic.records])
-    _png_ok(F.fig3(tmp_path)[0])
+    np.testing.assert_allclose(rd.success_per_iter(), [r.success_share for r in synthetic.records])
+    _png_ok(fig3(tmp_path)[0])
 
 
 # ---- the scripts ---------------------------------------------------------------------------

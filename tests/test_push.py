@@ -21,10 +21,12 @@ import torch
 
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
+from realize.config import ConfigError
 from realize.realization.goals import cube_in_container
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task
+from realize.run_config import RunSpec, build_run_spec
+from realize.task_plans import build_task
 from realize.scene import BatchedScene
 
 # columns: PushSide.x, PushSide.y, Stick_p.x, Stick_p.y, Stick_p.z
@@ -179,10 +181,9 @@ def test_bad_push_region_names_the_key(cfg: dict[str, Any], spec: RunSpec) -> No
 @pytest.mark.parametrize("key,value", [("push_depth", -0.1), ("push_speed", 0.0), ("push_pre_distance", float("nan")),
                                        ("goal_settle_s", -1.0)])
 def test_bad_push_setting_names_the_key(key: str, value: float) -> None:
-    from realize.config import ConfigError as SettingsError
     from realize.realization.config import RolloutConfig
 
-    with pytest.raises(SettingsError, match=rf"controller\.{key} = "):
+    with pytest.raises(ConfigError, match=rf"controller\.{key} = "):
         RolloutConfig.from_mapping({key: value})
 
 

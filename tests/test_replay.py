@@ -16,9 +16,10 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from realize.app import CONFIG_DIR
+from realize.paths import CONFIG_DIR
 from realize.replay import ReplayError, build_replay_spec, load_run, replay
-from realize.results import RESULT_FILE, atomic_write_json
+from realize.run_dir.jsonio import atomic_write_json
+from realize.run_dir.names import RESULT_FILE
 from realize.run_config import build_run_spec
 from realize.scene import BatchedScene, EnvOptions, SimSettings
 from realize.validation import validate

@@ -51,7 +51,7 @@ def test_every_iteration_has_ellipses_costs_and_shares(synthetic, summary):
     for rec in recs:
         got = summary["per_iteration"][rec.iteration]
         assert got["/stats/success/share"] == pytest.approx(rec.success_share)
-        assert got["/stats/samples/n_samples"] == rec.n_samples
+        assert got["/stats/samples/n_samples"] == rec.n_envs
         for path, (attr, _, _) in SCALAR_PATHS.items():
             v = float(getattr(rec, attr))
             if math.isfinite(v):
@@ -87,7 +87,7 @@ def test_scene_and_samples(synthetic, summary):
         assert f"/world/samples/{name}" in paths
     counts = summary["counts"]
     for rec in synthetic.records:
-        i, n = rec.iteration, rec.n_samples
+        i, n = rec.iteration, rec.n_envs
         assert counts["/world/samples/Table1"][i] == n
         assert counts["/distributions/Cube_g/samples"][i] == n
         n_ok = counts["/world/trajectories/succeeded"][i]
@@ -101,7 +101,7 @@ def test_scene_and_samples(synthetic, summary):
 
 def test_without_rollout_or_samples_and_infinite_costs(tmp_path, synthetic):
     rec0 = synthetic.records[0]
-    n = rec0.n_samples
+    n = rec0.n_envs
     # no sample kept, no rollout, nothing feasible yet
     rec = replace(rec0, Z=None, feasible=torch.zeros(n, dtype=torch.bool), n_feasible=0, success_share=0.0,
                   best_cost=math.inf, iteration_best_cost=math.inf, elite_cost_min=math.nan,
@@ -127,7 +127,7 @@ def test_without_rollout_or_samples_and_infinite_costs(tmp_path, synthetic):
     # cleared, not stale: trajectories and samples report 0 instances
     assert S["counts"]["/world/trajectories/succeeded"][1] == 0
     assert S["counts"]["/world/samples/Table1"][0] == 0
-    assert S["counts"]["/world/samples/Table1"][1] == rec1.n_samples
+    assert S["counts"]["/world/samples/Table1"][1] == rec1.n_envs
 
 
 def test_mixture_logs_one_ellipse_per_live_mode(tmp_path, synthetic):

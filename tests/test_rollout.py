@@ -29,10 +29,12 @@ import yaml
 
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
-from realize.app import CONFIG_DIR
+from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.run_config import ConfigError, RunSpec, build_run_spec, build_task, load_task_file
+from realize.run_config import RunSpec, build_run_spec
+from realize.task_plans import build_task, load_task_file
 from realize.scene import BatchedScene
 
 SEED_TASK = CONFIG_DIR / "task" / "pick_place.yaml"

@@ -178,7 +178,7 @@ def test_geometry_config_errors(d: dict, key: str, words: str) -> None:
 def test_every_variant_builds_from_the_config_files() -> None:
     import yaml
 
-    from realize.app import CONFIG_DIR
+    from realize.paths import CONFIG_DIR
 
     plain = yaml.safe_load((CONFIG_DIR / "scene" / "plain.yaml").read_text())
     for variant in ("plain", "wall", "ramp", "push"):

@@ -1,11 +1,12 @@
 """Top-k runs (``task.planner.top_k > 1``): config checks before any simulation, candidate tasks
 over their own parameters, fewer plans than asked for, and a real tiny run on the pick_place
 PDDL files (result.json ``candidates``/``winner``/``budget``, per-candidate files, budget
-accounting, resume refused, interrupt, replay of the leading candidate's plan)."""
+accounting, interrupt and resume, replay of the leading candidate's plan)."""
 
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -13,10 +14,14 @@ import pytest
 import yaml
 
 import realize.pddl
-from realize.app import CONFIG_DIR, run
+from realize.paths import CONFIG_DIR
 from realize.replay import build_replay_spec, load_run
-from realize.results import CHECKPOINT_FILE, RESULT_FILE, load_checkpoint
-from realize.run_config import ConfigError, build_run_spec
+from realize.run import run
+from realize.run_config import build_run_spec
+from realize.run_dir.checkpoint import load_checkpoint
+from realize.run_dir.directory import RunDir
+from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
+from realize.run_dir.result_doc import ResultDoc
 from test_app import cfg_of, expect_config_error, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
 
 TOPK = ["task.planner.enabled=true", "task.planner.top_k=2"]
@@ -127,15 +132,64 @@ def test_topk_run_writes_candidates(topk_run: Path) -> None:
             assert h["action_success_000"].shape[1] == c["n_actions"]
         assert (topk_run / f"realize_c{c['index']}.rrd").stat().st_size > 0
     ck = load_checkpoint(topk_run)
-    assert ck.iteration == 3 and [r["candidate"] for r in ck.records][:2] == [0, 1]
+    assert ck.iteration == 3 and [r.candidate for r in ck.records][:2] == [0, 1]
     assert ck.ce_state["kind"] == "successive_halving" and len(ck.ce_state["candidates"]) == 2
 
 
-def test_topk_resume_is_refused(topk_run: Path, no_sim: None) -> None:
-    before = (topk_run / RESULT_FILE).read_text()
-    with pytest.raises(ConfigError, match=r"resume: .* is a top-k run .*not supported yet.*start a new run"):
-        run(cfg_of([f"resume={topk_run}"]), topk_run, cli_overrides=[f"resume={topk_run}"])
-    assert (topk_run / RESULT_FILE).read_text() == before
+def test_topk_run_reads_back_typed(topk_run: Path) -> None:
+    rd = RunDir(topk_run)
+    doc = rd.result()
+    assert isinstance(doc, ResultDoc) and doc.halving is not None
+    assert doc.to_json() == json.loads((topk_run / RESULT_FILE).read_text())
+    h = doc.halving
+    assert h.winner is not None and h.leader == h.winner and h.n_candidates == 2
+    w = h.candidates[h.winner.index]
+    assert doc.plan == w.plan and doc.best_z == w.best_z and doc.columns == w.columns
+    assert rd.best_plan().leader == h.leader
+    for c in h.candidates:
+        assert len(rd.load_history(candidate=c.index)) == c.iterations
+
+
+@pytest.mark.parametrize("stop_at", [0, 1])
+def test_topk_interrupted_then_resumed_equals_uninterrupted(topk_run: Path, tmp_path: Path, stop_at: int) -> None:
+    """Interrupted mid-round (after candidate 0's first iteration) or at the end of round 0, then
+    resumed: the halving state comes back from the checkpoint and the run ends exactly as the
+    uninterrupted one (same winner, candidates, series and history files)."""
+    def stop(i: int) -> None:
+        if i == stop_at:
+            raise KeyboardInterrupt
+
+    cut = tmp_path / "cut"
+    out = run(cfg_of(RUN), cut, after_iteration=stop)
+    assert out.interrupted and out.iterations_done == stop_at + 1
+    done = run(cfg_of(["logging.progress=false", f"resume={cut}"]), tmp_path / "hydra_dir")
+    assert done.status == "done" and done.run_dir == cut and done.iterations_done == 3
+    a, b = (json.loads((d / RESULT_FILE).read_text()) for d in (topk_run, cut))
+    for k in ("best_z", "best_cost", "feasible", "best_iteration", "plan", "success_per_iter", "best_cost_per_iter",
+              "n_feasible_per_iter", "elite_per_iter", "final_mean", "final_std", "iterations_done", "winner",
+              "leader", "candidates", "spent_samples", "spent_iterations", "halving_round", "budget"):
+        assert a[k] == b[k], k
+    assert b["status"] == "done" and b["segments"] == 2 and b["resumed_from_iteration"] == stop_at + 1
+    for c in a["candidates"]:
+        with np.load(topk_run / c["history"], allow_pickle=False) as ha, \
+                np.load(cut / c["history"], allow_pickle=False) as hb:
+            assert sorted(ha.files) == sorted(hb.files)
+            for k in ha.files:
+                np.testing.assert_array_equal(ha[k], hb[k], err_msg=f"{c['history']}:{k}")
+    ck = load_checkpoint(cut)
+    assert ck.iteration == 3 and [r.candidate for r in ck.records] == [r.candidate for r in load_checkpoint(topk_run).records]
+    # candidate 0 went on after the interruption: its next segment has its own recording
+    assert (cut / "realize_c0.from-it1.rrd").stat().st_size > 0
+
+
+def test_resumed_topk_that_is_complete_runs_nothing(topk_run: Path, tmp_path: Path, no_sim: None) -> None:
+    copy = tmp_path / "copy"
+    shutil.copytree(topk_run, copy)
+    before = json.loads((copy / RESULT_FILE).read_text())
+    out = run(cfg_of([f"resume={copy}", "logging.progress=false"]), copy, cli_overrides=[f"resume={copy}"])
+    assert out.status == "done" and out.iterations_done == 3
+    after = json.loads((copy / RESULT_FILE).read_text())
+    assert after["winner"] == before["winner"] and after["candidates"] == before["candidates"]
 
 
 def test_topk_replay_spec_is_the_leaders_plan(topk_run: Path, no_sim: None) -> None:
@@ -165,7 +219,7 @@ def test_candidate_0_equals_a_single_plan_run_in_the_shared_scene(topk_run: Path
     single-plan run's numbers bit for bit (CPU resets are history-free)."""
     res = json.loads((topk_run / RESULT_FILE).read_text())
     assert res["winner"]["index"] == 0 and res["candidates"][0]["iterations"] == 2  # seed 2: c0, c1, c0
-    assert load_checkpoint(topk_run).records[1]["candidate"] == 1
+    assert load_checkpoint(topk_run).records[1].candidate == 1
     single = tmp_path / "single"
     run(cfg_of(tiny_with(["task.planner.enabled=true", "ce.iterations=2", "seed=2"])), single)
     with np.load(topk_run / "history_c0.npz", allow_pickle=False) as a, \

@@ -19,8 +19,8 @@ from realize.controllers.fabric_jets import distance_jets
 from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.obstacles import BoxDistance
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.geometry import GeometryCfg, build_geometry
 from realize.fetch_joints import whole_body_qpos_from_full
+from realize.geometry import GeometryCfg, build_geometry
 from realize.realization.config import RolloutConfig
 
 F64 = torch.float64

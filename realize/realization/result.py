@@ -16,7 +16,7 @@ import torch
 from torch import Tensor
 
 from realize.controllers.body import BASE_XY
-from realize.cross_entropy import EvalResult
+from realize.searcher import EvalResult
 from realize.realization.context import StepContext
 
 

@@ -12,7 +12,7 @@ then ``settle`` (physics only, uncounted, until the last goals are due), ``cut_a
 feasibility, progress and a distance proxy for ranking infeasible plans, trajectories). A goal
 that reads the cube is read ``goal_settle_s`` after the plan's last action, so a pushed or
 dropped cube has landed. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
-What it doesn't: choose parameters (``realize.cross_entropy``), implement the actions
+What it doesn't: choose parameters (``realize.ce``), implement the actions
 (``realize.realization.actions``) or the goal predicates (``realize.realization.goals``), or
 know any backend details (``realize.scene``).
 """
@@ -28,7 +28,7 @@ from torch import Tensor
 from realize.controllers.body import BASE_XY, UPPER
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.whole_body import WholeBodyFabric
-from realize.cross_entropy import EvalResult
+from realize.searcher import EvalResult
 from realize.realization.actions import TEMPLATES
 from realize.realization.actions.base import Template
 from realize.realization.config import RolloutConfig
