@@ -75,6 +75,9 @@ class PlannedAction:
         return f"{self.template}({', '.join(self.params)})"
 
 
+MAX_TIE_PLANS = 64  # at most this many plans are asked for to complete the k-th length class
+
+
 def plan_from_pddl(
     domain: Path,
     problem: Path,
@@ -109,12 +112,14 @@ def plan_from_pddl(
             )
 
     engine = OPTIMAL_ENGINE if top_k == 1 else TOP_K_ENGINE
-    raw_plans = _solve(task, engine, top_k, timeout_s, domain, problem)
-
-    if _unit_costs(task):
-        # SymK reports equally long plans in an order that can vary between calls: sort them
-        # (length, then text) so the candidate list, and a top-k run, is reproducible
+    if top_k > 1 and _unit_costs(task):
+        raw_plans = _solve_ties_complete(task, engine, top_k, timeout_s, domain, problem)
+        # SymK reports equally long plans in an order that can vary between calls, and which of
+        # them make the k best varies too: with every plan as long as the k-th one at hand,
+        # sort (length, then text) so the candidate list, and a top-k run, is reproducible
         raw_plans = sorted(raw_plans, key=lambda p: (len(p.actions), [str(a) for a in p.actions]))
+    else:
+        raw_plans = _solve(task, engine, top_k, timeout_s, domain, problem)
     region = _region_type(task)
     plans: list[list[PlannedAction]] = []
     for raw in raw_plans:
@@ -193,6 +198,20 @@ def _solve(
         hint = _timeout_hint(last.status, timeout_s) if last is not None else ""
         raise PlanningError(f"{engine} found no plan ({where}): status {status}{hint}{logs}")
     return plans
+
+
+def _solve_ties_complete(
+    task: Problem, engine: str, top_k: int, timeout_s: float, domain: Path, problem: Path
+) -> list[SequentialPlan]:
+    """The k best plans plus every other plan as long as the k-th (asking for twice as many
+    until a longer plan shows up, the planner runs out, or ``MAX_TIE_PLANS`` is reached)."""
+    n = top_k
+    while True:
+        plans = _solve(task, engine, n, timeout_s, domain, problem)
+        lengths = sorted(len(p.actions) for p in plans)
+        if len(plans) < n or lengths[-1] > lengths[min(top_k, len(lengths)) - 1] or n >= MAX_TIE_PLANS:
+            return plans
+        n = min(2 * n, MAX_TIE_PLANS)
 
 
 def _unit_costs(task: Problem) -> bool:

@@ -1,8 +1,8 @@
 """Replay and video of a run's best plan, rebuilt from its run directory.
 
 What it does:
-  * ``load_run`` reads ``result.json`` of a run directory (the resolved ``config``, ``best_z``,
-    ``best_cost``, ``columns``): the one place that reads the run directory here;
+  * ``saved_plan`` reads the run's best plan through ``realize.run_dir.directory.RunDir``
+    (the resolved ``config``, ``best_z``, ``best_cost``, ``columns``, the top-k leader);
     ``build_replay_spec`` turns that config back into a ``RunSpec`` with
     ``realize.run_config.build_run_spec`` (the simulator backend forced, CPU by default);
   * ``replay`` re-simulates the best plan in ONE copy (N = 1) with the run's task, geometry,
@@ -29,7 +29,7 @@ import json
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,13 +37,14 @@ import numpy as np
 import torch
 
 from realize.geometry import SceneGeometry
+from realize.run_dir.directory import BestPlan, RunDir, RunDirError
 from realize.run_dir.names import RESULT_FILE
 from realize.run_config import RunSpec, build_run_spec
 from realize.scene import BatchedScene, Camera, EnvOptions
 
 __all__ = [
-    "ReplayError", "SavedRun", "VideoRecorder", "VideoReport", "ReplayReport",
-    "load_run", "build_replay_spec", "video_camera", "best_z_rows", "replay",
+    "ReplayError", "VideoRecorder", "VideoReport", "ReplayReport",
+    "saved_plan", "build_replay_spec", "video_camera", "best_z_rows", "replay",
 ]
 
 
@@ -56,62 +57,16 @@ class ReplayError(ValueError):
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass
-class SavedRun:
-    """What a replay needs from ``result.json``."""
-
-    run_dir: Path
-    config: dict[str, Any]
-    best_z: list[float]
-    columns: list[str]
-    best_cost: float | None
-    feasible: bool
-    n_envs_run: int | None  # copies of the run's scene (its winning sample may sit in another tile)
-    backend: str | None
-    status: str | None
-    doc: dict[str, Any] = field(repr=False, default_factory=dict)  # the whole result.json
-
-    @property
-    def leader(self) -> dict[str, Any] | None:
-        """A top-k run's leading candidate (index, plan), else None."""
-        lead = self.doc.get("leader")
-        return lead if isinstance(lead, dict) else None
-
-
-def load_run(run_dir: str | Path) -> SavedRun:
-    """Read ``RUN_DIR/result.json``; raises ``ReplayError`` if it holds no best plan."""
-    run_dir = Path(run_dir)
-    path = run_dir / RESULT_FILE
-    if not path.is_file():
-        raise ReplayError(f"{path}: not found (is {run_dir} a run directory written by `realize`?)")
+def saved_plan(run_dir: str | Path) -> BestPlan:
+    """The run's best plan as ``RunDir.best_plan`` reads it; ``ReplayError`` (naming the file)
+    if the directory holds none."""
     try:
-        doc = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ReplayError(f"{path}: cannot read: {e}") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("config"), dict):
-        raise ReplayError(f"{path}: no resolved `config` mapping")
-    z = doc.get("best_z")
-    if not isinstance(z, list) or not z or not all(isinstance(v, (int, float)) and v is not None for v in z):
-        raise ReplayError(f"{path}: no `best_z` (the run found no plan to replay)")
-    cost = doc.get("best_cost")
-    n_run = doc.get("n_envs_scene")
-    if n_run is None:
-        n_run = (doc["config"].get("ce") or {}).get("n_envs")
-    return SavedRun(
-        run_dir=run_dir,
-        config=doc["config"],
-        best_z=[float(v) for v in z],
-        columns=list(doc.get("columns") or []),
-        best_cost=float(cost) if isinstance(cost, (int, float)) else None,
-        feasible=bool(doc.get("feasible", False)),
-        n_envs_run=int(n_run) if isinstance(n_run, (int, float)) else None,
-        backend=doc.get("backend"),
-        status=doc.get("status"),
-        doc=doc,
-    )
+        return RunDir(run_dir).best_plan()
+    except RunDirError as e:
+        raise ReplayError(str(e)) from None
 
 
-def build_replay_spec(run: SavedRun, backend: str = "cpu") -> RunSpec:
+def build_replay_spec(run: BestPlan, backend: str = "cpu") -> RunSpec:
     """The run's ``RunSpec`` with the simulator backend forced to ``backend`` (cpu | gpu | auto)."""
     if backend not in ("cpu", "gpu", "auto"):
         raise ReplayError(f"backend = {backend!r} is invalid: allowed 'cpu', 'gpu', 'auto'")
@@ -125,10 +80,10 @@ def build_replay_spec(run: SavedRun, backend: str = "cpu") -> RunSpec:
         raise ReplayError(f"{run.run_dir / RESULT_FILE}: its config: {e}") from None
     lead = run.leader
     if spec.halving and lead is not None:  # a top-k run: best_z belongs to the leading candidate
-        i = lead.get("index")
-        if not isinstance(i, int) or not 0 <= i < len(spec.candidates) or spec.candidates[i].describe() != lead.get("plan"):
+        i = lead.index
+        if not isinstance(i, int) or not 0 <= i < len(spec.candidates) or spec.candidates[i].describe() != lead.plan:
             raise ReplayError(
-                f"{run.run_dir / RESULT_FILE}: its leading candidate {lead.get('plan')!r} is not among the plans "
+                f"{run.run_dir / RESULT_FILE}: its leading candidate {lead.plan!r} is not among the plans "
                 f"the planner returns now ({[t.describe() for t in spec.candidates]})"
             )
         spec.task = spec.candidates[i]
@@ -140,7 +95,7 @@ def build_replay_spec(run: SavedRun, backend: str = "cpu") -> RunSpec:
     return spec
 
 
-def best_z_rows(run: SavedRun, k: int = 1) -> torch.Tensor:
+def best_z_rows(run: BestPlan, k: int = 1) -> torch.Tensor:
     """(k, D) the run's best parameter vector, repeated."""
     return torch.tensor([run.best_z], dtype=torch.float64).repeat(k, 1)
 
@@ -265,7 +220,7 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
     from realize.realization.rollout import PlanRealizer
 
     t0 = time.perf_counter()
-    run = load_run(run_dir)
+    run = saved_plan(run_dir)
     spec = build_replay_spec(run, backend)
     options = EnvOptions()
     if video is not None:
@@ -287,10 +242,11 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
         if recorder is not None:  # an error mid-rollout: still close the file
             recorder.close()
     cost = float(res.cost[0])
-    diff = None if run.best_cost is None else cost - run.best_cost
+    saved = run.best_cost if math.isfinite(run.best_cost) else None
+    diff = None if saved is None else cost - saved
     return ReplayReport(
-        run_dir=str(run.run_dir), feasible=bool(res.feasible[0]), cost=cost, saved_cost=run.best_cost,
+        run_dir=str(run.run_dir), feasible=bool(res.feasible[0]), cost=cost, saved_cost=saved,
         cost_diff=diff, matches=None if diff is None else diff == 0.0, failure=res.failure[0],
-        steps=int(res.steps[0]), n_envs_run=run.n_envs_run, backend=scene.backend,
+        steps=int(res.steps[0]), n_envs_run=run.n_envs, backend=scene.backend,
         wall_time_s=time.perf_counter() - t0, video=vid,
     )

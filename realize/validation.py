@@ -15,7 +15,6 @@ without perturbations: each copy sits at its own tile offset (float32 rounding d
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections import Counter
@@ -25,9 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from realize.replay import ReplayError, best_z_rows, build_replay_spec, load_run
-from realize.run_dir.jsonio import atomic_write_json
-from realize.run_dir.names import RESULT_FILE
+from realize.replay import ReplayError, best_z_rows, build_replay_spec, saved_plan
+from realize.run_dir.directory import RunDir
 from realize.scene import BatchedScene, EnvOptions
 
 __all__ = ["ValidationReport", "validate", "write_validation"]
@@ -74,7 +72,7 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
         if not (0 < lo <= hi and math.isfinite(hi)):
             raise ReplayError(f"friction range {friction_range} must satisfy 0 < low <= high")
     t0 = time.perf_counter()
-    run = load_run(run_dir)
+    run = saved_plan(run_dir)
     spec = build_replay_spec(run, backend)
     options = EnvOptions(cube_xy_noise=cube_xy_noise, robot_xy_noise=robot_xy_noise, randomize_resets=randomize)
     with BatchedScene.from_spec(spec, replicas, env=options) as scene:
@@ -96,7 +94,7 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
         randomize=randomize, cube_xy_noise=noise[0] if randomize else None,
         robot_xy_noise=noise[1] if randomize else None,
         cost_mean=float(costs.mean()) if len(costs) else None, cost_std=float(costs.std()) if len(costs) else None,
-        saved_cost=run.best_cost, backend=used_backend, wall_time_s=time.perf_counter() - t0,
+        saved_cost=run.best_cost if math.isfinite(run.best_cost) else None, backend=used_backend, wall_time_s=time.perf_counter() - t0,
     )
     if write:
         write_validation(run.run_dir, report)
@@ -105,7 +103,4 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
 
 def write_validation(run_dir: str | Path, report: ValidationReport) -> None:
     """Add ``validation`` to ``RUN_DIR/result.json`` (re-read just before, written atomically)."""
-    path = Path(run_dir) / RESULT_FILE
-    doc = json.loads(path.read_text())
-    doc["validation"] = report.to_dict()
-    atomic_write_json(path, doc)
+    RunDir(run_dir).add_to_result("validation", report.to_dict())

@@ -17,7 +17,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from realize.paths import CONFIG_DIR
-from realize.replay import ReplayError, build_replay_spec, load_run, replay
+from realize.replay import ReplayError, build_replay_spec, replay, saved_plan
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
 from realize.run_config import build_run_spec
@@ -56,18 +56,18 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_load_run_and_spec(run_dir: Path) -> None:
-    run = load_run(run_dir)
-    assert run.best_z == FEASIBLE_Z and run.best_cost == SAVED_COST and run.n_envs_run == 1
+    run = saved_plan(run_dir)
+    assert run.best_z == FEASIBLE_Z and run.best_cost == SAVED_COST and run.n_envs == 1
     spec = build_replay_spec(run)
     assert spec.sim.backend == "cpu" and spec.task.layout.dim == len(FEASIBLE_Z)
 
 
 def test_bad_run_dirs(tmp_path: Path) -> None:
     with pytest.raises(ReplayError, match="not found"):
-        load_run(tmp_path)
+        saved_plan(tmp_path)
     (tmp_path / RESULT_FILE).write_text(json.dumps({"config": {}, "best_z": None}))
     with pytest.raises(ReplayError, match="best_z"):
-        load_run(tmp_path)
+        saved_plan(tmp_path)
     for script in ("replay", "validate"):  # the command lines say so and exit 2
         assert _script(script).main([str(tmp_path)]) == 2
 

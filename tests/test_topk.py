@@ -15,7 +15,7 @@ import yaml
 
 import realize.pddl
 from realize.paths import CONFIG_DIR
-from realize.replay import build_replay_spec, load_run
+from realize.replay import build_replay_spec, saved_plan
 from realize.run import run
 from realize.run_config import build_run_spec
 from realize.run_dir.checkpoint import load_checkpoint
@@ -193,9 +193,9 @@ def test_resumed_topk_that_is_complete_runs_nothing(topk_run: Path, tmp_path: Pa
 
 
 def test_topk_replay_spec_is_the_leaders_plan(topk_run: Path, no_sim: None) -> None:
-    saved = load_run(topk_run)
+    saved = saved_plan(topk_run)
     spec = build_replay_spec(saved)
-    assert spec.task.describe() == saved.doc["leader"]["plan"]
+    assert spec.task.describe() == saved.leader.plan
     assert spec.task.layout.column_names == saved.columns
 
 
