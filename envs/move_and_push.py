@@ -34,21 +34,10 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from envs.pick_place import RealizePickPlaceEnv
-from realize.geometry import GeometryCfg, SceneGeometry
+from realize.geometry import GeometryCfg
+from realize.realization.goals import cube_in_container
 
 ENV_ID = "RealizeMoveAndPush-v1"
-REST_SPEED = 0.05  # m/s, the cube counts as resting below this
-
-
-def cube_in_container(p: torch.Tensor, speed: torch.Tensor, geometry: SceneGeometry, name: str,
-                      rest_speed: float = REST_SPEED) -> torch.Tensor:
-    """(N,) bool: cube centres ``p`` (N, 3) inside container ``name``'s inner footprint, below its
-    wall tops, with speeds ``speed`` (N,) at most ``rest_speed``."""
-    box = geometry.container(name)
-    w = geometry.container_wall
-    hx, hy, hz = box.half_size
-    inside = ((p[:, 0] - box.center[0]).abs() <= hx - w) & ((p[:, 1] - box.center[1]).abs() <= hy - w)
-    return inside & (p[:, 2] <= 2 * hz) & (speed <= rest_speed)
 
 
 @register_env(ENV_ID, max_episode_steps=2000)
@@ -101,8 +90,10 @@ class RealizeMoveAndPushEnv(RealizePickPlaceEnv):
                     cube.set_pose(Pose.create_from_pq(p, cube.pose.q[env_idx]))
 
     def evaluate(self) -> dict:
-        """Goal for every env (copy 0 only when tiled: use BatchedScene for all copies)."""
-        cube = self.cubes[0]
-        name = self.geometry.containers[0].name
-        ok = cube_in_container(cube.pose.p, cube.linear_velocity.norm(dim=1), self.geometry, name)
+        """Goal for every copy (tiled or not), by ``realize.realization.goals.cube_in_container``:
+        the cube rests inside the first container."""
+        off = torch.as_tensor(self.offsets, dtype=torch.float32, device=self.device)
+        p = torch.cat([c.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, c in enumerate(self.cubes)])
+        speed = torch.cat([c.linear_velocity for c in self.cubes]).norm(dim=1)
+        ok = cube_in_container(p, speed, self.geometry, self.geometry.containers[0].name)
         return dict(success=ok, cube_in_box=ok)

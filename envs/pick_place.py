@@ -45,6 +45,7 @@ from mani_skill.utils.structs.types import SceneConfig, SimConfig
 from envs import fetch_omni  # noqa: F401  (registers the agent)
 from realize.config import ConfigError
 from realize.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
+from realize.realization.goals import base_in_rectangle, cube_on_table
 
 ENV_ID = "RealizePickPlace-v1"
 TILE_MARGIN = 3.0  # metres of empty floor between tiled copies
@@ -247,24 +248,16 @@ class RealizePickPlaceEnv(BaseEnv):
 
     # ------------------------------------------------------------------ success
     def evaluate(self) -> dict:
-        """Goal of the seed task for every env (copy 0 only when tiled: use BatchedScene for all)."""
+        """Goal of the seed task for every copy (tiled or not), by the predicates of
+        ``realize.realization.goals``: the cube rests on table 2 and the base is in the exit."""
         g = self.geometry
-        t2 = g.tables[1]
-        cube = self.cubes[0]
-        p = cube.pose.p
-        lv = cube.linear_velocity
-        top = 2 * t2.half_size[2] + g.cube_half_size
-        on_t2 = (
-            ((p[:, 0] - t2.center[0]).abs() <= t2.half_size[0])
-            & ((p[:, 1] - t2.center[1]).abs() <= t2.half_size[1])
-            & ((p[:, 2] - top).abs() <= 0.02)
-            & (lv.norm(dim=1) < 0.05)
-        )
-        base = self.agents[0].robot.get_qpos()[:, :2] + torch.tensor(g.robot_start[:2], device=self.device)
-        in_exit = (
-            (base[:, 0] >= g.exit_low[0]) & (base[:, 0] <= g.exit_high[0])
-            & (base[:, 1] >= g.exit_low[1]) & (base[:, 1] <= g.exit_high[1])
-        )
+        off = torch.as_tensor(self.offsets, dtype=torch.float32, device=self.device)
+        p = torch.cat([c.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, c in enumerate(self.cubes)])
+        speed = torch.cat([c.linear_velocity for c in self.cubes]).norm(dim=1)
+        start = torch.tensor(g.robot_start[:2], dtype=torch.float32, device=self.device)
+        base = torch.cat([a.robot.get_qpos()[:, :2] for a in self.agents]) + start
+        on_t2 = cube_on_table(p, speed, g, g.tables[1].name)
+        in_exit = base_in_rectangle(base, g.exit_low, g.exit_high)
         return dict(success=on_t2 & in_exit, cube_on_table2=on_t2, base_in_exit=in_exit)
 
     def _get_obs_extra(self, info: dict):

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
     from realize.run_config import RunSpec
     from realize.scene import BatchedScene
     from realize.task import TaskSpec
@@ -28,7 +28,7 @@ def open_realization(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None,
     """``(scene, realizers)``: a scene of ``n_envs`` (default ``spec.ce.n_envs``) copies and one
     realizer per task (default ``[spec.task]``), seeded with ``spec.seed``. The caller closes
     the scene (it is a context manager)."""
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
 
     tasks = [spec.task] if tasks is None else list(tasks)

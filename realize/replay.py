@@ -217,7 +217,7 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
     the task camera's); the camera sits at ``eye`` looking at ``target``, by default at
     ``video_camera(geometry)``, or where the task's render camera is with ``task_camera``.
     """
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
 
     t0 = time.perf_counter()
     run = saved_plan(run_dir)

@@ -48,7 +48,7 @@ from realize.topdown import ellipse_params, iteration_colors, param_xy, planar_p
 
 if TYPE_CHECKING:  # avoid importing the simulator stack just for a type
     from realize.ce.state import IterationRecord
-    from realize.rollout import RolloutResult
+    from realize.realization.result import RolloutResult
 
 __all__ = ["RerunLogger"]
 

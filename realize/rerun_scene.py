@@ -42,7 +42,7 @@ from realize.topdown import (
 )
 
 if TYPE_CHECKING:  # avoid importing the simulator stack just for a type
-    from realize.rollout import RolloutResult
+    from realize.realization.result import RolloutResult
 
 __all__ = ["log_static_scene", "log_world_samples", "log_trajectories"]
 

@@ -162,10 +162,10 @@ def _read_geometry(d: Any) -> tuple[GeometryCfg, SceneGeometry]:
 
 
 def _read_rollout(d: Any) -> Any:
-    from realize.rollout import RolloutConfig
+    from realize.realization.config import RolloutConfig
 
     try:
-        return RolloutConfig.from_dict(as_mapping(d, "controller"), "controller")
+        return RolloutConfig.from_mapping(as_mapping(d, "controller"), "controller")
     except (ValueError, TypeError) as e:
         msg = str(e)
         raise ConfigError(msg if msg.startswith("controller") else f"controller: {msg}") from None

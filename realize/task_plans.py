@@ -124,7 +124,7 @@ def build_task_candidates(
     Without ``top_k > 1`` the candidates are ``[task]``. With it, one ``TaskSpec`` per distinct
     planned plan (cheapest first; fewer than ``top_k`` if the planner finds fewer), each over
     only the parameters its plan uses (``realize.task.task_for_plan``)."""
-    from realize.actions import TEMPLATES
+    from realize.realization.actions import TEMPLATES
     from realize.task import plan_from_actions, task_for_plan, task_from_dict
 
     try:

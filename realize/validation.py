@@ -63,7 +63,7 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     defaults unless given) and, per replica, the cube friction times U(friction_range) drawn
     from ``numpy.random.default_rng(seed)`` (None: friction unchanged).
     """
-    from realize.rollout import PlanRealizer
+    from realize.realization.rollout import PlanRealizer
 
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
         raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")

@@ -36,14 +36,17 @@ import yaml
 
 from envs.fetch_omni import REST_QPOS
 from realize.geometry import GeometryCfg, build_geometry
-from realize.actions import TEMPLATES
 from realize.controllers.astar import astar_world
+from realize.controllers.body import DOF
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import pid_init, pid_step
 from realize.controllers.waypoints import path_to_waypoints
 from realize.controllers.whole_body import WholeBodyFabric
 from realize.fetch_joints import whole_body_qpos_from_full
-from realize.rollout import PlanRealizer, RolloutConfig, StepContext
+from realize.realization.actions import TEMPLATES
+from realize.realization.config import RolloutConfig
+from realize.realization.context import StepContext
+from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene, SimSettings
 from realize.task import task_from_dict
 
@@ -71,11 +74,11 @@ def bench_fabric(n: int, reps: int, dtype: torch.dtype, cfg: RolloutConfig, dt: 
     fab = WholeBodyFabric(geometry, cfg.fabric, dt=dt, dtype=dtype)
     g = torch.Generator().manual_seed(0)
     q = whole_body_qpos_from_full(torch.tensor(REST_QPOS, dtype=dtype)).expand(n, -1).clone()
-    q = q + 0.1 * torch.randn(n, 11, generator=g).to(dtype)
+    q = q + 0.1 * torch.randn(n, DOF, generator=g).to(dtype)
     q[:, 0] = 0.9 + 0.3 * torch.rand(n, generator=g).to(dtype)
     q[:, 1] = 1.2 + 0.3 * (2 * torch.rand(n, generator=g).to(dtype) - 1)
     q[:, 2] = math.pi
-    qd = 0.3 * torch.randn(n, 11, generator=g).to(dtype)
+    qd = 0.3 * torch.randn(n, DOF, generator=g).to(dtype)
     pos = torch.tensor([0.0, 1.2, 0.82], dtype=dtype).expand(n, 3)
     goal = fab.goal_points(pos, torch.tensor([0.0, 0.0, -1.0], dtype=dtype).expand(n, 3),
                            torch.tensor([0.0, 1.0, 0.0], dtype=dtype).expand(n, 3))

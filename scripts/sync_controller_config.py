@@ -1,4 +1,4 @@
-"""Write configs/controller/default.yaml from the defaults of ``realize.rollout.RolloutConfig``.
+"""Write configs/controller/default.yaml from the defaults of ``realize.realization.config.RolloutConfig``.
 
 The Hydra ``controller`` group must list every key (Hydra refuses overrides of keys a config
 does not have), and its values must be the dataclass defaults. This script keeps the two in
@@ -22,7 +22,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 TARGET = ROOT / "configs" / "controller" / "default.yaml"
 HEADER = """\
-# Action tolerances, timeouts and controller settings (realize.rollout.RolloutConfig).
+# Action tolerances, timeouts and controller settings (realize.realization.config.RolloutConfig).
 # Generated from the dataclass defaults by scripts/sync_controller_config.py: edit the
 # dataclass, then re-run it (tests/test_app.py checks that the two agree).
 """
@@ -76,7 +76,7 @@ def _lines(obj: Any, indent: int, cls_comment: str = "") -> list[str]:
 
 def render() -> str:
     sys.path.insert(0, str(ROOT))
-    from realize.rollout import RolloutConfig
+    from realize.realization.config import RolloutConfig
 
     return HEADER + "\n".join(_lines(RolloutConfig(), 0)) + "\n"
 

@@ -144,7 +144,7 @@ def test_plan_from_pddl_matches_the_yaml_plan(no_sim: None) -> None:
 
 
 def test_controller_yaml_mirrors_rollout_defaults() -> None:
-    from realize.rollout import RolloutConfig
+    from realize.realization.config import RolloutConfig
 
     want = json.loads(json.dumps(asdict(RolloutConfig())))  # tuples -> lists
     got = yaml.safe_load((CONFIG_DIR / "controller" / "default.yaml").read_text())

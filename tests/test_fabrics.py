@@ -13,12 +13,9 @@ import numpy as np
 import pytest
 import torch
 
-from realize.controllers.fabrics import (
-    FabricConfig,
-    Kinematics,
-    fabric_acceleration,
-    integrate,
-)
+from realize.config import ConfigError
+from realize.controllers.fabric_jets import Kinematics
+from realize.controllers.fabrics import FabricConfig, fabric_acceleration, integrate
 
 FIXTURES = Path(__file__).parent / "fixtures"
 SYSTEMS = ("point_mass", "planar_arm")
@@ -136,12 +133,14 @@ def test_bad_per_plan_inputs_are_flagged():
 
 
 def test_non_positive_gains_raise():
-    with pytest.raises(ValueError, match="gamma"):
+    with pytest.raises(ConfigError, match="gamma"):
         FabricConfig(gamma=0.0)
-    with pytest.raises(ValueError, match="base_inertia"):
+    with pytest.raises(ConfigError, match="base_inertia"):
         FabricConfig(base_inertia=-0.2)
-    with pytest.raises(ValueError, match="beta_close"):
+    with pytest.raises(ConfigError, match="beta_close"):
         FabricConfig(beta_close=-1.0)
+    with pytest.raises(ConfigError, match="m_max"):
+        FabricConfig(m_min=1.0, m_max=0.5)
     data = load("point_mass")
     with pytest.raises(ValueError, match="weight"):
         run(data, slice(0, 2), weight=-1.0)

@@ -9,8 +9,8 @@ import math
 import pytest
 import torch
 
+from realize.realization.context import StepContext
 from realize.realizers import open_realization
-from realize.rollout import StepContext
 from realize.run_config import build_run_spec
 from _compose import blas_batch_invariant
 from test_rollout import GOOD, SEED_TASK, compose_config

@@ -251,7 +251,7 @@ def test_timing_note(capsys) -> None:
 
 def test_fabrics_protocol_jets_match_autodiff(kin64: FetchKinematics) -> None:
     """``kin.jets`` (closed form) equals the fabric's own forward-mode jets of ``kin(q)``."""
-    fabrics = pytest.importorskip("realize.controllers.fabrics")
+    fabrics = pytest.importorskip("realize.controllers.fabric_jets")
     q = random_q(kin64, 5, seed=11)
     qd = torch.randn(5, 11, dtype=F64, generator=torch.Generator().manual_seed(12))
     ours = kin64.jets(q, qd)

@@ -22,9 +22,11 @@ import pytest
 import torch
 
 from realize.geometry import SceneGeometry
-from realize.actions import TEMPLATES
+from realize.realization.actions import TEMPLATES
+from realize.realization.config import RolloutConfig
+from realize.realization.result import RolloutResult
+from realize.realization.rollout import PlanRealizer
 from realize.regions import Annulus
-from realize.rollout import PlanRealizer, RolloutConfig, RolloutResult
 from realize.scene import BatchedScene, SimSettings
 from realize.task import task_from_dict
 

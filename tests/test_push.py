@@ -19,11 +19,12 @@ import numpy as np
 import pytest
 import torch
 
-from envs.move_and_push import cube_in_container
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
-from realize.rollout import PlanRealizer, RolloutConfigError, RolloutResult
 from realize.config import ConfigError
+from realize.realization.goals import cube_in_container
+from realize.realization.result import RolloutResult
+from realize.realization.rollout import PlanRealizer
 from realize.run_config import RunSpec, build_run_spec
 from realize.task_plans import build_task
 from realize.scene import BatchedScene
@@ -62,7 +63,7 @@ def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False, repeat: int 
     """Realize Z ``repeat`` times in one newly built scene of len(Z) copies."""
     out = []
     with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
-        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
+        realizer = PlanRealizer.from_spec(spec, None, scene)
         for _ in range(repeat):
             res = realizer.rollout(Z, record=record)
             out.append(dict(res=res, **_readback(scene)))
@@ -180,10 +181,10 @@ def test_bad_push_region_names_the_key(cfg: dict[str, Any], spec: RunSpec) -> No
 @pytest.mark.parametrize("key,value", [("push_depth", -0.1), ("push_speed", 0.0), ("push_pre_distance", float("nan")),
                                        ("goal_settle_s", -1.0)])
 def test_bad_push_setting_names_the_key(key: str, value: float) -> None:
-    from realize.rollout import RolloutConfig
+    from realize.realization.config import RolloutConfig
 
-    with pytest.raises(RolloutConfigError, match=rf"controller\.{key} = "):
-        RolloutConfig.from_dict({key: value})
+    with pytest.raises(ConfigError, match=rf"controller\.{key} = "):
+        RolloutConfig.from_mapping({key: value})
 
 
 def test_goal_names_unknown_container(cfg: dict[str, Any], spec: RunSpec) -> None:

@@ -27,9 +27,12 @@ from pathlib import Path
 import torch
 import yaml
 
-from realize.actions import TEMPLATES
+from realize.controllers.body import BASE_XY, UPPER
 from realize.fetch_body import TCP_OFFSET
-from realize.rollout import PlanRealizer, RolloutConfig, StepContext
+from realize.realization.actions import TEMPLATES
+from realize.realization.config import RolloutConfig
+from realize.realization.context import StepContext
+from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene, SimSettings, quat_to_matrix
 from realize.task import task_from_dict
 
@@ -132,8 +135,8 @@ def run_reach(n: int, seed: int) -> ReachOutcome:
         contacts = _TableContacts(scene)
         ctx = StepContext(scene, realizer.cfg, realizer.fabric, realizer.grid, realizer.occupancy)
         ctx.read()
-        assert torch.allclose(ctx.base[:, :2], xy, atol=1e-4), "teleport failed"
-        ctx.arm_hold[:] = ctx.q[:, 3:]
+        assert torch.allclose(ctx.base[:, BASE_XY], xy, atol=1e-4), "teleport failed"
+        ctx.arm_hold[:] = ctx.q[:, UPPER]
         rows = torch.arange(n)
         ctx.start_fabric(rows)
         tcp_offset = torch.tensor(TCP_OFFSET)

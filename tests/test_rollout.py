@@ -29,9 +29,10 @@ import yaml
 
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
-from realize.paths import CONFIG_DIR
-from realize.rollout import PlanRealizer, RolloutResult
 from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
+from realize.realization.result import RolloutResult
+from realize.realization.rollout import PlanRealizer
 from realize.run_config import RunSpec, build_run_spec
 from realize.task_plans import build_task, load_task_file
 from realize.scene import BatchedScene
@@ -104,7 +105,7 @@ def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False) -> dict[str,
     """Realize Z in a newly built scene of len(Z) copies; result plus simulator read-backs."""
     with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
         counter = StepCounter(scene)
-        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
+        realizer = PlanRealizer.from_spec(spec, None, scene)
         res = realizer.rollout(Z, record=record)
         return dict(res=res, calls=counter.calls, cube=scene.cube_pose(), base=scene.base_pose())
 
@@ -382,7 +383,8 @@ def test_wrong_z_shape(spec: RunSpec, scene3: BatchedScene, shape: tuple[int, ..
 
 
 def test_place_takes_a_box_of_release_points_grasp_does_not() -> None:
-    from realize.actions import Grasp, Place
+    from realize.realization.actions.grasp import Grasp
+    from realize.realization.actions.place import Place
     from realize.regions import Box as BoxRegion
 
     box3 = BoxRegion([-0.1, -1.4, 0.76], [0.1, -0.1, 1.15])

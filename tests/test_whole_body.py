@@ -13,17 +13,15 @@ import pytest
 import torch
 
 from envs.fetch_omni import REST_QPOS
-from realize.geometry import GeometryCfg, build_geometry
-from realize.controllers.fabrics import _distance_jets, fabric_acceleration
-from realize.controllers.whole_body import (
-    BoxDistance,
-    ControllerConfigError,
-    FabricState,
-    WholeBodyConfig,
-    WholeBodyFabric,
-)
+from realize.config import ConfigError
+from realize.controllers.body import DOF
+from realize.controllers.fabric_jets import distance_jets
+from realize.controllers.fabrics import fabric_acceleration
+from realize.controllers.obstacles import BoxDistance
+from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
 from realize.fetch_joints import whole_body_qpos_from_full
-from realize.rollout import RolloutConfig
+from realize.geometry import GeometryCfg, build_geometry
+from realize.realization.config import RolloutConfig
 
 F64 = torch.float64
 
@@ -60,12 +58,12 @@ def _rest_q(n: int) -> torch.Tensor:
 def _states_near_table1(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Configurations beside table 1 (its +x side, facing it) with random arm poses and speeds."""
     g = torch.Generator().manual_seed(seed)
-    q = _rest_q(n) + 0.15 * torch.randn(n, 11, generator=g, dtype=F64)
+    q = _rest_q(n) + 0.15 * torch.randn(n, DOF, generator=g, dtype=F64)
     q[:, 0] = 0.95 + 0.1 * torch.rand(n, generator=g, dtype=F64)
     q[:, 1] = 1.2 + 0.3 * (2 * torch.rand(n, generator=g, dtype=F64) - 1)
     q[:, 2] = math.pi + 0.3 * (2 * torch.rand(n, generator=g, dtype=F64) - 1)
     q[:, 3] = 0.1 + 0.2 * torch.rand(n, generator=g, dtype=F64)  # torso well inside its limits
-    qd = 0.4 * torch.randn(n, 11, generator=g, dtype=F64)  # non-zero: away from the sign() switches
+    qd = 0.4 * torch.randn(n, DOF, generator=g, dtype=F64)  # non-zero: away from the sign() switches
     return q, qd
 
 
@@ -93,7 +91,7 @@ def test_box_jets_equal_forward_ad_of_the_distance(wb: WholeBodyFabric) -> None:
     extra = torch.tensor([[0.3, -0.4, 0.6, 0.25, 0.15, 0.1, 0.7, -0.5, 0.0]], dtype=F64)  # arbitrary yaw + pitch
     boxes = torch.cat([wb.boxes, extra], dim=0)
     assert bool(((boxes[:, 6] != 0) & (boxes[:, 7] != 0) & (boxes[:, 8] < 0.5)).any()), "need a yawed+pitched box"
-    N, K, n = 16, wb.map.body_radii.shape[0], 11
+    N, K, n = 16, wb.map.body_radii.shape[0], DOF
     M = boxes.shape[0]
     p = _near_box_points(boxes, N, K, g)
     p[:, :3, 2] = 0.02 * torch.rand(N, 3, generator=g, dtype=F64) - 0.01  # a few near / under the floor
@@ -104,7 +102,7 @@ def test_box_jets_equal_forward_ad_of_the_distance(wb: WholeBodyFabric) -> None:
     bx = boxes.expand(N, -1, -1)
 
     closed = wb.distance.jets(p, Jp, pd, ap, radii, bx)
-    ad = _distance_jets(wb.distance, p, Jp, pd, ap, radii, bx, vectorize=True)
+    ad = distance_jets(wb.distance, p, Jp, pd, ap, radii, bx, vectorize=True)
     for name, a, b in zip(("value", "J", "velocity", "curvature"), closed, ad):
         assert a.shape == b.shape, name
     val_c, val_ad = closed[0], ad[0]
@@ -188,7 +186,7 @@ def test_step_batched_equals_per_sample(wb: WholeBodyFabric) -> None:
     q, qd = _states_near_table1(N, seed=5)
     goal = _goals(wb, N, seed=6)
     g = torch.Generator().manual_seed(7)
-    q_meas = q + 0.01 * torch.randn(N, 11, generator=g, dtype=F64)
+    q_meas = q + 0.01 * torch.randn(N, DOF, generator=g, dtype=F64)
     q_meas[2, 5] += 0.2  # beyond resync_tolerance: this row restarts from the measurement
     state = wb.start(q, qd)
     weight = torch.linspace(1.0, 4.0, N, dtype=F64)
@@ -235,14 +233,14 @@ def test_non_positive_gain_names_the_key(gamma: float) -> None:
     geometry = build_geometry(GeometryCfg())
     with pytest.raises(ValueError, match=r"controller\.fabric\.gamma"):
         WholeBodyFabric(geometry, WholeBodyConfig(gamma=gamma))
-    with pytest.raises(ControllerConfigError, match=r"controller\.fabric\.gamma"):
-        WholeBodyConfig.from_dict({"gamma": gamma})
+    with pytest.raises(ConfigError, match=r"controller\.fabric\.gamma"):
+        WholeBodyConfig.from_mapping({"gamma": gamma})
     with pytest.raises(ValueError, match=r"controller\.fabric\.gamma"):
-        RolloutConfig.from_dict({"fabric": {"gamma": gamma}})
+        RolloutConfig.from_mapping({"fabric": {"gamma": gamma}})
 
 
 def test_unknown_fabric_keys_are_named() -> None:
-    with pytest.raises(ControllerConfigError, match="gama"):
-        WholeBodyConfig.from_dict({"gama": 1.0})
-    with pytest.raises(ControllerConfigError, match="collision_exclude"):
+    with pytest.raises(ConfigError, match="gama"):
+        WholeBodyConfig.from_mapping({"gama": 1.0})
+    with pytest.raises(ConfigError, match="collision_exclude"):
         WholeBodyFabric(build_geometry(GeometryCfg()), WholeBodyConfig(collision_exclude=("no_such_sphere",)))

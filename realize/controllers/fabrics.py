@@ -36,15 +36,16 @@ energization coefficients ``alpha`` use both, as in the package. Inverses are
 or above ``1 / eps`` are zeroed, as ``compute_action`` does.
 
 The robot enters only through a differentiable forward map supplied by the
-caller (see :class:`Kinematics`): end-effector position ``x_ee(q)`` (N, d) and
-collision-sphere centres ``p(q)`` (N, K, d). Jacobians and curvature terms
-are computed with forward-mode AD (``torch.func.jvp``, vmapped over joint
-directions), so any differentiable torch function works; everything is
-batched over N plans with no Python loop over N, device- and dtype-agnostic,
-and differentiable w.r.t. ``q``, ``qd``, the goal, obstacles and gains.
+caller (``realize.controllers.fabric_jets``: ``FabricKinematics``, ``Kinematics``):
+end-effector position ``x_ee(q)`` (N, d) and collision-sphere centres ``p(q)``
+(N, K, d); that module computes the leaves' Jacobians and curvature terms.
+Everything is batched over N plans with no Python loop over N, device- and
+dtype-agnostic, and differentiable w.r.t. ``q``, ``qd``, the goal, obstacles
+and gains.
 
 Bad input: invalid *configuration* constants (non-positive gains, ...) raise
-``ValueError`` naming the parameter. Invalid *per-plan* data (NaN/inf in
+``realize.config.ConfigError`` naming the parameter when the ``FabricConfig`` is
+built; the step itself checks no constant again. Invalid *per-plan* data (NaN/inf in
 ``q``, ``qd``, goal, goal weight or an unmasked obstacle, a non-positive goal
 weight, a non-finite result) never fails the batch: such rows get ``qdd = 0``
 and ``valid = False`` in the returned ``(N,)`` mask.
@@ -63,218 +64,74 @@ reference gives NaN there).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
-from typing import Callable, Protocol
+from dataclasses import dataclass
+from typing import Callable, ClassVar
 
 import torch
 from torch import Tensor
-from torch.func import jvp, vmap
 
-__all__ = [
-    "FabricConfig",
-    "FabricKinematics",
-    "Kinematics",
-    "sphere_distance",
-    "fabric_acceleration",
-    "integrate",
-    "kinematic_jets",
-]
+from realize.config import ConfigError, Settings, setting
+from realize.controllers.fabric_jets import (
+    FabricKinematics,
+    distance_jets,
+    kinematic_jets,
+    sphere_distance,
+    sphere_jets,
+)
 
-
-@dataclass(frozen=True)
-class FabricConfig:
-    """Fabric constants; the defaults are the reference package's defaults."""
-
-    # base energy 0.5 * base_inertia * |qd|^2 (reference: "0.5 * 0.2 * ca.dot(xdot, xdot)")
-    base_inertia: float = 0.2
-    # obstacle collision geometry  h = -collision_lam / x^collision_exp * s(xd) * xd^2
-    collision_lam: float = 0.5
-    collision_exp: float = 5.0
-    # obstacle collision Finsler energy  l = collision_metric_lam / x^collision_metric_exp * xd^2
-    collision_metric_lam: float = 0.1
-    collision_metric_exp: float = 1.0
-    # joint-limit geometry  h = -limit_lam / x^limit_exp * xd^2
-    limit_lam: float = 0.1
-    limit_exp: float = 1.0
-    # joint-limit energy  l = limit_metric_lam / x^limit_metric_exp * s(xd) * xd^2
-    limit_metric_lam: float = 0.1
-    limit_metric_exp: float = 1.0
-    # attractor potential  psi = gamma * k_psi * (|x| + log(1 + exp(-2 a_psi |x|)) / a_psi)
-    gamma: float = 1.0  # attractor weight ("weight_goal_0"); overridable per plan
-    k_psi: float = 5.0
-    a_psi: float = 10.0
-    # attractor metric  ((m_max - m_min) exp(-(a_m |x|)^2) + m_min) * I
-    m_min: float = 0.3
-    m_max: float = 2.0
-    a_m: float = 0.75
-    # damper  beta = 0.5 (tanh(-alpha_b (|x| - radius_shift)) + 1) beta_close + beta_distant
-    #                + max(0, alpha_geometry - alpha_execution)
-    alpha_b: float = 0.5
-    radius_shift: float = 0.02
-    beta_close: float = 6.5
-    beta_distant: float = 0.01
-    # interpolation  eta = 0.5 (tanh(-alpha_eta * |qd|^2 * (1 - ex_factor) - 0.5) + 1)
-    alpha_eta: float = 0.9
-    ex_factor: float = 0.5
-    # regularisation of inverses and alpha denominators; actions with norm < eps or
-    # > 1 / eps are zeroed (set zero_extreme_actions=False to keep them)
-    eps: float = 1e-6
-    zero_extreme_actions: bool = True
-
-    def __post_init__(self) -> None:
-        positive = ("base_inertia", "collision_metric_lam", "limit_metric_lam", "gamma",
-                    "k_psi", "a_psi", "m_min", "m_max", "eps")
-        non_negative = ("collision_lam", "collision_exp", "collision_metric_exp", "limit_lam",
-                        "limit_exp", "limit_metric_exp", "a_m", "alpha_b", "beta_close",
-                        "beta_distant", "alpha_eta")
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "zero_extreme_actions":
-                continue
-            if not math.isfinite(v):
-                raise ValueError(f"FabricConfig.{f.name} must be finite, got {v}")
-            if f.name in positive and v <= 0:
-                raise ValueError(f"FabricConfig.{f.name} must be > 0, got {v}")
-            if f.name in non_negative and v < 0:
-                raise ValueError(f"FabricConfig.{f.name} must be >= 0, got {v}")
-        if self.m_max < self.m_min:
-            raise ValueError(f"FabricConfig.m_max ({self.m_max}) must be >= m_min ({self.m_min})")
-
-
-class FabricKinematics(Protocol):
-    """What the fabric needs from a robot.
-
-    ``body_radii``: radii of the K collision spheres, shape (K,) or (N, K).
-    ``__call__(q)``: for q (N, n) return ``(x_ee (N, d), points (N, K, d))``.
-    Must be a differentiable torch function of q, without in-place writes to q,
-    and work under ``torch.func`` forward-mode AD (vmap over tangents unless
-    ``vectorize=False`` is passed to :func:`fabric_acceleration`). For gradients
-    through the fabric (reverse over forward-over-forward), avoid ops whose
-    forward-mode rule is in place (e.g. ``torch.linalg.vector_norm``; write
-    ``sqrt((x * x).sum(-1))``).
-
-    Optional fast path: a method ``jets(q, qd)`` returning the same as
-    :func:`kinematic_jets` (values, Jacobians, velocities and curvature terms
-    ``qd^T (d^2 x / dq^2) qd`` of the end effector and of the sphere centres),
-    e.g. from closed forms. Without it the fabric differentiates ``__call__``
-    with nested forward-mode AD, which is exact but costs about one Python-level
-    op dispatch per op of the map per directional derivative.
-    """
-
-    body_radii: Tensor
-
-    def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]: ...
+__all__ = ["FabricConfig", "fabric_acceleration", "integrate"]
 
 
 @dataclass
-class Kinematics:
-    """Plain implementation of :class:`FabricKinematics` from a function."""
+class FabricConfig(Settings):
+    """Fabric constants; the defaults are the reference package's defaults."""
 
-    forward: Callable[[Tensor], tuple[Tensor, Tensor]]
-    body_radii: Tensor
+    config_key: ClassVar[str] = "controller.fabric"
 
-    def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]:
-        return self.forward(q)
+    # base energy 0.5 * base_inertia * |qd|^2 (reference: "0.5 * 0.2 * ca.dot(xdot, xdot)")
+    base_inertia: float = setting(0.2, gt=0)
+    # obstacle collision geometry  h = -collision_lam / x^collision_exp * s(xd) * xd^2
+    collision_lam: float = setting(0.5, ge=0)
+    collision_exp: float = setting(5.0, ge=0)
+    # obstacle collision Finsler energy  l = collision_metric_lam / x^collision_metric_exp * xd^2
+    collision_metric_lam: float = setting(0.1, gt=0)
+    collision_metric_exp: float = setting(1.0, ge=0)
+    # joint-limit geometry  h = -limit_lam / x^limit_exp * xd^2
+    limit_lam: float = setting(0.1, ge=0)
+    limit_exp: float = setting(1.0, ge=0)
+    # joint-limit energy  l = limit_metric_lam / x^limit_metric_exp * s(xd) * xd^2
+    limit_metric_lam: float = setting(0.1, gt=0)
+    limit_metric_exp: float = setting(1.0, ge=0)
+    # attractor potential  psi = gamma * k_psi * (|x| + log(1 + exp(-2 a_psi |x|)) / a_psi)
+    gamma: float = setting(1.0, gt=0)  # attractor weight ("weight_goal_0"); overridable per plan
+    k_psi: float = setting(5.0, gt=0)
+    a_psi: float = setting(10.0, gt=0)
+    # attractor metric  ((m_max - m_min) exp(-(a_m |x|)^2) + m_min) * I
+    m_min: float = setting(0.3, gt=0)
+    m_max: float = setting(2.0, gt=0)
+    a_m: float = setting(0.75, ge=0)
+    # damper  beta = 0.5 (tanh(-alpha_b (|x| - radius_shift)) + 1) beta_close + beta_distant
+    #                + max(0, alpha_geometry - alpha_execution)
+    alpha_b: float = setting(0.5, ge=0)
+    radius_shift: float = 0.02
+    beta_close: float = setting(6.5, ge=0)
+    beta_distant: float = setting(0.01, ge=0)
+    # interpolation  eta = 0.5 (tanh(-alpha_eta * |qd|^2 * (1 - ex_factor) - 0.5) + 1)
+    alpha_eta: float = setting(0.9, ge=0)
+    ex_factor: float = 0.5
+    # regularisation of inverses and alpha denominators; actions with norm < eps or
+    # > 1 / eps are zeroed (set zero_extreme_actions=False to keep them)
+    eps: float = setting(1e-6, gt=0)
+    zero_extreme_actions: bool = True
 
-
-def sphere_distance(points: Tensor, body_radii: Tensor, obstacles: Tensor) -> Tensor:
-    """Reference sphere-sphere leaf map ``|p - c| / (r_obst + r_body) - 1``.
-
-    points (N, K, d), body_radii (N, K), obstacles (N, M, d + 1) = centre, radius.
-    Returns (N, K, M). Any function with this signature can replace it (e.g. a
-    signed distance to boxes), as long as it is differentiable in ``points``.
-    """
-    centre, radius = obstacles[..., :-1], obstacles[..., -1]
-    diff = points[:, :, None, :] - centre[:, None, :, :]
-    # not torch.linalg.vector_norm: its forward-mode rule writes in place, which
-    # breaks reverse mode through the nested jvp used for the curvature terms
-    dist = torch.sqrt((diff * diff).sum(-1))
-    return dist / (radius[:, None, :] + body_radii[:, :, None]) - 1.0
+    def check(self, where: str) -> None:
+        if self.m_max < self.m_min:
+            raise ConfigError(f"{where}.m_max = {self.m_max!r} is invalid: must be >= m_min ({self.m_min})")
 
 
 def _one_sided(xd: Tensor) -> Tensor:
     """Reference switch ``-0.5 * (sign(xd) - 1)``: 1 approaching, 0.5 at rest, 0 leaving."""
     return -0.5 * (torch.sign(xd) - 1.0)
-
-
-def _jets(fn: Callable[[Tensor], Tensor], q: Tensor, qd: Tensor, vectorize: bool
-          ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Value y (N, L), Jacobian J (N, L, n), velocity J qd (N, L), curvature qd^T H qd (N, L)."""
-
-    def velocity(z: Tensor) -> tuple[Tensor, Tensor]:
-        return jvp(fn, (z,), (qd,))
-
-    (y, yd), (_, curvature) = jvp(velocity, (q,), (qd,))
-    n = q.shape[-1]
-    basis = torch.eye(n, dtype=q.dtype, device=q.device)[:, None, :].expand(n, *q.shape)
-    if vectorize:
-        J = vmap(lambda v: jvp(fn, (q,), (v,))[1], out_dims=-1)(basis)
-    else:
-        J = torch.stack([jvp(fn, (q,), (basis[j],))[1] for j in range(n)], dim=-1)
-    return y, J, yd, curvature
-
-
-Jets = tuple[Tensor, Tensor, Tensor, Tensor]
-
-
-def kinematic_jets(kin: FabricKinematics, q: Tensor, qd: Tensor, d: int, vectorize: bool = True
-                   ) -> tuple[Jets, Jets]:
-    """Jets of the robot maps: ``((x_ee, J_ee, xd_ee, a_ee), (p, J_p, pd, a_p))``.
-
-    Shapes (N, d), (N, d, n), (N, d), (N, d) and (N, K, d'), (N, K, d', n),
-    (N, K, d'), (N, K, d'); ``a = qd^T (d^2 x / dq^2) qd`` is the true curvature
-    term. Uses ``kin.jets(q, qd)`` when the kinematics provides it (e.g. closed
-    forms), otherwise forward-mode AD through ``kin(q)``.
-    """
-    if hasattr(kin, "jets"):
-        return kin.jets(q, qd)
-    N = q.shape[0]
-
-    def flat(z: Tensor) -> Tensor:
-        x_ee, points = kin(z)
-        return torch.cat([x_ee, points.flatten(1)], dim=1)
-
-    y, J, yd, a = _jets(flat, q, qd, vectorize)
-    K = int(torch.as_tensor(kin.body_radii).shape[-1])
-    dp = (y.shape[1] - d) // max(K, 1)
-    ee = (y[:, :d], J[:, :d], yd[:, :d], a[:, :d])
-    pts = (y[:, d:].reshape(N, K, dp), J[:, d:].reshape(N, K, dp, -1),
-           yd[:, d:].reshape(N, K, dp), a[:, d:].reshape(N, K, dp))
-    return ee, pts
-
-
-def _sphere_jets(p: Tensor, Jp: Tensor, pd: Tensor, ap: Tensor, radii: Tensor,
-                 obstacles: Tensor) -> Jets:
-    """Closed-form jets of :func:`sphere_distance` composed with the point jets."""
-    centre, radius = obstacles[..., :-1], obstacles[..., -1]
-    u = p[:, :, None, :] - centre[:, None, :, :]  # (N, K, M, d)
-    rho = torch.sqrt((u * u).sum(-1))
-    R = radius[:, None, :] + radii[:, :, None]
-    phi = rho / R - 1.0
-    g = u / (rho * R)[..., None]  # d phi / d p
-    J = torch.einsum("nkmd,nkdj->nkmj", g, Jp)
-    pdm = pd[:, :, None, :]
-    phid = (g * pdm).sum(-1)
-    u_pd = (u * pdm).sum(-1)
-    a = (g * ap[:, :, None, :]).sum(-1) + ((pdm * pdm).sum(-1) - u_pd ** 2 / rho ** 2) / (rho * R)
-    return phi.flatten(1), J.flatten(1, 2), phid.flatten(1), a.flatten(1)
-
-
-def _distance_jets(distance: Callable[[Tensor, Tensor, Tensor], Tensor], p: Tensor, Jp: Tensor,
-                   pd: Tensor, ap: Tensor, radii: Tensor, obstacles: Tensor, vectorize: bool) -> Jets:
-    """Jets of a generic leaf map ``distance(p, radii, obstacles)`` by forward-mode AD."""
-
-    def f(z: Tensor) -> Tensor:
-        return distance(z, radii, obstacles)
-
-    (phi, phid), (_, a2) = jvp(lambda z: jvp(f, (z,), (pd,)), (p,), (pd,))
-    a1 = jvp(f, (p,), (ap,))[1]
-    cols = Jp.movedim(-1, 0)  # (n, N, K, d)
-    if vectorize:
-        J = vmap(lambda v: jvp(f, (p,), (v,))[1], out_dims=-1)(cols)
-    else:
-        J = torch.stack([jvp(f, (p,), (c,))[1] for c in cols], dim=-1)
-    return phi.flatten(1), J.flatten(1, 2), phid.flatten(1), (a1 + a2).flatten(1)
 
 
 def _pull(J: Tensor, m: Tensor) -> Tensor:
@@ -307,7 +164,7 @@ def fabric_acceleration(
     Args:
         q, qd: joint positions and velocities (N, n).
         goal: end-effector goal positions (N, d).
-        kin: forward maps of the robot, see :class:`FabricKinematics`.
+        kin: forward maps of the robot, see ``fabric_jets.FabricKinematics``.
         cfg: fabric constants (reference defaults).
         obstacles: (N, M, P) obstacle parameters for ``obstacle_distance``; for the
             default spheres/circles P = d + 1 (centre, radius). None: no obstacles.
@@ -334,8 +191,8 @@ def fabric_acceleration(
 
     # ---- per-plan validity and sanitised inputs (invalid rows never poison the batch)
     if weight is None:
-        weight = cfg.gamma
-    if not torch.is_tensor(weight):
+        weight = cfg.gamma  # checked once, when the FabricConfig was built
+    elif not torch.is_tensor(weight):
         if not math.isfinite(weight) or weight <= 0:
             raise ValueError(f"weight (attractor gain gamma) must be finite and > 0, got {weight}")
     w = torch.as_tensor(weight, dtype=dtype, device=device).expand(N)
@@ -378,11 +235,11 @@ def fabric_acceleration(
     if obstacles is not None:
         radii = body_radii.expand(N, point_jets[0].shape[1])
         if obstacle_distance is sphere_distance:
-            parts.append(_sphere_jets(*point_jets, radii, obstacles))
+            parts.append(sphere_jets(*point_jets, radii, obstacles))
         elif hasattr(obstacle_distance, "jets"):  # closed-form leaf jets of a custom map
             parts.append(obstacle_distance.jets(*point_jets, radii, obstacles))
         else:
-            parts.append(_distance_jets(obstacle_distance, *point_jets, radii, obstacles, vectorize))
+            parts.append(distance_jets(obstacle_distance, *point_jets, radii, obstacles, vectorize))
     # leaves in one layout: [attractor (d) | collision pairs (K * M, index k * M + m)]
     y, J, yd, curv = (torch.cat(t, dim=1) for t in zip(*parts))
     goal = torch.where(valid[:, None], goal, y[:, :d].detach() + 1.0)

@@ -35,11 +35,13 @@ robot's own joint drives to track.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 from torch import Tensor
+
+from realize.config import Settings, setting
 
 __all__ = ["PIDConfig", "PIDState", "PIDOutput", "pid_init", "pid_step", "wrap_angle", "HEADING_MODES"]
 
@@ -51,8 +53,8 @@ def wrap_angle(a: Tensor) -> Tensor:
     return torch.atan2(torch.sin(a), torch.cos(a))
 
 
-@dataclass(frozen=True)
-class PIDConfig:
+@dataclass
+class PIDConfig(Settings):
     """Gains and limits (SI units: m, s, rad).
 
     kp, ki, kd: position gains (kp > 0; ki, kd >= 0).
@@ -65,43 +67,23 @@ class PIDConfig:
     heading: "hold" | "face_goal" | "target" (see module docstring).
     """
 
-    kp: float = 1.5
-    ki: float = 0.0
-    kd: float = 0.05
-    kp_yaw: float = 2.0
-    ki_yaw: float = 0.0
-    kd_yaw: float = 0.0
-    max_lin_speed: float = 0.6
-    max_yaw_rate: float = 1.0
-    max_lin_accel: float | None = None
-    max_yaw_accel: float | None = None
-    switch_radius: float = 0.15
-    goal_tolerance: float = 0.03
-    yaw_tolerance: float = 0.05
-    integral_limit: float = 0.5
-    heading: str = "hold"
+    config_key: ClassVar[str] = "controller.pid"
 
-    def __post_init__(self) -> None:
-        positive = ("kp", "kp_yaw", "max_lin_speed", "max_yaw_rate", "switch_radius",
-                    "goal_tolerance", "yaw_tolerance")
-        non_negative = ("ki", "kd", "ki_yaw", "kd_yaw", "integral_limit")
-        optional_positive = ("max_lin_accel", "max_yaw_accel")
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "heading":
-                continue
-            if v is None:
-                if f.name not in optional_positive:
-                    raise ValueError(f"PIDConfig.{f.name} must be a number, got None")
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"PIDConfig.{f.name} must be a finite number, got {v!r}")
-            if (f.name in positive or f.name in optional_positive) and not v > 0:
-                raise ValueError(f"PIDConfig.{f.name} must be > 0, got {v}")
-            if f.name in non_negative and v < 0:
-                raise ValueError(f"PIDConfig.{f.name} must be >= 0, got {v}")
-        if self.heading not in HEADING_MODES:
-            raise ValueError(f"PIDConfig.heading must be one of {HEADING_MODES}, got {self.heading!r}")
+    kp: float = setting(1.5, gt=0)
+    ki: float = setting(0.0, ge=0)
+    kd: float = setting(0.05, ge=0)
+    kp_yaw: float = setting(2.0, gt=0)
+    ki_yaw: float = setting(0.0, ge=0)
+    kd_yaw: float = setting(0.0, ge=0)
+    max_lin_speed: float = setting(0.6, gt=0)
+    max_yaw_rate: float = setting(1.0, gt=0)
+    max_lin_accel: float | None = setting(None, gt=0)
+    max_yaw_accel: float | None = setting(None, gt=0)
+    switch_radius: float = setting(0.15, gt=0)
+    goal_tolerance: float = setting(0.03, gt=0)
+    yaw_tolerance: float = setting(0.05, gt=0)
+    integral_limit: float = setting(0.5, ge=0)
+    heading: str = setting("hold", choices=HEADING_MODES)
 
 
 @dataclass
@@ -218,11 +200,10 @@ def pid_step(
     lengths: Tensor,
     dt: float,
 ) -> PIDOutput:
-    """One control step for all N plans. ``dt``: control period in seconds (> 0)."""
-    if not (isinstance(dt, (int, float)) and not isinstance(dt, bool) and dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"dt must be a positive finite number, got {dt!r}")
-    n = _check_pose(pose)
-    _check_path(waypoints, lengths, n)
+    """One control step for all N plans. ``dt``: control period in seconds (> 0).
+
+    The hot path checks nothing: ``config`` was checked when it was built, the path when the
+    tracker started (``pid_init``), ``dt`` is the scene's control period."""
     dtype, dev = pose.dtype, pose.device
     wps = waypoints.to(dtype)
     pos, yaw = pose[:, :2], pose[:, 2]

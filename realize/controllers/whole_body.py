@@ -6,9 +6,9 @@ What it does: wraps the generic fabric (``realize.controllers.fabrics``) for the
     ``axis_length`` behind it on the approach axis and one beside it on the closing axis, to the
     same points of the goal pose; together they pull position and orientation;
   * collision leaves keep the robot's spheres off the scene's static boxes (tables, wall, ramp,
-    a container; not the push scene's stick, which the gripper must touch) and off
-    the floor, with a box signed distance; the fingers and the front of the gripper are left out
-    of the box leaves (they must reach a cube lying on a table);
+    a container; not the push scene's stick, which the gripper must touch) and off the floor,
+    with a box signed distance (``realize.controllers.obstacles``); the fingers and the front
+    of the gripper are left out of the box leaves (they must reach a cube lying on a table);
   * joint-limit leaves for torso and arm;
   * the fabric integrates its own reference state (q_ref, qd_ref), the way a fabric planner
     commands a real robot; the reference is re-synchronised with the measured state when they
@@ -20,151 +20,47 @@ simulator (the rollout writes the targets to ``realize.scene.BatchedScene``).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field, fields
-from typing import Any, Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 from torch import Tensor
 
-from realize.geometry import SceneGeometry
+from realize.config import ConfigError, Settings, setting
+from realize.controllers.body import BASE_XY, DOF, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
+from realize.controllers.obstacles import BoxDistance, boxes_tensor
+from realize.geometry import SceneGeometry
 from realize.kinematics import FetchKinematics
 
 # spheres that may touch a table top while grasping or placing a cube lying on it
 DEFAULT_EXCLUDE = ("finger_r", "finger_l", "gripper_front")
-FLOOR_HALF = 50.0
 LIMIT_MARGIN = 0.005  # rad (m for the torso): the fabric's state stays this far inside the limits
 
 
-class ControllerConfigError(ValueError):
-    """A controller setting is invalid; the message names the key."""
-
-
 @dataclass
-class WholeBodyConfig:
+class WholeBodyConfig(Settings):
     """Whole-body fabric settings (Hydra ``controller.fabric``). Every field is a config key."""
 
-    gamma: float = 3.0  # attractor weight
-    beta_close: float = 6.5  # damping near the goal (reference default)
-    beta_distant: float = 0.01  # damping far from the goal
-    k_psi: float = 5.0  # attractor potential gain
-    axis_length: float = 0.25  # m, orientation points behind / beside the TCP
-    collision_lam: float = 0.5
-    collision_margin: float = 0.02  # m added to every sphere radius
+    config_key: ClassVar[str] = "controller.fabric"
+
+    gamma: float = setting(3.0, gt=0)  # attractor weight
+    beta_close: float = setting(6.5, ge=0)  # damping near the goal (reference default)
+    beta_distant: float = setting(0.01, ge=0)  # damping far from the goal
+    k_psi: float = setting(5.0, gt=0)  # attractor potential gain
+    axis_length: float = setting(0.25, gt=0)  # m, orientation points behind / beside the TCP
+    collision_lam: float = setting(0.5, ge=0)
+    collision_margin: float = setting(0.02, ge=0)  # m added to every sphere radius
     collision_exclude: tuple[str, ...] = DEFAULT_EXCLUDE
     floor: bool = True
-    max_base_speed: float = 0.6  # m/s
-    max_yaw_rate: float = 1.0  # rad/s
-    max_joint_speed: float = 1.2  # rad/s or m/s for the torso
-    resync_tolerance: float = 0.08  # reference/measured drift that triggers a re-sync
-
-    def validate(self, prefix: str = "controller.fabric") -> None:
-        for name in ("gamma", "k_psi", "axis_length", "max_base_speed", "max_yaw_rate", "max_joint_speed",
-                     "resync_tolerance"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ControllerConfigError(f"{prefix}.{name} = {v!r} is invalid: must be a finite number > 0")
-        for name in ("beta_close", "beta_distant", "collision_lam", "collision_margin"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ControllerConfigError(f"{prefix}.{name} = {v!r} is invalid: must be a finite number >= 0")
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | None, prefix: str = "controller.fabric") -> "WholeBodyConfig":
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        bad = set(d) - known
-        if bad:
-            raise ControllerConfigError(f"{prefix}: unknown keys {sorted(bad)}; allowed: {sorted(known)}")
-        if "collision_exclude" in d:
-            d["collision_exclude"] = tuple(d["collision_exclude"])
-        cfg = cls(**d)
-        cfg.validate(prefix)
-        return cfg
+    max_base_speed: float = setting(0.6, gt=0)  # m/s
+    max_yaw_rate: float = setting(1.0, gt=0)  # rad/s
+    max_joint_speed: float = setting(1.2, gt=0)  # rad/s or m/s for the torso
+    resync_tolerance: float = setting(0.08, gt=0)  # reference/measured drift that triggers a re-sync
 
     def fabric(self) -> FabricConfig:
         return FabricConfig(gamma=self.gamma, beta_close=self.beta_close, beta_distant=self.beta_distant,
                             k_psi=self.k_psi, collision_lam=self.collision_lam)
-
-
-def boxes_tensor(geometry: SceneGeometry, floor: bool = True) -> Tensor:
-    """(M, 9) obstacle boxes: centre xyz, half sizes xyz, yaw, pitch, is-floor flag."""
-    rows = [list(b.center) + list(b.half_size) + [b.yaw, b.pitch, 0.0] for b in geometry.static_obstacles]
-    if floor:
-        rows.append([0.0, 0.0, -FLOOR_HALF, FLOOR_HALF, FLOOR_HALF, FLOOR_HALF, 0.0, 0.0, 1.0])
-    return torch.tensor(rows, dtype=torch.float64)
-
-
-class BoxDistance:
-    """Leaf map of the collision terms: sphere-to-box gap in units of the sphere radius.
-
-    ``__call__(points (N,K,3), radii (N,K), boxes (N,M,9)) -> (N,K,M)``. Pairs that must not
-    interact (``box_ok[k]`` False for a box, ``floor_ok[k]`` False for the floor) get a constant
-    far distance, hence no force.
-    """
-
-    FAR = 10.0
-
-    def __init__(self, box_ok: Tensor, floor_ok: Tensor):
-        self.box_ok, self.floor_ok = box_ok, floor_ok
-
-    def _local(self, points: Tensor, boxes: Tensor):
-        c, h, yaw, pitch = boxes[..., 0:3], boxes[..., 3:6], boxes[..., 6], boxes[..., 7]
-        cy, sy = torch.cos(yaw), torch.sin(yaw)
-        cp, sp = torch.cos(pitch), torch.sin(pitch)
-        zero, one = torch.zeros_like(cy), torch.ones_like(cy)
-        rz = torch.stack([torch.stack([cy, -sy, zero], -1), torch.stack([sy, cy, zero], -1),
-                          torch.stack([zero, zero, one], -1)], -2)
-        ry = torch.stack([torch.stack([cp, zero, sp], -1), torch.stack([zero, one, zero], -1),
-                          torch.stack([-sp, zero, cp], -1)], -2)
-        rot = rz @ ry  # (N, M, 3, 3): box frame -> world
-        u = points[:, :, None, :] - c[:, None, :, :]  # (N,K,M,3)
-        local = torch.einsum("nmji,nkmj->nkmi", rot, u)  # R^T u
-        return rot, local, h[:, None, :, :]
-
-    def _ok(self, boxes: Tensor) -> Tensor:
-        floor = boxes[..., 8][:, None, :] > 0.5
-        dev = boxes.device
-        return torch.where(floor, self.floor_ok.to(dev)[None, :, None], self.box_ok.to(dev)[None, :, None])
-
-    def __call__(self, points: Tensor, body_radii: Tensor, boxes: Tensor) -> Tensor:
-        _, local, h = self._local(points, boxes)
-        qv = local.abs() - h
-        outside = torch.sqrt((torch.clamp(qv, min=0.0) ** 2).sum(-1) + 1e-12)
-        inside = torch.clamp(qv.max(dim=-1).values, max=0.0)
-        # dimensionless like the reference's sphere leaf (|p - c| / (r_o + r_b) - 1): the gap
-        # in units of the body sphere's radius, which keeps the leaves well-conditioned at dt
-        dist = (outside + inside) / body_radii[:, :, None] - 1.0
-        return torch.where(self._ok(boxes), dist, torch.full_like(dist, self.FAR))
-
-    def jets(self, p: Tensor, Jp: Tensor, pd: Tensor, ap: Tensor, radii: Tensor, boxes: Tensor):
-        """Closed-form leaf jets (value, Jacobian, velocity, curvature), flattened (N, K*M, ...)."""
-        rot, local, h = self._local(p, boxes)
-        s = torch.where(local >= 0, torch.ones_like(local), -torch.ones_like(local))
-        qv = local.abs() - h
-        act = (qv > 0).to(p.dtype)
-        w = act * qv
-        wn = torch.sqrt((w * w).sum(-1) + 1e-12)
-        is_out = (qv > 0).any(-1)
-        k = qv.argmax(dim=-1, keepdim=True)
-        e_k = torch.zeros_like(qv).scatter(-1, k, 1.0)
-        g_local = torch.where(is_out[..., None], act * s * w / wn[..., None], e_k * s)
-        r = radii[:, :, None]
-        g = torch.einsum("nmij,nkmj->nkmi", rot, g_local) / r[..., None]  # d phi / d p (world)
-        val = torch.where(is_out, wn, qv.max(-1).values) / r - 1.0
-        J = torch.einsum("nkmd,nkdj->nkmj", g, Jp)
-        pdl = torch.einsum("nmji,nkj->nkmi", rot, pd)  # local velocity
-        v = act * s * pdl
-        curv_out = ((v * v).sum(-1) - (w * v).sum(-1) ** 2 / wn ** 2) / wn
-        a = (g * ap[:, :, None, :]).sum(-1) + torch.where(is_out, curv_out, torch.zeros_like(curv_out)) / r
-        phid = (g * pd[:, :, None, :]).sum(-1)
-        ok = self._ok(boxes).expand_as(val)
-        val = torch.where(ok, val, torch.full_like(val, self.FAR))
-        J = torch.where(ok[..., None], J, torch.zeros_like(J))
-        phid = torch.where(ok, phid, torch.zeros_like(phid))
-        a = torch.where(ok, a, torch.zeros_like(a))
-        return val.flatten(1), J.flatten(1, 2), phid.flatten(1), a.flatten(1)
 
 
 class _PoseMap:
@@ -205,7 +101,7 @@ class _PoseMap:
 
 @dataclass
 class FabricState:
-    """Reference state integrated by the fabric, per plan: (N, 11) each."""
+    """Reference state integrated by the fabric, per plan: (N, DOF) each (``realize.controllers.body``)."""
 
     q: Tensor
     qd: Tensor
@@ -223,16 +119,15 @@ class WholeBodyFabric:
 
     def __init__(self, geometry: SceneGeometry, cfg: WholeBodyConfig | None = None, dt: float = 0.05,
                  device: torch.device | str = "cpu", dtype: torch.dtype = torch.float64):
-        self.cfg = cfg or WholeBodyConfig()
-        self.cfg.validate()
+        self.cfg = cfg or WholeBodyConfig()  # checked when it was built
         self.dt = dt
         self.device, self.dtype = torch.device(device), dtype
         self.kin = FetchKinematics(device=device, dtype=dtype)
         names = list(self.kin.sphere_names)
         unknown = [s for s in self.cfg.collision_exclude if s not in names]
         if unknown:
-            raise ControllerConfigError(
-                f"controller.fabric.collision_exclude: unknown spheres {unknown}; known: {names}")
+            raise ConfigError(f"controller.fabric.collision_exclude = {list(self.cfg.collision_exclude)!r} is "
+                              f"invalid: unknown spheres {unknown}; known: {names}")
         radii = self.kin.sphere_radii.to(device, dtype) + self.cfg.collision_margin
         box_ok = torch.tensor([s not in self.cfg.collision_exclude for s in names], device=device)
         floor_ok = self.kin.sphere_floor_mask.to(device=device, dtype=torch.bool)
@@ -244,9 +139,10 @@ class WholeBodyFabric:
         self.lower, self.upper = lo, up
         self._clamp_lo, self._clamp_hi = lo + LIMIT_MARGIN, up - LIMIT_MARGIN
         self.fabric_cfg = self.cfg.fabric()
-        self.speed_limit = torch.tensor(
-            [self.cfg.max_base_speed] * 2 + [self.cfg.max_yaw_rate] + [self.cfg.max_joint_speed] * 8,
-            dtype=dtype, device=device)
+        limit = torch.full((DOF,), self.cfg.max_joint_speed, dtype=dtype, device=device)
+        limit[BASE_XY] = self.cfg.max_base_speed
+        limit[YAW] = self.cfg.max_yaw_rate
+        self.speed_limit = limit
 
     def goal_points(self, position: Tensor, approach: Tensor, closing: Tensor) -> Tensor:
         """(N, 9) attractor goal from a TCP goal position and unit approach / closing axes (N, 3)."""
@@ -265,7 +161,7 @@ class WholeBodyFabric:
         """Advance the reference one control period towards ``goal`` (N, 9); returns (state, valid).
 
         Rows whose reference drifted more than ``resync_tolerance`` from the measured joints
-        (``q_meas``, (N, 11)) restart from the measured configuration at rest.
+        (``q_meas``, (N, DOF)) restart from the measured configuration at rest.
         """
         q_meas = q_meas.to(self.device, self.dtype)
         drift = (state.q - q_meas).abs().max(dim=1).values > self.cfg.resync_tolerance

@@ -1,0 +1,46 @@
+"""The ``grasp`` action template: pick the cube from a pre-grasp pose on a hemisphere around it.
+
+What it does: ``Grasp`` runs the shared manipulation phases (``manipulate``) closing the gripper,
+and decides success from the fingers' contact forces on the cube.
+What it doesn't: carry the cube anywhere (``move_to`` and ``place`` do).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from realize.realization.actions.base import Outcome
+from realize.realization.actions.manipulate import RETREAT, Manipulate
+from realize.realization.context import StepContext
+from realize.realization.failures import Failure
+
+
+class Grasp(Manipulate):
+    """grasp(g_p): fabric to the pre-grasp g_p on the hemisphere around the cube, straight in to
+    the cube, close, retreat to g_p.
+
+    Success: the TCP reached the grasp point within ``reach_tolerance`` (paper ``ee_in(g_p)``)
+    AND both fingers press on the cube (contact forces) after the retreat.
+    """
+
+    name = "grasp"
+    closes_gripper = True
+
+    def check(self, ctx: StepContext, rows: Tensor) -> Outcome:
+        cfg = ctx.cfg
+        err, ph, pt, holds, gripped = self._grip_step(ctx, rows)
+        not_held = gripped & ~holds
+        self.phase[rows] = torch.where(gripped & holds, RETREAT, ph)
+        self.phase_t[rows] = torch.where(gripped & holds, 0, pt)
+        if (gripped & holds).any():
+            ctx.start_fabric(rows[gripped & holds])
+        ph = self.phase[rows]
+        retreated = (ph == RETREAT) & self._retreated(ctx, rows, err)
+        dropped = (ph == RETREAT) & ~holds & (self.phase_t[rows] > 2)
+        ok = retreated & holds
+        timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
+        fail = torch.where(not_held, Failure.GRASP_NOT_HELD,
+                           torch.where(dropped, Failure.CUBE_DROPPED,
+                                       torch.where(timeout & ~ok, Failure.TIMEOUT, 0)))
+        return Outcome(ok | (fail > 0), ok, fail)

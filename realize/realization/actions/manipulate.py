@@ -1,0 +1,168 @@
+"""The steps grasp and place share: a whole-body fabric move to a pre-pose, straight in, grip, out.
+
+What it does: ``Manipulate``, the phase machine of ``grasp`` and ``place`` (APPROACH the pre-pose
+on the parameter's hemisphere with the gripper aligned, DESCEND straight in along a goal sliding
+at ``approach_speed``, GRIP: close / open the gripper with the arm still, RETREAT straight back
+out), with the target geometry (TCP goal backed off so the fingertips clear the supporting
+surface, closing axis on two cube faces).
+What it doesn't: decide success (``grasp`` and ``place`` do, from finger contacts and the cube).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from realize.fetch_body import FINGERTIP_REACH
+from realize.hemisphere import Hemisphere
+from realize.realization.actions.base import Template
+from realize.realization.context import StepContext
+from realize.regions import Region
+from realize.scene import quat_to_matrix
+
+PAD_HALF_WIDTH = 0.013  # m, half width of the finger pads across the closing axis (fetch.urdf)
+
+# phases of grasp / place
+APPROACH, DESCEND, GRIP, RETREAT = 0, 1, 2, 3
+
+
+class Manipulate(Template):
+    """Common phase machine of grasp and place (whole-body fabric to a hemisphere pre-pose)."""
+
+    param_doc = "a hemisphere region (pre-pose on its surface, approach towards its centre)"
+    closes_gripper = True  # gripper command in the GRIP phase
+
+    def __init__(self, n_envs: int, device: torch.device):
+        super().__init__(n_envs, device)
+        n = n_envs
+        self.phase = torch.zeros(n, dtype=torch.long, device=device)
+        self.phase_t = torch.zeros(n, dtype=torch.long, device=device)
+        self.pre = torch.zeros(n, 3, device=device)
+        self.target = torch.zeros(n, 3, device=device)
+        self.approach = torch.zeros(n, 3, device=device)
+        self.closing = torch.zeros(n, 3, device=device)
+
+    @classmethod
+    def accepts(cls, region: Region) -> bool:
+        return isinstance(region, Hemisphere)
+
+    def _centre_and_pre(self, ctx: StepContext, params: Tensor, region: Region) -> tuple[Tensor, Tensor]:
+        """(object point, pre-pose) of the action: a hemisphere parameter is the pre-pose around
+        the region's fixed centre; a 3-D box parameter (place only) is the point itself, reached
+        straight down from ``place_pre_height`` above it."""
+        p = params[:, :3].to(torch.float32)
+        if isinstance(region, Hemisphere):
+            return torch.tensor(region.center, dtype=torch.float32, device=self.device).expand(len(p), 3), p
+        up = torch.tensor([0.0, 0.0, ctx.cfg.place_pre_height], device=self.device)
+        return p, p + up
+
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
+        centre, pre = self._centre_and_pre(ctx, params, region)
+        d = centre - pre
+        approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
+        self.pre[rows] = pre
+        self.approach[rows] = approach
+        self.closing[rows] = self._closing_axis(ctx, rows, approach)
+        self.target[rows] = self._target(ctx, rows, centre, approach)
+        self.phase[rows] = APPROACH
+        self.phase_t[rows] = 0
+        self.t[rows] = 0
+        ctx.start_fabric(rows)
+        return torch.zeros(len(rows), dtype=torch.long, device=self.device)
+
+    def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor) -> Tensor:
+        """TCP goal of the plans ``rows`` that begin the action now: the region centre (the
+        cube's centre), backed off along the approach just enough that the fingertips stay
+        ``grasp_clearance`` above the surface the cube rests on."""
+        cfg, g = ctx.cfg, ctx.scene.geometry
+        support = centre[:, 2] - g.cube_half_size
+        a_z = approach[:, 2].clamp(max=-0.2)  # approaches from below the horizon are not useful
+        tilt = torch.sqrt((1.0 - approach[:, 2] ** 2).clamp(min=0.0))
+        lowest = FINGERTIP_REACH * a_z - PAD_HALF_WIDTH * tilt  # fingertip height below the TCP
+        back = (support + cfg.grasp_clearance - centre[:, 2] - lowest) / (-a_z)
+        back = back.clamp(min=0.0) + cfg.grasp_offset
+        return centre - approach * back[:, None]
+
+    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor) -> Tensor:
+        """Closing axis of the goal pose: the cube's face normal (perpendicular to the approach)
+        nearest to the gripper's current closing axis, so the fingers close on two faces."""
+        frame = quat_to_matrix(ctx.cube[rows, 3:7])  # (n, 3, 3), columns = cube axes
+        cand = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 6, 3)
+        cand = cand - (cand * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
+        norm = cand.norm(dim=-1)
+        cand = cand / norm.clamp(min=1e-6)[..., None]
+        # most perpendicular to the approach first (a true face normal), then nearest the current axis
+        score = 2.0 * norm + 0.5 * (cand * ctx.closing[rows][:, None, :]).sum(-1)
+        best = score.argmax(dim=1)
+        return cand[torch.arange(len(rows), device=self.device), best]
+
+    def _goal(self, rows: Tensor, ctx: StepContext | None = None) -> Tensor:
+        """Goal of the current phase. The straight moves in and out (DESCEND, RETREAT) follow a
+        goal that slides along the approach line at ``approach_speed``, so the gripper moves
+        in a straight line instead of swinging (a swing knocks over or drops the cube)."""
+        ph = self.phase[rows]
+        final = torch.where(((ph == APPROACH) | (ph == RETREAT))[:, None], self.pre[rows], self.target[rows])
+        if ctx is None:
+            return final
+        start = torch.where((ph == RETREAT)[:, None], self.target[rows], self.pre[rows])
+        span = (final - start).norm(dim=1).clamp(min=1e-6)
+        frac = (self.phase_t[rows].float() * ctx.dt * ctx.cfg.approach_speed / span).clamp(max=1.0)
+        ramp = start + (final - start) * frac[:, None]
+        straight = (ph == DESCEND) | (ph == RETREAT)
+        return torch.where(straight[:, None], ramp, final)
+
+    def act(self, ctx: StepContext, rows: Tensor) -> None:
+        ph = self.phase[rows]
+        # the arm stands still while the fingers close / open (ctx.arm_hold was set on entry)
+        moving = ph != GRIP
+        mr = rows[moving]
+        if len(mr):
+            ctx.fabric_goal(mr, self._goal(mr, ctx), self.approach[mr], self.closing[mr])
+        grip = (ph >= GRIP) if self.closes_gripper else (ph < GRIP)
+        ctx.grip_cmd[rows] = grip
+        self.t[rows] += 1
+        self.phase_t[rows] += 1
+
+    def _advance(self, ctx: StepContext, rows: Tensor) -> tuple[Tensor, Tensor]:
+        """Shared phase transitions; returns (tcp error to current goal, reached-target flag)."""
+        cfg = ctx.cfg
+        tcp = ctx.tcp[rows]
+        ph = self.phase[rows]
+        err = (tcp - self._goal(rows)).norm(dim=1)
+        axis_ok = (ctx.approach[rows] * self.approach[rows]).sum(dim=1) >= math.cos(cfg.axis_tolerance)
+        to_descend = (ph == APPROACH) & (err <= cfg.pregrasp_tolerance) & axis_ok
+        # close when at the target, or when settled within reach_tolerance of it (the fingers
+        # or the robot's own collision terms may hold the TCP a few mm off)
+        ramp_done = self.phase_t[rows] * ctx.dt * cfg.approach_speed >= (self.pre[rows] - self.target[rows]).norm(dim=1)
+        settled = ramp_done & (self.phase_t[rows] >= self._settle_steps(ctx, rows)) & (err <= cfg.reach_tolerance)
+        to_grip = (ph == DESCEND) & ((err <= cfg.grip_tolerance) | settled)
+        new = torch.where(to_descend, DESCEND, torch.where(to_grip, GRIP, ph))
+        changed = new != ph
+        if to_grip.any():
+            ctx.hold_arm(rows[to_grip])
+        self.phase[rows] = new
+        self.phase_t[rows] = torch.where(changed, 0, self.phase_t[rows])
+        return err, to_grip
+
+    def _grip_step(self, ctx: StepContext, rows: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """Advance the shared phases; returns (TCP error, phase, steps in phase, holds, and
+        whether the gripper has had ``grip_s`` to close / open)."""
+        err, _ = self._advance(ctx, rows)
+        ph, pt = self.phase[rows], self.phase_t[rows]
+        done = (ph == GRIP) & (pt >= ctx.steps(ctx.cfg.grip_s))
+        return err, ph, pt, ctx.holds(rows), done
+
+    def _retreated(self, ctx: StepContext, rows: Tensor, err: Tensor) -> Tensor:
+        """Back at the pre-pose, or most of the way back out along the approach line."""
+        span = (self.pre[rows] - self.target[rows]).norm(dim=1)
+        out = (ctx.tcp[rows] - self.target[rows]).norm(dim=1)
+        return (self.phase_t[rows] > 0) & ((err <= ctx.cfg.pregrasp_tolerance) | (out >= ctx.cfg.retreat_share * span))
+
+    def _settle_steps(self, ctx: StepContext, rows: Tensor) -> Tensor:
+        ramp = (self.pre[rows] - self.target[rows]).norm(dim=1) / (ctx.cfg.approach_speed * ctx.dt)
+        return ramp.ceil().long() + ctx.steps(ctx.cfg.settle_s)
+
+    def distance(self, ctx: StepContext, rows: Tensor) -> Tensor:
+        return (ctx.tcp[rows] - self.target[rows]).norm(dim=1)

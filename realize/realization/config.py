@@ -1,0 +1,63 @@
+"""Settings of a rollout (Hydra ``controller``): action tolerances, timeouts, controller settings.
+
+What it does: ``RolloutConfig`` (the ``controller`` group, with the nested ``pid``, ``astar``
+and ``fabric`` groups) and ``AStarConfig``, read and checked by ``realize.config.Settings``
+(bounds are field metadata; a bad value raises ``ConfigError`` naming ``controller.<key>``).
+They are checked once, when built; nothing on the control path checks them again.
+What it doesn't: run anything (``realize.realization.rollout``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from realize.config import Settings, setting
+from realize.controllers.pid import PIDConfig
+from realize.controllers.whole_body import WholeBodyConfig
+
+
+@dataclass
+class AStarConfig(Settings):
+    """Base path planning (Hydra ``controller.astar``)."""
+
+    config_key: ClassVar[str] = "controller.astar"
+
+    resolution: float = setting(0.05, gt=0)  # m per grid cell
+    padding: float = setting(0.2, ge=0)  # m around every obstacle (paper: 20 cm), on top of the robot radius
+
+
+@dataclass
+class RolloutConfig(Settings):
+    """Action tolerances, timeouts and controller settings (Hydra ``controller``)."""
+
+    config_key: ClassVar[str] = "controller"
+
+    move_tolerance: float = setting(0.1, gt=0)  # m, move_to success  ||x_base - x_loc|| <= eps
+    move_timeout_s: float = setting(20.0, gt=0)
+    reach_tolerance: float = setting(0.015, gt=0)  # m, ee_in(g_p): the TCP settled this close to the grasp point
+    grip_tolerance: float = setting(0.005, gt=0)  # m, close at once when this close
+    settle_s: float = setting(0.5, gt=0)  # s after the straight move before a settled TCP counts as arrived
+    pregrasp_tolerance: float = setting(0.03, gt=0)  # m, pre-pose reached
+    axis_tolerance: float = setting(0.1, gt=0)  # rad, approach axis alignment at the pre-pose
+    grasp_offset: float = setting(0.0, ge=0)  # m, extra back-off of the TCP target along the approach
+    grasp_clearance: float = setting(0.006, ge=0)  # m, fingertips stay this far above the supporting surface
+    place_drop: float = setting(0.004, ge=0)  # m, the held cube is released this high above its place point
+    place_pre_height: float = setting(0.12, gt=0)  # m, pre-place above a release point (place with a 3-D box region)
+    retreat_share: float = setting(0.6, gt=0)  # retreat done once the TCP is this share of the way back out
+    grip_s: float = setting(0.5, gt=0)  # s to close / open the gripper
+    approach_speed: float = setting(0.15, gt=0)  # m/s of the straight moves in to and out from the object
+    rest_speed: float = setting(0.05, gt=0)  # m/s, the cube counts as resting below this
+    manip_timeout_s: float = setting(15.0, gt=0)
+    push_pre_distance: float = setting(0.15, gt=0)  # m, push: the straight move starts this far before the push point
+    push_depth: float = setting(0.1, ge=0)  # m, push: and ends this far past it
+    push_speed: float = setting(0.15, gt=0)  # m/s of the straight push (faster: the fabric lags behind the sliding goal)
+    goal_settle_s: float = setting(1.5, ge=0)  # s of physics after a plan's last action before a cube goal is read (uncounted)
+    max_time_s: float = setting(120.0, gt=0)  # horizon of a whole plan
+    record_every: int = setting(5, gt=0)  # control steps between recorded trajectory samples
+    diverge_speed: float = setting(50.0, gt=0)  # joint speed that marks a plan as diverged
+    base_feedback: float = setting(3.0, gt=0)  # 1/s, base position feedback onto the fabric's base velocity
+    freeze_finished: bool = True  # put robots of finished / failed plans to sleep (saves physics)
+    pid: PIDConfig = field(default_factory=PIDConfig)
+    astar: AStarConfig = field(default_factory=AStarConfig)
+    fabric: WholeBodyConfig = field(default_factory=WholeBodyConfig)

@@ -1,0 +1,150 @@
+"""What one control step knows: the scene's reads, the controllers, and the command buffers.
+
+What it does: ``StepContext`` holds, for all N copies of the scene, the measured state of the
+current control step (whole-body joints, base pose, tool centre point and gripper axes, cube
+pose and speed, whether the fingers hold the cube), the shared controllers (the whole-body
+fabric, the A* grid and occupancy), and the commands the action templates write this step
+(base velocity, torso/arm targets, gripper). Templates that want the fabric register a goal
+for their rows (``fabric_goal``); ``run_fabric`` then runs ONE batched fabric step for all of
+them and turns the fabric's reference into commands. Every field is declared below; templates
+get everything else they need as arguments.
+What it doesn't: decide which action a plan is in or when it ends (``realize.realization.rollout``
+and the templates), or write to the simulator (the rollout does).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from realize.controllers.body import BASE, DOF, N_BASE, N_UPPER, UPPER
+from realize.controllers.occupancy import GridSpec
+from realize.controllers.whole_body import FabricState, WholeBodyFabric
+from realize.realization.config import RolloutConfig
+from realize.scene import BatchedScene
+
+
+class StepContext:
+    """Per-step view shared by the templates: measured state and the command buffers.
+
+    Constant for a rollout: ``scene``, ``cfg``, ``fabric``, ``grid``, ``occupancy`` (A*'s
+    padded (H, W) grid), ``n_envs``, ``device``, ``dt`` (control period, s).
+    Measured by ``read()`` after every physics step, (N, ...) float32: ``q`` / ``qd`` (N, DOF)
+    whole-body joints (``realize.controllers.body``), ``base`` (N, 3) x, y, yaw, ``tcp`` (N, 3),
+    ``approach`` / ``closing`` (N, 3) gripper axes, ``cube`` (N, 7) pose, ``cube_speed`` (N,);
+    ``holds(rows)`` reads finger contacts on demand (once per step).
+    Commands, reset by ``begin_step()``: ``base_cmd`` (N, 3) world-frame base velocity,
+    ``arm_cmd`` / ``arm_vel_cmd`` (N, N_UPPER) torso + arm targets, ``grip_cmd`` (N,) closed;
+    ``arm_hold`` (N, N_UPPER) is where an arm not driven by the fabric stays.
+    """
+
+    scene: BatchedScene
+    cfg: RolloutConfig
+    fabric: WholeBodyFabric
+    grid: GridSpec
+    occupancy: Tensor
+    n_envs: int
+    device: torch.device
+    dt: float
+    q: Tensor
+    qd: Tensor
+    base: Tensor
+    tcp: Tensor
+    approach: Tensor
+    closing: Tensor
+    cube: Tensor
+    cube_speed: Tensor
+    base_cmd: Tensor
+    arm_cmd: Tensor
+    arm_vel_cmd: Tensor
+    grip_cmd: Tensor
+    arm_hold: Tensor
+    fab_state: FabricState  # the fabric's reference state of every copy
+    fab_invalid: Tensor  # (N,) the fabric flagged the copy's step invalid
+
+    def __init__(self, scene: BatchedScene, cfg: RolloutConfig, fabric: WholeBodyFabric, grid: GridSpec,
+                 occupancy: Tensor):
+        self.scene, self.cfg, self.fabric = scene, cfg, fabric
+        self.grid, self.occupancy = grid, occupancy
+        self.n_envs, self.device = scene.n_envs, scene.device
+        self.dt = scene.control_dt
+        n, dev = self.n_envs, self.device
+        self.base_cmd = torch.zeros(n, N_BASE, device=dev)
+        self.arm_cmd = torch.zeros(n, N_UPPER, device=dev)
+        self.arm_vel_cmd = torch.zeros(n, N_UPPER, device=dev)
+        self.grip_cmd = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.arm_hold = torch.zeros(n, N_UPPER, device=dev)
+        self.fab_state = FabricState(torch.zeros(n, DOF, dtype=fabric.dtype), torch.zeros(n, DOF, dtype=fabric.dtype))
+        self._fab_rows: list[Tensor] = []
+        self._fab_goals: list[Tensor] = []
+        self._fab_approach: list[Tensor] = []
+        self._fab_closing: list[Tensor] = []
+        self.fab_invalid = torch.zeros(n, dtype=torch.bool, device=dev)
+        self._holds: Tensor | None = None
+
+    def steps(self, seconds: float) -> int:
+        """Control steps in ``seconds`` (at least 1)."""
+        return max(1, int(round(seconds / self.dt)))
+
+    def read(self) -> None:
+        """Read the scene's state after a physics step."""
+        s = self.scene
+        self.q = s.whole_body_q()
+        self.qd = s.whole_body_qd()
+        self.base = self.q[:, BASE]
+        tcp, approach, closing = self.fabric.kin.tcp_and_axes(self.q.to(self.fabric.dtype))
+        self.tcp, self.approach, self.closing = tcp.float(), approach.float(), closing.float()
+        self.cube = s.cube_pose()
+        self.cube_speed = s.cube_velocity()[:, :3].norm(dim=1)
+        self._holds = None
+
+    def holds(self, rows: Tensor) -> Tensor:
+        """(len(rows),) bool: both fingers press on the cube (read once per step)."""
+        if self._holds is None:
+            self._holds = self.scene.holds_cube()
+        return self._holds[rows]
+
+    def hold_arm(self, rows: Tensor) -> None:
+        """Keep the torso and arm of ``rows`` where they are now."""
+        self.arm_hold[rows] = self.q[rows, UPPER]
+
+    def start_fabric(self, rows: Tensor) -> None:
+        """Restart the fabric's reference of ``rows`` from the measured joints, at rest."""
+        st = self.fabric.start(self.q[rows], torch.zeros_like(self.qd[rows]))
+        self.fab_state.q[rows] = st.q
+        self.fab_state.qd[rows] = st.qd
+
+    def fabric_goal(self, rows: Tensor, position: Tensor, approach: Tensor, closing: Tensor) -> None:
+        """Ask for a fabric step of ``rows`` towards a TCP position and gripper axes (len, 3)."""
+        self._fab_rows.append(rows)
+        self._fab_goals.append(position)
+        self._fab_approach.append(approach)
+        self._fab_closing.append(closing)
+
+    def begin_step(self) -> None:
+        """Reset the commands: base still, arm at ``arm_hold``, no fabric goals."""
+        self.base_cmd.zero_()
+        self.arm_cmd.copy_(self.arm_hold)
+        self.arm_vel_cmd.zero_()
+        self._fab_rows, self._fab_goals, self._fab_approach, self._fab_closing = [], [], [], []
+        self.fab_invalid.zero_()
+
+    def run_fabric(self) -> None:
+        """One batched fabric step for every plan that asked for it this step."""
+        if not self._fab_rows:
+            return
+        rows = torch.cat(self._fab_rows)
+        dt = self.fabric.dtype
+        goal = self.fabric.goal_points(torch.cat(self._fab_goals).to(dt), torch.cat(self._fab_approach).to(dt),
+                                       torch.cat(self._fab_closing).to(dt))
+        st = FabricState(self.fab_state.q[rows], self.fab_state.qd[rows])
+        new, valid = self.fabric.step(st, self.q[rows], goal)
+        self.fab_state.q[rows] = new.q
+        self.fab_state.qd[rows] = new.qd
+        # the base is velocity-driven: feed back its position error to the fabric's reference
+        base_err = (new.q[:, BASE] - self.q[rows, BASE].to(new.q)).float()
+        self.base_cmd[rows] = new.qd[:, BASE].float() + self.cfg.base_feedback * base_err
+        self.arm_cmd[rows] = new.q[:, UPPER].float()
+        self.arm_vel_cmd[rows] = new.qd[:, UPPER].float()
+        self.arm_hold[rows] = new.q[:, UPPER].float()
+        self.fab_invalid[rows] = ~valid

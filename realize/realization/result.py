@@ -1,0 +1,74 @@
+"""What a rollout returns: per-plan cost, success, failure and (optionally) trajectories.
+
+What it does: ``RolloutResult`` (one row per plan; ``to_eval`` adapts it to the cross-entropy
+optimizer's ``EvalResult``) and ``TrajectoryRecorder``, which samples base, TCP and cube
+positions every ``record_every`` control steps and stores them into a result.
+What it doesn't: simulate (``realize.realization.rollout``) or write files (the run directory's
+sinks do).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from realize.controllers.body import BASE_XY
+from realize.searcher import EvalResult
+from realize.realization.context import StepContext
+
+
+@dataclass
+class RolloutResult:
+    """Outcome of N realized plans (one row per plan)."""
+
+    cost: Tensor  # (N,) eq. (2): steps until each action finished + final cost
+    feasible: Tensor  # (N,) every action succeeded and psi_g holds
+    action_success: Tensor  # (N, A)
+    goal: Tensor  # (N,) psi_g at the end (read from the simulator)
+    steps: Tensor  # (N,) control steps simulated for the plan
+    progress: Tensor  # (N,) actions completed
+    distance: Tensor  # (N,) distance proxy of the failing action (0 if feasible)
+    failure: list[str]  # per plan: "" or "<action index>:<action>:<reason>"
+    traj_t: Tensor | None = None  # (T,) seconds
+    traj_base: Tensor | None = None  # (N, T, 2)
+    traj_ee: Tensor | None = None  # (N, T, 3)
+    traj_cube: Tensor | None = None  # (N, T, 3)
+    wall_time_s: float = 0.0
+    sim_steps: int = 0
+    horizon_cost: float = math.nan  # cost of a plan cut by the horizon: max steps + final cost
+
+    def to_eval(self) -> EvalResult:
+        return EvalResult(cost=self.cost.double(), feasible=self.feasible, progress=self.progress.double(),
+                          distance=self.distance.double(),
+                          failure_cost=self.horizon_cost if math.isfinite(self.horizon_cost) else None)
+
+
+class TrajectoryRecorder:
+    """Base (x, y), TCP and cube positions of every copy, every ``every`` control steps."""
+
+    def __init__(self, every: int):
+        self.every = every
+        self.t: list[float] = []
+        self.base: list[Tensor] = []
+        self.ee: list[Tensor] = []
+        self.cube: list[Tensor] = []
+
+    def sample(self, step: int, ctx: StepContext) -> None:
+        """Record the state just read by ``ctx`` if ``step`` is a recording step."""
+        if step % self.every == 0:
+            self.t.append(step * ctx.dt)
+            self.base.append(ctx.base[:, BASE_XY].clone())
+            self.ee.append(ctx.tcp.clone())
+            self.cube.append(ctx.cube[:, :3].clone())
+
+    def store(self, res: RolloutResult, m: int) -> None:
+        """Put the first ``m`` copies' trajectories into ``res`` (nothing if none was recorded)."""
+        if not self.t:
+            return
+        res.traj_t = torch.tensor(self.t)
+        res.traj_base = torch.stack(self.base, dim=1)[:m].cpu()
+        res.traj_ee = torch.stack(self.ee, dim=1)[:m].cpu()
+        res.traj_cube = torch.stack(self.cube, dim=1)[:m].cpu()

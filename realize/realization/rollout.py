@@ -1,0 +1,319 @@
+"""Batched rollout: realize N parameterized plans at once and score them by eq. (2) of the paper.
+
+What it does: for a sample matrix Z (M, D) (M <= the scene's N copies) ``PlanRealizer.rollout``
+resets the batched scene and runs a per-plan action state machine (each plan is in one action of
+the task's plan at a time; a plan whose action fails or times out stops there and is held still),
+stepping physics for all plans together. One ``Rollout`` object holds the per-plan state and runs
+the phases of every control step: ``act`` (templates -> controllers -> commands), ``physics``,
+``check_faults`` (a plan that diverges, NaN or exploding joint speeds, fails alone),
+``check_actions`` (success / failure of the current actions, begin the next), ``read_due_goals``;
+then ``settle`` (physics only, uncounted, until the last goals are due), ``cut_at_horizon`` and
+``finish`` (a ``RolloutResult``: cost, per-action success, goal psi_g read from the simulator,
+feasibility, progress and a distance proxy for ranking infeasible plans, trajectories). A goal
+that reads the cube is read ``goal_settle_s`` after the plan's last action, so a pushed or
+dropped cube has landed. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
+What it doesn't: choose parameters (``realize.ce``), implement the actions
+(``realize.realization.actions``) or the goal predicates (``realize.realization.goals``), or
+know any backend details (``realize.scene``).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+import torch
+from torch import Tensor
+
+from realize.controllers.body import BASE_XY, UPPER
+from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
+from realize.controllers.whole_body import WholeBodyFabric
+from realize.searcher import EvalResult
+from realize.realization.actions import TEMPLATES
+from realize.realization.actions.base import Template
+from realize.realization.config import RolloutConfig
+from realize.realization.context import StepContext
+from realize.realization.failures import Failure
+from realize.realization.goals import goal_reached
+from realize.realization.result import RolloutResult, TrajectoryRecorder
+from realize.scene import BatchedScene
+from realize.task import TaskSpec
+
+
+class RealizerSpec(Protocol):
+    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.run_config.RunSpec``)."""
+
+    task: TaskSpec
+    rollout: RolloutConfig
+    seed: int
+
+
+class Rollout:
+    """One rollout of a batch Z in progress: the per-plan state (N,) and the phases of a step."""
+
+    def __init__(self, realizer: PlanRealizer, Z: Tensor, record: bool):
+        scene, task = realizer.scene, realizer.task
+        self.realizer, self.scene, self.task, self.cfg = realizer, scene, task, realizer.cfg
+        self.templates = realizer.templates
+        n, dev = scene.n_envs, realizer.device
+        self.n_envs, self.device, self.m = n, dev, Z.shape[0]
+        scene.reset(seed=realizer.seed)
+        self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy)
+        self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
+        self.n_actions = task.n_actions
+        self.action = torch.zeros(n, dtype=torch.long, device=dev)  # the action each plan is in
+        self.running = torch.arange(n, device=dev) < self.m
+        self.success = torch.zeros(n, self.n_actions, dtype=torch.bool, device=dev)
+        self.fail_code = torch.zeros(n, dtype=torch.long, device=dev)
+        self.fail_action = torch.full((n,), -1, dtype=torch.long, device=dev)
+        self.distance = torch.zeros(n, device=dev)
+        self.steps = torch.zeros(n, dtype=torch.long, device=dev)  # counted control steps (the cost)
+        self.step = 0  # control steps simulated
+        self.max_steps = self.ctx.steps(self.cfg.max_time_s)
+        self.recorder = TrajectoryRecorder(self.cfg.record_every) if record else None
+        # psi_g of a plan is read goal_settle_s after its last action (a pushed or dropped cube
+        # must land first); plans that never finish are read at the end
+        self.goal = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.goal_read = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.goal_dist = torch.zeros(n, device=dev)
+        self.settle_left = torch.full((n,), -1, dtype=torch.long, device=dev)
+        reads_cube = task.goal.cube_on is not None or task.goal.cube_in_box is not None
+        self.settle_steps = int(round(self.cfg.goal_settle_s / self.ctx.dt)) if reads_cube else 0
+
+    # ------------------------------------------------------------------ the whole rollout
+    def run(self, t0: float) -> RolloutResult:
+        """Every phase until each plan finished, failed or hit the horizon (``t0``: wall start)."""
+        self.start()
+        while self.step < self.max_steps and bool(self.running.any()):
+            self.act()
+            self.physics(counted=True)
+            self.check_faults()
+            self.check_actions()
+            self.read_due_goals()
+        # the last finished plans settle with every robot asleep (physics only, no cost)
+        while bool((self.settle_left > 0).any()):
+            self.settle()
+        self.cut_at_horizon()
+        return self.finish(t0)
+
+    # ------------------------------------------------------------------ phases
+    def start(self) -> None:
+        """Read the reset scene, hold every arm, begin the first action."""
+        ctx = self.ctx
+        ctx.read()
+        ctx.arm_hold[:] = ctx.q[:, UPPER]
+        self.begin_action(0, torch.nonzero(self.running).flatten())
+
+    def _rows_in(self, a: int, mask: Tensor) -> Tensor:
+        return torch.nonzero(mask & (self.action == a)).flatten()
+
+    def _padded(self, name: str, rows: Tensor) -> Tensor:
+        """Parameter ``name`` of plans ``rows`` (zeros for copies beyond the M samples)."""
+        full = torch.zeros(self.n_envs, self.realizer.layout.regions[name].dim, device=self.device)
+        full[:self.m] = self.params[name]
+        return full[rows]
+
+    def _template(self, a: int) -> Template:
+        return self.templates[self.task.plan[a].template]
+
+    def _fail(self, rows: Tensor, code: Tensor | int, action: Tensor | int) -> None:
+        self.fail_code[rows] = code
+        self.fail_action[rows] = action
+        self.running[rows] = False
+
+    def begin_action(self, a: int, rows: Tensor) -> None:
+        """Plans ``rows`` enter action ``a``; those that fail at once stop, arm held."""
+        spec = self.task.plan[a]
+        name = spec.params[0]
+        code = self._template(a).begin(self.ctx, rows, self._padded(name, rows), self.realizer.layout.regions[name])
+        bad = code > 0
+        if bad.any():
+            r = rows[bad]
+            self._fail(r, code[bad], a)
+            self.ctx.hold_arm(r)
+
+    def _write_commands(self, asleep: Tensor) -> None:
+        scene, ctx = self.scene, self.ctx
+        scene.set_base_velocity(ctx.base_cmd)
+        scene.set_arm_targets(ctx.arm_cmd, ctx.arm_vel_cmd)
+        scene.set_gripper(ctx.grip_cmd)
+        if self.cfg.freeze_finished:
+            scene.freeze(asleep)
+
+    def act(self) -> None:
+        """Controllers of every running plan's current action -> commands -> the scene."""
+        ctx = self.ctx
+        ctx.begin_step()
+        for a in range(self.n_actions):
+            rows = self._rows_in(a, self.running)
+            if len(rows):
+                self._template(a).act(ctx, rows)
+        ctx.run_fabric()
+        idle = ~self.running
+        ctx.base_cmd[idle] = 0.0
+        self._write_commands(idle)
+
+    def physics(self, counted: bool) -> None:
+        """One control step of physics, then read the scene (``counted``: running plans pay it)."""
+        self.scene.step()
+        self.step += 1
+        if counted:
+            self.steps += self.running.long()
+        self.ctx.read()
+        self.settle_left[self.settle_left > 0] -= 1
+        if self.recorder is not None:
+            self.recorder.sample(self.step, self.ctx)
+
+    def check_faults(self) -> None:
+        """A diverged plan (or one the fabric flagged invalid) stops; the others go on."""
+        ctx, running = self.ctx, self.running
+        bad = running & (~torch.isfinite(ctx.q).all(1) | (ctx.qd.abs().max(1).values > self.cfg.diverge_speed)
+                         | ctx.fab_invalid)
+        if bad.any():
+            self.fail_code[bad] = torch.where(ctx.fab_invalid[bad], Failure.CONTROLLER_INVALID, Failure.DIVERGED)
+            self.fail_action[bad] = self.action[bad]
+            running &= ~bad
+
+    def check_actions(self) -> None:
+        """Success / failure of the current actions; succeeded plans begin their next action."""
+        ctx = self.ctx
+        for a in range(self.n_actions):
+            rows = self._rows_in(a, self.running)
+            if not len(rows):
+                continue
+            tpl = self._template(a)
+            done, ok, code = tpl.check(ctx, rows)
+            failed = done & ~ok
+            if failed.any():
+                r = rows[failed]
+                self.fail_code[r] = code[failed]
+                self.fail_action[r] = a
+                self.distance[r] = tpl.distance(ctx, rows)[failed]
+                self.running[r] = False
+                ctx.hold_arm(r)
+            if ok.any():
+                r = rows[ok]
+                self.success[r, a] = True
+                self.action[r] = a + 1
+                finished = self.action[r] >= self.n_actions
+                self.running[r[finished]] = False
+                self.settle_left[r[finished]] = self.settle_steps
+                nxt = r[~finished]
+                if len(nxt) and a + 1 < self.n_actions:
+                    self.begin_action(a + 1, nxt)
+
+    def _goal_now(self) -> tuple[Tensor, Tensor]:
+        ctx = self.ctx
+        return goal_reached(self.task.goal, self.scene.geometry, self.realizer.layout.regions, ctx.cube[:, :3],
+                            ctx.cube_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed)
+
+    def read_due_goals(self) -> None:
+        """Read psi_g of the plans whose settling time just ran out."""
+        due = (self.settle_left == 0) & ~self.goal_read
+        if due.any():
+            ok, dist = self._goal_now()
+            self.goal[due], self.goal_dist[due] = ok[due], dist[due]
+            self.goal_read[due] = True
+
+    def settle(self) -> None:
+        """A physics-only step with every robot idle and held (no cost), then due goals."""
+        ctx = self.ctx
+        ctx.begin_step()
+        ctx.base_cmd.zero_()
+        self._write_commands(torch.ones(self.n_envs, dtype=torch.bool, device=self.device))
+        self.physics(counted=False)
+        self.read_due_goals()
+
+    def cut_at_horizon(self) -> None:
+        """Plans still running at the horizon time out where they are."""
+        cut = self.running.clone()
+        if cut.any():
+            self.fail_code[cut] = Failure.TIMEOUT
+            self.fail_action[cut] = self.action[cut]
+            for a in range(self.n_actions):
+                rows = self._rows_in(a, cut)
+                if len(rows):
+                    self.distance[rows] = self._template(a).distance(self.ctx, rows)
+
+    def finish(self, t0: float) -> RolloutResult:
+        """Read the goals not read yet, score every plan (eq. (2)), build the result."""
+        task, m, A = self.task, self.m, self.n_actions
+        unread = ~self.goal_read
+        ok, dist = self._goal_now()
+        self.goal[unread], self.goal_dist[unread] = ok[unread], dist[unread]
+        goal, success = self.goal, self.success
+        all_ok = success.all(dim=1)
+        feasible = all_ok & goal
+        goal_fail = all_ok & ~goal
+        self.fail_code[goal_fail] = Failure.GOAL_NOT_REACHED
+        self.fail_action[goal_fail] = A
+        self.distance[goal_fail] = self.goal_dist[goal_fail]
+        cost = self.steps.to(torch.float32) + float(task.final_cost)
+        progress = success.sum(dim=1).to(torch.float32) + goal.to(torch.float32) * all_ok
+        failure = []
+        codes, acts = self.fail_code.tolist(), self.fail_action.tolist()
+        for i in range(m):
+            if feasible[i]:
+                failure.append("")
+            else:
+                a = acts[i]
+                where = task.plan[a].template if 0 <= a < A else "goal"
+                failure.append(f"{a}:{where}:{Failure(codes[i]).label}")
+        res = RolloutResult(
+            cost=cost[:m].cpu(), feasible=feasible[:m].cpu(), action_success=success[:m].cpu(),
+            goal=goal[:m].cpu(), steps=self.steps[:m].cpu(), progress=progress[:m].cpu(),
+            distance=self.distance[:m].cpu(), failure=failure, wall_time_s=time.perf_counter() - t0,
+            sim_steps=self.step, horizon_cost=float(self.max_steps) + float(task.final_cost),
+        )
+        if self.recorder is not None:
+            self.recorder.store(res, m)
+        return res
+
+
+class PlanRealizer:
+    """Realizes a task's plan for batches of parameter samples in one batched scene."""
+
+    def __init__(self, task: TaskSpec, scene: BatchedScene, cfg: RolloutConfig | None = None, seed: int = 0,
+                 fabric_dtype: torch.dtype = torch.float32):
+        self.task, self.scene = task, scene
+        self.cfg = cfg or RolloutConfig()  # checked when it was built
+        self.seed = seed
+        self.layout = task.layout
+        self.device = scene.device
+        g = scene.geometry
+        self.grid = grid_from_bounds((g.bounds_low[0], g.bounds_low[1], g.bounds_high[0], g.bounds_high[1]),
+                                     self.cfg.astar.resolution)
+        obs = g.obstacles
+        centers = torch.tensor([[b.center[0], b.center[1]] for b in obs], dtype=torch.float32)
+        halves = torch.tensor([list(b.footprint_half_size()) for b in obs], dtype=torch.float32)
+        yaws = torch.tensor([b.yaw for b in obs], dtype=torch.float32)
+        self.occupancy = occupancy_from_boxes(self.grid, centers, halves, yaws,
+                                              padding=self.cfg.astar.padding + g.robot_radius).to(self.device)
+        self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
+                                      dtype=fabric_dtype)
+        self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}
+        self.last: RolloutResult | None = None
+
+    @classmethod
+    def from_spec(cls, spec: RealizerSpec, task: TaskSpec | None, scene: BatchedScene,
+                  seed: int | None = None) -> PlanRealizer:
+        """The realizer of a run spec: its task (or ``task``, e.g. a candidate plan's), its
+        controller settings and its seed (or ``seed``), in ``scene``."""
+        return cls(spec.task if task is None else task, scene, spec.rollout,
+                   seed=spec.seed if seed is None else seed)
+
+    def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
+        """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it."""
+        t0 = time.perf_counter()
+        n, m = self.scene.n_envs, Z.shape[0]
+        if Z.ndim != 2 or Z.shape[1] != self.layout.dim:
+            raise ValueError(f"Z must be (M, {self.layout.dim}), got {tuple(Z.shape)}")
+        if m > n:
+            raise ValueError(f"{m} samples but the scene has only {n} copies (ce.n_envs)")
+        res = Rollout(self, Z, record).run(t0)
+        self.last = res
+        return res
+
+    def evaluate(self, Z: Tensor, record: bool = False) -> EvalResult:
+        """Cross-entropy adapter: rollout, keep the full result in ``self.last``."""
+        return self.rollout(Z, record=record).to_eval()
