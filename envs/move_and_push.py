@@ -25,7 +25,6 @@ footprint, below the top of its walls, and the cube is nearly still.
 
 from __future__ import annotations
 
-from typing import Any
 
 import sapien
 import torch

@@ -5,7 +5,7 @@ copies (or ``n_envs``) from the run spec's geometry and physics settings, and on
 ``PlanRealizer`` per task on it (a top-k run realizes every candidate plan in the same scene:
 each rollout starts with a reset, history-free on CPU). The search loop, replay-like scripts
 (``scripts/uniform_success.py``) and tests call it instead of wiring the classes themselves.
-What it doesn't: simulate (``realize.rollout``), or choose the backend (``RunSpec.placement``,
+What it doesn't: simulate (``realize.realization``), or choose the backend (``RunSpec.placement``,
 resolved at the config edge, is already in ``spec.sim``).
 """
 
@@ -17,24 +17,26 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from realize.realization.rollout import PlanRealizer
     from realize.run_config import RunSpec
-    from realize.scene import BatchedScene
+    from realize.scene import BatchedScene, EnvOptions
     from realize.task import TaskSpec
 
 __all__ = ["open_realization"]
 
 
-def open_realization(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None,
-                     n_envs: int | None = None) -> tuple[BatchedScene, list[PlanRealizer]]:
-    """``(scene, realizers)``: a scene of ``n_envs`` (default ``spec.ce.n_envs``) copies and one
-    realizer per task (default ``[spec.task]``), seeded with ``spec.seed``. The caller closes
-    the scene (it is a context manager)."""
+def open_realization(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None, n_envs: int | None = None, *,
+                     env: EnvOptions | None = None, seed: int | None = None
+                     ) -> tuple[BatchedScene, list[PlanRealizer]]:
+    """``(scene, realizers)``: a scene of ``n_envs`` (default ``spec.ce.n_envs``) copies with the
+    env options ``env`` (camera, reset noise; default none) and one realizer per task (default
+    ``[spec.task]``), seeded with ``seed`` (default ``spec.seed``). The caller closes the scene
+    (it is a context manager)."""
     from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
 
     tasks = [spec.task] if tasks is None else list(tasks)
-    scene = BatchedScene.from_spec(spec, spec.ce.n_envs if n_envs is None else n_envs)
+    scene = BatchedScene.from_spec(spec, spec.ce.n_envs if n_envs is None else n_envs, env=env)
     try:
-        realizers = [PlanRealizer(t, scene, spec.rollout, seed=spec.seed) for t in tasks]
+        realizers = [PlanRealizer.from_spec(spec, t, scene, seed=seed) for t in tasks]
     except BaseException:
         scene.close()
         raise

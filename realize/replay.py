@@ -217,7 +217,7 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
     the task camera's); the camera sits at ``eye`` looking at ``target``, by default at
     ``video_camera(geometry)``, or where the task's render camera is with ``task_camera``.
     """
-    from realize.realization.rollout import PlanRealizer
+    from realize.realizers import open_realization
 
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
@@ -231,10 +231,10 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
         options = EnvOptions(camera=cam)
     recorder = VideoRecorder(video, fps=fps, every=every) if video is not None else None
     try:
-        with BatchedScene.from_spec(spec, 1, env=options) as scene:
+        scene, (realizer,) = open_realization(spec, n_envs=1, env=options)
+        with scene:
             if recorder is not None:
                 recorder.attach(scene)
-            realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed)
             res = realizer.rollout(best_z_rows(run))
             vid = recorder.close(hold_s) if recorder is not None else None
             recorder = None

@@ -96,7 +96,7 @@ class RunSpec:
     geometry_cfg: GeometryCfg
     geometry: SceneGeometry
     sim: SimSettings
-    rollout: Any  # realize.rollout.RolloutConfig (imported lazily: it pulls in the controllers)
+    rollout: Any  # realize.realization.config.RolloutConfig (imported lazily: it pulls in the controllers)
     ce: CEConfig
     logging: LoggingSettings
     config: dict[str, Any]

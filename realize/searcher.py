@@ -13,7 +13,7 @@ What it does:
     ``realize.candidates.SuccessiveHalving`` implement; ``realize.loop`` drives either one
     without knowing which.
 What it doesn't: sample, rank or simulate (``realize.ce``, ``realize.candidates``,
-``realize.rollout``), or write files (``realize.sinks``).
+``realize.realization``), or write files (``realize.sinks``).
 """
 
 from __future__ import annotations

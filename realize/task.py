@@ -5,7 +5,7 @@ What it does: turns a mapping such as ``configs/task/pick_place.yaml`` into a ``
 checks every name against the scene and the action templates, with errors that name the file
 and key (``realize.config.ConfigError``). A plan is written as strings ``"move_to(Table1)"`` or
 as ``{move_to: [Table1]}``.
-What it doesn't: simulate (``realize.rollout``), or plan symbolically (``realize.pddl``; the
+What it doesn't: simulate (``realize.realization``), or plan symbolically (``realize.pddl``; the
 resulting actions enter here through ``plan_from_actions``).
 """
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from realize.replay import ReplayError, best_z_rows, build_replay_spec, saved_plan
 from realize.run_dir.directory import RunDir
-from realize.scene import BatchedScene, EnvOptions
+from realize.scene import EnvOptions
 
 __all__ = ["ValidationReport", "validate", "write_validation"]
 
@@ -63,7 +63,7 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     defaults unless given) and, per replica, the cube friction times U(friction_range) drawn
     from ``numpy.random.default_rng(seed)`` (None: friction unchanged).
     """
-    from realize.realization.rollout import PlanRealizer
+    from realize.realizers import open_realization
 
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
         raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")
@@ -75,13 +75,13 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     run = saved_plan(run_dir)
     spec = build_replay_spec(run, backend)
     options = EnvOptions(cube_xy_noise=cube_xy_noise, robot_xy_noise=robot_xy_noise, randomize_resets=randomize)
-    with BatchedScene.from_spec(spec, replicas, env=options) as scene:
+    scene, (realizer,) = open_realization(spec, n_envs=replicas, env=options, seed=seed)
+    with scene:
         if friction_range is not None:
             factors = np.random.default_rng(seed).uniform(lo, hi, size=replicas)
             friction = scene.set_cube_friction(factors).tolist()
         else:
             friction = [float(scene.geometry.cube_friction)] * replicas
-        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=seed)
         res = realizer.rollout(best_z_rows(run, replicas))
         noise = (scene.cube_xy_noise, scene.robot_xy_noise)
         used_backend = scene.backend

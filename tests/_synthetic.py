@@ -55,7 +55,7 @@ def make_geometry() -> SceneGeometry:
 
 @dataclass
 class FakeRollout:
-    """The fields of ``realize.rollout.RolloutResult`` the logger and figures read."""
+    """The fields of ``realize.realization.result.RolloutResult`` the logger and figures read."""
 
     cost: torch.Tensor
     feasible: torch.Tensor

@@ -35,7 +35,7 @@ log = logging.getLogger("realize")
 class Iteration:
     """One finished iteration (see the module docstring). ``index`` counts the run's iterations
     (all candidates, from 0; resumed runs go on counting); ``rollout`` is the evaluator's full
-    result (``realize.rollout.RolloutResult``)."""
+    result (``realize.realization.result.RolloutResult``)."""
 
     index: int
     batch: Batch
