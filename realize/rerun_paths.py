@@ -35,7 +35,7 @@ SCALAR_PATHS: dict[str, tuple[str, str, tuple[int, int, int]]] = {
     "stats/cost/elite_mean": ("elite_cost_mean", "elite cost mean", (60, 60, 60)),
     "stats/cost/elite_max": ("elite_cost_max", "elite cost max", (170, 170, 170)),
     "stats/success/share": ("success_share", "share of successful samples", (40, 170, 70)),
-    "stats/samples/n_samples": ("n_samples", "samples", (90, 90, 90)),
+    "stats/samples/n_envs": ("n_envs", "samples (n_envs)", (90, 90, 90)),
     "stats/samples/n_feasible": ("n_feasible", "successful samples", (40, 170, 70)),
     "stats/time/eval_s": ("eval_time", "evaluation time [s]", (200, 120, 40)),
 }

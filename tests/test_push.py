@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 import torch
 
+from _compose import blas_batch_invariant
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
 from realize.config import ConfigError
@@ -121,8 +122,11 @@ def test_batched_equals_per_sample(batch: list[dict[str, Any]], alone: list[dict
             n_rec = a.traj_cube.shape[1]
             assert torch.equal(a.traj_cube[0], b.traj_cube[0, :n_rec])
             assert torch.equal(out["cube"][0], batch[0]["cube"][0])
-        # tiled copies round their world coordinates differently (see tests/test_rollout.py)
-        assert (out["cube"][0, :3] - batch[0]["cube"][i, :3]).abs().max() < 0.03
+        # tiled copies round their world coordinates differently (see tests/test_rollout.py); where
+        # the batched products also depend on the batch's other rows, the cube that tumbles off
+        # the stick onto the floor (copy 1) lands up to ~7 cm apart (measured on an AMD EPYC)
+        tol = 0.03 if blas_batch_invariant() else 0.1
+        assert (out["cube"][0, :3] - batch[0]["cube"][i, :3]).abs().max() < tol
 
 
 def test_reset_is_deterministic(spec: RunSpec, batch: list[dict[str, Any]]) -> None:

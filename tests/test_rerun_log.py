@@ -51,7 +51,7 @@ def test_every_iteration_has_ellipses_costs_and_shares(synthetic, summary):
     for rec in recs:
         got = summary["per_iteration"][rec.iteration]
         assert got["/stats/success/share"] == pytest.approx(rec.success_share)
-        assert got["/stats/samples/n_samples"] == rec.n_envs
+        assert got["/stats/samples/n_envs"] == rec.n_envs
         for path, (attr, _, _) in SCALAR_PATHS.items():
             v = float(getattr(rec, attr))
             if math.isfinite(v):

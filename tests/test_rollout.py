@@ -27,6 +27,7 @@ import pytest
 import torch
 import yaml
 
+from _compose import blas_batch_invariant
 from _compose import compose_config as _compose
 from _compose import torch_single_thread  # noqa: F401  (fixture)
 from realize.config import ConfigError
@@ -195,14 +196,16 @@ def test_batched_equals_per_sample(alone: list[dict[str, Any]], batch: dict[str,
         # measured: the same step counts, hence the same costs, also for copies 1 and 2
         assert a.cost[0] == b.cost[i] and a.steps[0] == b.steps[i]
         n_rec = a.traj_base.shape[1]
-        if i == 0:
-            # copy 0 sits at the origin in both scenes: bit-identical while its plan runs
+        if i == 0 and blas_batch_invariant():
+            # copy 0 sits at the origin in both scenes: bit-identical while its plan runs (where
+            # the controllers' batched products do not depend on the batch's other rows)
             assert torch.equal(a.distance[0], b.distance[i])
             for name in ("traj_base", "traj_ee", "traj_cube"):
                 assert torch.equal(getattr(a, name)[0], getattr(b, name)[i, :n_rec]), name
         else:
             # copies 1 and 2 are tiled 9 m / 8 m from the origin: float32 world coordinates
-            # round differently there, and the controllers' feedback carries the ulp-level
+            # round differently there (and, on a machine whose batched products depend on the
+            # batch, copy 0 too), and the controllers' feedback carries the ulp-level
             # differences on. Measured max deviation over whole plans: base 1.9 cm / ee 0.8 cm
             # (copy 2, whose grasp pushes against its reach limit until the timeout), cube 0.2 mm.
             assert (a.traj_base[0] - b.traj_base[i, :n_rec]).abs().max() < 0.05
