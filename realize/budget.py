@@ -79,7 +79,7 @@ class HalvingBudget:
         return {
             "n_candidates": self.n_candidates,
             "total_iterations": self.total_iterations,
-            "n_samples_per_iteration": self.n_envs,
+            "n_envs_per_iteration": self.n_envs,
             "total_samples": self.total_samples,
             "round_iterations": self.round_iterations,
             "survivors_per_round": list(self.survivors),

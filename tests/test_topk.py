@@ -112,7 +112,7 @@ def test_topk_run_writes_candidates(topk_run: Path) -> None:
     assert [c["index"] for c in cands] == [0, 1] and cands[0]["plan"] == SEED_PLAN
     assert cands[1]["plan"] != SEED_PLAN
     b = res["budget"]
-    assert b == {"n_candidates": 2, "total_iterations": 3, "n_samples_per_iteration": 4, "total_samples": 12,
+    assert b == {"n_candidates": 2, "total_iterations": 3, "n_envs_per_iteration": 4, "total_samples": 12,
                  "round_iterations": 1, "survivors_per_round": [2], "final_iterations": 1}
     # budget accounting: one round of 1 iteration each, the winner 1 more: 3 x 4 samples in all
     assert sum(c["samples"] for c in cands) == res["spent_samples"] == 12 == b["total_samples"]

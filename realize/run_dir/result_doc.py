@@ -90,7 +90,7 @@ class PlanRef:
 @dataclass
 class HalvingDoc:
     """The top-k part of a result: the candidates, who leads/won, the budget and its use.
-    ``budget`` is ``realize.candidates.HalvingBudget.to_dict()``."""
+    ``budget`` is ``realize.budget.HalvingBudget.to_dict()``."""
 
     top_k: int
     leader: PlanRef
