@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from realize.config import ConfigError
+from realize.controllers.body import BASE, BASE_XY, UPPER, YAW
 from realize.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
 from realize.scene.physics import ARM_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN, WHOLE_BODY_JOINTS
@@ -121,7 +122,7 @@ class BatchedScene:
         self._impl.after_reset()
         q = self.whole_body_q()
         self._base_cmd.zero_()
-        self._arm_target = q[:, 3:].clone()
+        self._arm_target = q[:, UPPER].clone()
         self._arm_vel_target = torch.zeros_like(self._arm_target)
         self._grip_target.fill_(GRIPPER_OPEN)
         self._apply_targets()
@@ -140,14 +141,14 @@ class BatchedScene:
     def whole_body_q(self) -> torch.Tensor:
         """(N, 11) base x, y (local frame), yaw, torso, 7 arm joints."""
         q = self.qpos()[:, self._wb_idx]
-        return torch.cat([q[:, :2] + self._start_xy, q[:, 2:]], dim=1)
+        return torch.cat([q[:, BASE_XY] + self._start_xy, q[:, YAW:]], dim=1)
 
     def whole_body_qd(self) -> torch.Tensor:
         return self.qvel()[:, self._wb_idx]
 
     def base_pose(self) -> torch.Tensor:
         """(N, 3) base x, y (local frame) and yaw."""
-        return self.whole_body_q()[:, :3]
+        return self.whole_body_q()[:, BASE]
 
     def finger_width(self) -> torch.Tensor:
         """(N,) sum of the two finger joint positions (m): 0.1 fully open."""
@@ -217,7 +218,7 @@ class BatchedScene:
         q = self.whole_body_q()
         m = torch.ones(self.n_envs, dtype=torch.bool, device=self.device) if mask is None else mask
         self._base_cmd = torch.where(m[:, None], torch.zeros_like(self._base_cmd), self._base_cmd)
-        self._arm_target = torch.where(m[:, None], q[:, 3:], self._arm_target)
+        self._arm_target = torch.where(m[:, None], q[:, UPPER], self._arm_target)
         self._arm_vel_target = torch.where(m[:, None], torch.zeros_like(self._arm_vel_target), self._arm_vel_target)
 
     def freeze(self, mask: torch.Tensor) -> None:
