@@ -157,20 +157,17 @@ class KinematicChain:
         self.Aa = (torch.stack(a_list) @ torch.stack(ax_list).unsqueeze(-1)).squeeze(-1).to(**kw)
         self.axis = torch.stack(ax_list).to(**kw)
         # per link, the constant columns W of r_par @ W that give the link's pose from its parent's
-        # (revolute: [A - C | B | C | p0], prismatic: [A | p0 | Aa], fixed: [A | p0]); children of
-        # the root get them pre-multiplied by the root's constant pose
+        # (revolute: [A - C | B | C | p0 | Aa], prismatic: [A | p0 | Aa], fixed: [A | p0]; Aa is the
+        # joint axis in the parent frame)
         self._w: list[Tensor] = []
         for i, nd in enumerate(nodes):
             a64, p64 = torch.stack(a_list)[i], torch.stack(p_list)[i]
             if nd.kind == REVOLUTE:
-                w = torch.cat([a64 - c_list[i], b_list[i], c_list[i], p64[:, None]], dim=1)
+                w = torch.cat([a64 - c_list[i], b_list[i], c_list[i], p64[:, None], (a64 @ ax_list[i])[:, None]], dim=1)
             elif nd.kind == PRISMATIC:
                 w = torch.cat([a64, p64[:, None], (a64 @ ax_list[i])[:, None]], dim=1)
             else:
                 w = torch.cat([a64, p64[:, None]], dim=1)
-            if nd.parent == 0:
-                w = a_list[0] @ w + torch.cat([torch.zeros(3, 3 * (w.shape[1] // 3)), p_list[0][:, None],
-                                               torch.zeros(3, w.shape[1] - 3 * (w.shape[1] // 3) - 1)], 1)
             self._w.append(w.to(**kw))
 
         # Actuated joints: the link each one moves, and which joints each link depends on.
@@ -219,7 +216,17 @@ class KinematicChain:
         In the root frame, or in the world frame when ``root_pose`` (a world-from-root 4x4
         transform, optionally batched) is given.
         """
+        return self._forward(q, links, root_pose)[0]
+
+    def _forward(self, q: Tensor, links: Sequence[str], root_pose: Tensor | None
+                 ) -> tuple[dict[str, tuple[Tensor, Tensor]], dict[int, Tensor]]:
+        """Rotation (..., 3, 3) and position (..., 3) of the given links (and their ancestors).
+
+        In the root frame, or in the world frame when ``root_pose`` (a world-from-root 4x4
+        transform, optionally batched) is given.
+        """
         batch = q.shape[:-1]
+        axes: dict[int, Tensor] = {}  # joint axis z of each dof's link, in the output frame
         cos, sin = torch.cos(q), torch.sin(q)
         out: dict[int, tuple[Tensor, Tensor]] = {}
         for i in self.needed(links):
@@ -235,35 +242,36 @@ class KinematicChain:
                     p = rp[..., :3, 3].expand(*batch, 3)
                 out[i] = (r, p)
                 continue
-            if nd.parent == 0 and root_pose is None:  # the root's pose is folded into w
+            if nd.parent == 0 and root_pose is None:  # the root frame itself: pose (I, 0)
                 x, p_par = w, None
             else:
                 r_par, p_par = out[nd.parent]
-                x = mat3(r_par, w)  # (..., 3, k)
+                # the one product per link; r_par @ constant is a 2D GEMM over the batch, whose
+                # rows were checked (tests/test_batch_invariance.py) not to depend on each other
+                x = r_par @ w  # (..., 3, k)
             if nd.kind == REVOLUTE:
                 c, s = cos[..., nd.dof, None, None], sin[..., nd.dof, None, None]
                 r = c * x[..., 0:3] + s * x[..., 3:6] + x[..., 6:9]
                 p = x[..., 9]
+                axes[i] = x[..., 10]
             elif nd.kind == PRISMATIC:
                 r = x[..., 0:3]
                 p = x[..., 3] + q[..., nd.dof, None] * x[..., 4]
+                axes[i] = x[..., 4]
             else:
                 r, p = x[..., 0:3], x[..., 3]
             if p_par is not None:
                 p = p + p_par
             r, p = r.expand(*batch, 3, 3), p.expand(*batch, 3)
             out[i] = (r, p)
-        return {self.nodes[i].link: v for i, v in out.items()}
+        return {self.nodes[i].link: v for i, v in out.items()}, axes
 
     def joint_frames(
         self, q: Tensor, links: Sequence[str], root_pose: Tensor | None
     ) -> tuple[dict[str, tuple[Tensor, Tensor]], Tensor, Tensor]:
         """:meth:`forward` of ``links`` plus every degree of freedom's axis ``z`` and origin ``o``
         in the output frame, each ``(..., n_dof, 3)``."""
-        fk = self.forward(q, [self.nodes[i].link for i in self.dof_link] + list(links), root_pose)
-        z, o = [], []
-        for i in self.dof_link:
-            r, p = fk[self.nodes[i].link]
-            z.append(matvec3(r, self.axis[i]))
-            o.append(p)
-        return fk, torch.stack(z, dim=-2), torch.stack(o, dim=-2)
+        fk, axes = self._forward(q, [self.nodes[i].link for i in self.dof_link] + list(links), root_pose)
+        z = torch.stack([axes[i].expand(*q.shape[:-1], 3) for i in self.dof_link], dim=-2)
+        o = torch.stack([fk[self.nodes[i].link][1] for i in self.dof_link], dim=-2)
+        return fk, z, o
