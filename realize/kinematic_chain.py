@@ -31,7 +31,7 @@ from torch import Tensor
 
 from realize.fetch_urdf import JointSpec, axis_rotation, rpy_matrix, skew
 
-__all__ = ["ChainNode", "KinematicChain", "homogeneous", "FIXED", "REVOLUTE", "PRISMATIC"]
+__all__ = ["ChainNode", "KinematicChain", "homogeneous", "mat3", "matvec3", "FIXED", "REVOLUTE", "PRISMATIC"]
 
 FIXED, REVOLUTE, PRISMATIC = 0, 1, 2
 
@@ -44,6 +44,17 @@ class ChainNode:
     parent: int  # index into the node list, -1 for the root
     kind: int  # 0 fixed, 1 revolute, 2 prismatic
     dof: int  # index into q, -1 if none
+
+
+def mat3(a: Tensor, b: Tensor) -> Tensor:
+    """``a @ b`` for ``(..., 3, 3)`` by ``(..., 3, k)`` (broadcasting), written out elementwise: unlike a
+    batched matmul, a row's bits never depend on the other rows of the batch."""
+    return a[..., :, 0:1] * b[..., 0:1, :] + a[..., :, 1:2] * b[..., 1:2, :] + a[..., :, 2:3] * b[..., 2:3, :]
+
+
+def matvec3(a: Tensor, v: Tensor) -> Tensor:
+    """``a @ v`` for ``(..., 3, 3)`` matrices and ``(..., 3)`` vectors (broadcasting), elementwise."""
+    return a[..., 0] * v[..., 0:1] + a[..., 1] * v[..., 1:2] + a[..., 2] * v[..., 2:3]
 
 
 def homogeneous(r: Tensor, p: Tensor) -> Tensor:
@@ -145,6 +156,19 @@ class KinematicChain:
         self.p0 = torch.stack(p_list).to(**kw)  # (n_links, 3)
         self.Aa = (torch.stack(a_list) @ torch.stack(ax_list).unsqueeze(-1)).squeeze(-1).to(**kw)
         self.axis = torch.stack(ax_list).to(**kw)
+        # per link, the constant columns W of r_par @ W that give the link's pose from its parent's
+        # (revolute: [A - C | B | C | p0 | Aa], prismatic: [A | p0 | Aa], fixed: [A | p0]; Aa is the
+        # joint axis in the parent frame)
+        self._w: list[Tensor] = []
+        for i, nd in enumerate(nodes):
+            a64, p64 = torch.stack(a_list)[i], torch.stack(p_list)[i]
+            if nd.kind == REVOLUTE:
+                w = torch.cat([a64 - c_list[i], b_list[i], c_list[i], p64[:, None], (a64 @ ax_list[i])[:, None]], dim=1)
+            elif nd.kind == PRISMATIC:
+                w = torch.cat([a64, p64[:, None], (a64 @ ax_list[i])[:, None]], dim=1)
+            else:
+                w = torch.cat([a64, p64[:, None]], dim=1)
+            self._w.append(w.to(**kw))
 
         # Actuated joints: the link each one moves, and which joints each link depends on.
         self.dof_link: list[int] = [0] * len(self.dof_names)
@@ -192,10 +216,22 @@ class KinematicChain:
         In the root frame, or in the world frame when ``root_pose`` (a world-from-root 4x4
         transform, optionally batched) is given.
         """
+        return self._forward(q, links, root_pose)[0]
+
+    def _forward(self, q: Tensor, links: Sequence[str], root_pose: Tensor | None
+                 ) -> tuple[dict[str, tuple[Tensor, Tensor]], dict[int, Tensor]]:
+        """Rotation (..., 3, 3) and position (..., 3) of the given links (and their ancestors).
+
+        In the root frame, or in the world frame when ``root_pose`` (a world-from-root 4x4
+        transform, optionally batched) is given.
+        """
         batch = q.shape[:-1]
+        axes: dict[int, Tensor] = {}  # joint axis z of each dof's link, in the output frame
+        cos, sin = torch.cos(q), torch.sin(q)
         out: dict[int, tuple[Tensor, Tensor]] = {}
         for i in self.needed(links):
             nd = self.nodes[i]
+            w = self._w[i]
             if nd.parent < 0:
                 if root_pose is None:
                     r = self.A[i].expand(*batch, 3, 3)
@@ -206,32 +242,36 @@ class KinematicChain:
                     p = rp[..., :3, 3].expand(*batch, 3)
                 out[i] = (r, p)
                 continue
-            r_par, p_par = out[nd.parent]
-            if nd.kind == REVOLUTE:
-                t = q[..., nd.dof, None, None]
-                c, s = torch.cos(t), torch.sin(t)
-                r_loc = c * self.A[i] + s * self.B[i] + (1.0 - c) * self.C[i]
-                p_loc = self.p0[i]
-            elif nd.kind == PRISMATIC:
-                r_loc = self.A[i]
-                p_loc = self.p0[i] + q[..., nd.dof, None] * self.Aa[i]
+            if nd.parent == 0 and root_pose is None:  # the root frame itself: pose (I, 0)
+                x, p_par = w, None
             else:
-                r_loc = self.A[i]
-                p_loc = self.p0[i]
-            r = r_par @ r_loc
-            p = (r_par @ p_loc.unsqueeze(-1)).squeeze(-1) + p_par
+                r_par, p_par = out[nd.parent]
+                # the one product per link; r_par @ constant is a 2D GEMM over the batch, whose
+                # rows were checked (tests/test_batch_invariance.py) not to depend on each other
+                x = r_par @ w  # (..., 3, k)
+            if nd.kind == REVOLUTE:
+                c, s = cos[..., nd.dof, None, None], sin[..., nd.dof, None, None]
+                r = c * x[..., 0:3] + s * x[..., 3:6] + x[..., 6:9]
+                p = x[..., 9]
+                axes[i] = x[..., 10]
+            elif nd.kind == PRISMATIC:
+                r = x[..., 0:3]
+                p = x[..., 3] + q[..., nd.dof, None] * x[..., 4]
+                axes[i] = x[..., 4]
+            else:
+                r, p = x[..., 0:3], x[..., 3]
+            if p_par is not None:
+                p = p + p_par
+            r, p = r.expand(*batch, 3, 3), p.expand(*batch, 3)
             out[i] = (r, p)
-        return {self.nodes[i].link: v for i, v in out.items()}
+        return {self.nodes[i].link: v for i, v in out.items()}, axes
 
     def joint_frames(
         self, q: Tensor, links: Sequence[str], root_pose: Tensor | None
     ) -> tuple[dict[str, tuple[Tensor, Tensor]], Tensor, Tensor]:
         """:meth:`forward` of ``links`` plus every degree of freedom's axis ``z`` and origin ``o``
         in the output frame, each ``(..., n_dof, 3)``."""
-        fk = self.forward(q, [self.nodes[i].link for i in self.dof_link] + list(links), root_pose)
-        z, o = [], []
-        for i in self.dof_link:
-            r, p = fk[self.nodes[i].link]
-            z.append((r @ self.axis[i].unsqueeze(-1)).squeeze(-1))
-            o.append(p)
-        return fk, torch.stack(z, dim=-2), torch.stack(o, dim=-2)
+        fk, axes = self._forward(q, [self.nodes[i].link for i in self.dof_link] + list(links), root_pose)
+        z = torch.stack([axes[i].expand(*q.shape[:-1], 3) for i in self.dof_link], dim=-2)
+        o = torch.stack([fk[self.nodes[i].link][1] for i in self.dof_link], dim=-2)
+        return fk, z, o

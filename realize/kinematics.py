@@ -47,8 +47,8 @@ from realize.fetch_joints import (
     whole_body_qpos_from_full,
 )
 from realize.fetch_urdf import fetch_urdf_path, parse_urdf_joints
-from realize.jacobians import jdot_qdot, point_jacobian
-from realize.kinematic_chain import KinematicChain, homogeneous
+from realize.jacobians import jdot_qdot, point_jacobian, point_jets, prefix_ends
+from realize.kinematic_chain import KinematicChain, homogeneous, matvec3
 
 __all__ = ["FetchKinematics"]
 
@@ -135,6 +135,9 @@ class FetchKinematics:
         ).to(**kw).reshape(-1, len(WHOLE_BODY_JOINT_NAMES))
         """(K, 11): 1 where joint j moves sphere k."""
         self._ee_dof_mask = self.chain.ancestor_dof_mask(self.ee_link).to(**kw)
+        self._fk_links = [self.ee_link] + list(dict.fromkeys(self.sphere_links))
+        self._jets_mask = torch.cat([self._ee_dof_mask.unsqueeze(0), self.sphere_dof_mask], dim=0)
+        self._jets_ends = prefix_ends(self._jets_mask)
 
     @property
     def n_dof(self) -> int:
@@ -197,7 +200,7 @@ class FetchKinematics:
 
     def _tcp_from(self, fk: dict[str, tuple[Tensor, Tensor]]) -> tuple[Tensor, Tensor]:
         r, p = fk[self.ee_link]
-        return r, p + (r @ self.tcp_offset.unsqueeze(-1)).squeeze(-1)
+        return r, p + matvec3(r, self.tcp_offset)
 
     def tcp_jacobian(self, q: Tensor, root_pose: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """TCP pose ``(..., 4, 4)`` and geometric Jacobian ``(..., 6, 11)``.
@@ -226,7 +229,7 @@ class FetchKinematics:
     def _sphere_centres(self, fk: dict[str, tuple[Tensor, Tensor]]) -> Tensor:
         r = torch.stack([fk[lk][0] for lk in self.sphere_links], dim=-3)
         p = torch.stack([fk[lk][1] for lk in self.sphere_links], dim=-2)
-        return (r @ self.sphere_offsets.unsqueeze(-1)).squeeze(-1) + p
+        return matvec3(r, self.sphere_offsets) + p
 
     def sphere_jacobians(self, q: Tensor, root_pose: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
         """Sphere centres ``(..., K, 3)``, radii ``(K,)`` and centre Jacobians ``(..., K, 3, 11)``."""
@@ -259,12 +262,9 @@ class FetchKinematics:
         ``((x, J, J q', (dJ/dt) q') of the TCP, (same) of the sphere centres)``, shapes
         ``(..., 3), (..., 3, 11), (..., 3), (..., 3)`` and ``(..., K, 3), (..., K, 3, 11), ...``.
         ``(dJ/dt) q' = q'^T (d^2 x / dq^2) q'`` (the true curvature term, sign +1)."""
-        fk, z, o = self._chain_terms(q, [self.ee_link] + list(dict.fromkeys(self.sphere_links)), root_pose)
+        fk, z, o = self._chain_terms(q, self._fk_links, root_pose)
         pts = torch.cat([self._tcp_from(fk)[1].unsqueeze(-2), self._sphere_centres(fk)], dim=-2)
-        mask = torch.cat([self._ee_dof_mask.unsqueeze(0), self.sphere_dof_mask], dim=0)
-        jac = self._point_jacobian(z, o, pts, mask)  # (..., 1 + K, 3, 11)
-        vel = (jac @ qd.unsqueeze(-2).unsqueeze(-1)).squeeze(-1)
-        acc = self._jdot_qdot(z, o, pts, mask, qd)
+        jac, vel, acc = point_jets(z, o, pts, self._jets_mask, self._jets_ends, qd, self._rev_mask)
         ee = (pts[..., 0, :], jac[..., 0, :, :], vel[..., 0, :], acc[..., 0, :])
         sph = (pts[..., 1:, :], jac[..., 1:, :, :], vel[..., 1:, :], acc[..., 1:, :])
         return ee, sph

@@ -134,9 +134,20 @@ def _one_sided(xd: Tensor) -> Tensor:
     return -0.5 * (torch.sign(xd) - 1.0)
 
 
-def _pull(J: Tensor, m: Tensor) -> Tensor:
-    """Sum over scalar leaves of m_l J_l^T J_l: J (N, L, n), m (N, L) -> (N, n, n)."""
-    return torch.einsum("nli,nl,nlj->nij", J, m, J)
+# The leaf sums below are broadcast products reduced over the leaves, not batched matrix
+# products: a batched BLAS product may give a row different last bits depending on the other
+# rows of the batch (seen with MKL on AMD CPUs), and the fabric runs on a changing subset of
+# plans; an elementwise product reduced inside one row does not depend on its batch mates.
+
+
+def _pull(Jt: Tensor, m: Tensor) -> Tensor:
+    """Sum over scalar leaves of m_l J_l^T J_l: Jt (N, n, L) (transposed Jacobians), m (N, L) -> (N, n, n)."""
+    return ((Jt * m[:, None, :])[:, :, None, :] * Jt[:, None, :, :]).sum(-1)
+
+
+def _pull_force(Jt: Tensor, f: Tensor) -> Tensor:
+    """Sum over scalar leaves of J_l^T f_l: Jt (N, n, L), f (N, L) -> (N, n)."""
+    return (Jt * f[:, None, :]).sum(-1)
 
 
 def _safe_norm(x: Tensor) -> Tensor:
@@ -204,14 +215,19 @@ def fabric_acceleration(
         obstacles = None
     if obstacles is not None:
         M = obstacles.shape[1]
-        mask = (torch.ones(N, M, dtype=torch.bool, device=device) if obstacle_mask is None
-                else obstacle_mask.to(device=device, dtype=torch.bool))
-        obs_ok = torch.isfinite(obstacles).all(-1) | ~mask
-        valid = valid & obs_ok.all(1)
+        if obstacle_mask is None:  # no padding: every obstacle is real
+            mask = None
+            valid = valid & torch.isfinite(obstacles).flatten(1).all(1)
+            keep = valid[:, None, None]
+        else:
+            mask = obstacle_mask.to(device=device, dtype=torch.bool)
+            obs_ok = torch.isfinite(obstacles).all(-1) | ~mask
+            valid = valid & obs_ok.all(1)
+            keep = mask[..., None] & valid[:, None, None]
         # padding -> a harmless far-away unit sphere; its leaves are masked out below
         far = torch.cat([torch.full_like(obstacles[..., :-1], 1e3),
                          torch.ones_like(obstacles[..., -1:])], dim=-1)
-        obstacles = torch.where(mask[..., None] & valid[:, None, None], obstacles, far)
+        obstacles = torch.where(keep, obstacles, far)
     v2 = valid[:, None]
     if (lower is None) != (upper is None):
         raise ValueError("give both joint limits lower and upper, or neither")
@@ -252,20 +268,24 @@ def fabric_acceleration(
     f_g = torch.zeros(N, n, dtype=dtype, device=device)
     f_le = torch.zeros(N, n, dtype=dtype, device=device)
     if obstacles is not None:
-        on_b = mask[:, None, :].expand(N, (y.shape[1] - d) // M, M).flatten(1)
-        on = on_b.to(dtype)
-        # masked (padding) leaves: neutral values so that nothing non-finite is formed
-        x = torch.where(on_b, y[:, d:], torch.ones_like(y[:, d:]))
-        xd = torch.where(on_b, yd[:, d:], torch.zeros_like(yd[:, d:]))
-        a = torch.where(on_b, curv[:, d:], torch.zeros_like(curv[:, d:]))
-        Jc = torch.where(on_b[..., None], J[:, d:], torch.zeros_like(J[:, d:]))
+        x, xd, a, Jc = y[:, d:], yd[:, d:], curv[:, d:], J[:, d:].transpose(1, 2).contiguous()
+        if mask is not None:
+            on_b = mask[:, None, :].expand(N, (y.shape[1] - d) // M, M).flatten(1)
+            # masked (padding) leaves: neutral values so that nothing non-finite is formed
+            x = torch.where(on_b, x, torch.ones_like(x))
+            xd = torch.where(on_b, xd, torch.zeros_like(xd))
+            a = torch.where(on_b, a, torch.zeros_like(a))
+            Jc = torch.where(on_b[:, None, :], Jc, torch.zeros_like(Jc))
         h = -cfg.collision_lam / x ** cfg.collision_exp * _one_sided(xd) * xd ** 2
-        m = 2.0 * cfg.collision_metric_lam / x ** cfg.collision_metric_exp * on
+        m = 2.0 * cfg.collision_metric_lam / x ** cfg.collision_metric_exp
         f_le_x = (-cfg.collision_metric_exp * cfg.collision_metric_lam
-                  / x ** (cfg.collision_metric_exp + 1.0) * xd ** 2 * on)
+                  / x ** (cfg.collision_metric_exp + 1.0) * xd ** 2)
+        if mask is not None:
+            on = on_b.to(dtype)
+            m, f_le_x = m * on, f_le_x * on
         M_g = M_g + _pull(Jc, m)
-        f_g = f_g + torch.einsum("nli,nl->ni", Jc, m * (h - a))
-        f_le = f_le + torch.einsum("nli,nl->ni", Jc, m * a + f_le_x)
+        f_g = f_g + _pull_force(Jc, m * (h - a))
+        f_le = f_le + _pull_force(Jc, m * a + f_le_x)
     if lower is not None and upper is not None:
         # x = q - lower (J = +1) and x = upper - q (J = -1); linear maps, a = 0
         for sign, x, lim in ((1.0, q - lo, lo), (-1.0, up - q, up)):
@@ -288,15 +308,16 @@ def fabric_acceleration(
     r = _safe_norm(xa)
     grad_psi = (w * cfg.k_psi * torch.tanh(cfg.a_psi * r) / r)[:, None] * xa
     m_att = 2.0 * ((cfg.m_max - cfg.m_min) * torch.exp(-(cfg.a_m * r) ** 2) + cfg.m_min)
-    M_f = M_g + m_att[:, None, None] * Ja.transpose(1, 2) @ Ja
-    f_f = f_g + m_att[:, None] * torch.einsum("nki,nk->ni", Ja, grad_psi - aa)
+    Jat = Ja.transpose(1, 2).contiguous()
+    M_f = M_g + m_att[:, None, None] * _pull(Jat, torch.ones_like(xa))
+    f_f = f_g + m_att[:, None] * _pull_force(Jat, grad_psi - aa)
 
     # ---- energization and speed control
     reg = eps * eye
     h_g = torch.linalg.solve(M_g + reg, f_g)
     h_f = torch.linalg.solve(M_f + reg, f_f)
     qd2 = (qd * qd).sum(-1)
-    alpha_geo = -(qd * (f_g - f_le)).sum(-1) / (eps + torch.einsum("ni,nij,nj->n", qd, M_g, qd))
+    alpha_geo = -(qd * (f_g - f_le)).sum(-1) / (eps + ((M_g * qd[:, None, :]).sum(-1) * qd).sum(-1))
     alpha_ex = -2.0 * (qd * h_g).sum(-1) / (eps + 2.0 * qd2)
     alpha_fex = -2.0 * (qd * h_f).sum(-1) / (eps + 2.0 * qd2)
     eta = 0.5 * (torch.tanh(-cfg.alpha_eta * qd2 * (1.0 - cfg.ex_factor) - 0.5) + 1.0)

@@ -16,6 +16,7 @@ import torch
 from torch import Tensor
 
 from realize.geometry import SceneGeometry
+from realize.kinematic_chain import mat3, matvec3
 
 # columns of one obstacle-box row
 BOX_CENTER = slice(0, 3)  # centre x, y, z (m)
@@ -58,10 +59,9 @@ class BoxDistance:
                           torch.stack([zero, zero, one], -1)], -2)
         ry = torch.stack([torch.stack([cp, zero, sp], -1), torch.stack([zero, one, zero], -1),
                           torch.stack([-sp, zero, cp], -1)], -2)
-        rot = rz @ ry  # (N, M, 3, 3): box frame -> world
+        rot = mat3(rz, ry)  # (N, M, 3, 3): box frame -> world
         u = points[:, :, None, :] - c[:, None, :, :]  # (N,K,M,3)
-        local = torch.einsum("nmji,nkmj->nkmi", rot, u)  # R^T u
-        return rot, local, h[:, None, :, :]
+        return rot, _rt_vec(rot[:, None], u), h[:, None, :, :]
 
     def _ok(self, boxes: Tensor) -> Tensor:
         floor = boxes[..., BOX_FLOOR][:, None, :] > 0.5
@@ -80,29 +80,45 @@ class BoxDistance:
 
     def jets(self, p: Tensor, Jp: Tensor, pd: Tensor, ap: Tensor, radii: Tensor, boxes: Tensor
              ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        """Closed-form leaf jets (value, Jacobian, velocity, curvature), flattened (N, K*M, ...)."""
+        """Closed-form leaf jets (value, Jacobian, velocity, curvature), flattened (N, K*M, ...).
+
+        Every sum over the 3 coordinates is written out (elementwise ops only): faster than
+        tiny matrix products and reductions, and a row's bits never depend on its batch mates."""
         rot, local, h = self._local(p, boxes)
         s = torch.where(local >= 0, torch.ones_like(local), -torch.ones_like(local))
         qv = local.abs() - h
         act = (qv > 0).to(p.dtype)
         w = act * qv
-        wn = torch.sqrt((w * w).sum(-1) + 1e-12)
-        is_out = (qv > 0).any(-1)
-        k = qv.argmax(dim=-1, keepdim=True)
-        e_k = torch.zeros_like(qv).scatter(-1, k, 1.0)
+        wn = torch.sqrt(_dot3(w, w) + 1e-12)
+        q0, q1, q2 = qv.unbind(-1)
+        qmax = torch.maximum(torch.maximum(q0, q1), q2)
+        is_out = qmax > 0
+        # one-hot of the first largest coordinate (argmax) for points inside the box
+        k0 = (q0 >= q1) & (q0 >= q2)
+        k1 = ~k0 & (q1 >= q2)
+        e_k = torch.stack([k0, k1, ~k0 & ~k1], dim=-1).to(p.dtype)
         g_local = torch.where(is_out[..., None], act * s * w / wn[..., None], e_k * s)
         r = radii[:, :, None]
-        g = torch.einsum("nmij,nkmj->nkmi", rot, g_local) / r[..., None]  # d phi / d p (world)
-        val = torch.where(is_out, wn, qv.max(-1).values) / r - 1.0
-        J = torch.einsum("nkmd,nkdj->nkmj", g, Jp)
-        pdl = torch.einsum("nmji,nkj->nkmi", rot, pd)  # local velocity
-        v = act * s * pdl
-        curv_out = ((v * v).sum(-1) - (w * v).sum(-1) ** 2 / wn ** 2) / wn
-        a = (g * ap[:, :, None, :]).sum(-1) + torch.where(is_out, curv_out, torch.zeros_like(curv_out)) / r
-        phid = (g * pd[:, :, None, :]).sum(-1)
-        ok = self._ok(boxes).expand_as(val)
+        ok = self._ok(boxes).expand_as(qmax)
+        # d phi / d p (world); zero on pairs that must not interact
+        g = torch.where(ok[..., None], matvec3(rot[:, None], g_local) / r[..., None], torch.zeros_like(g_local))
+        val = torch.where(is_out, wn, qmax) / r - 1.0
+        g0, g1, g2 = g.unsqueeze(-1).unbind(-2)  # (N,K,M,1)
+        J0, J1, J2 = Jp[:, :, None].unbind(-2)  # (N,K,1,n)
+        J = g0 * J0 + g1 * J1 + g2 * J2
+        v = act * s * _rt_vec(rot[:, None], pd[:, :, None, :])  # local velocity of the active coordinates
+        curv_out = (_dot3(v, v) - _dot3(w, v) ** 2 / wn ** 2) / wn
+        a = _dot3(g, ap[:, :, None, :]) + torch.where(is_out & ok, curv_out, torch.zeros_like(curv_out)) / r
+        phid = _dot3(g, pd[:, :, None, :])
         val = torch.where(ok, val, torch.full_like(val, self.FAR))
-        J = torch.where(ok[..., None], J, torch.zeros_like(J))
-        phid = torch.where(ok, phid, torch.zeros_like(phid))
-        a = torch.where(ok, a, torch.zeros_like(a))
         return val.flatten(1), J.flatten(1, 2), phid.flatten(1), a.flatten(1)
+
+
+def _dot3(a: Tensor, b: Tensor) -> Tensor:
+    """Dot product over a last dim of size 3, written out (broadcasting)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def _rt_vec(rot: Tensor, u: Tensor) -> Tensor:
+    """``rot^T @ u`` for ``(..., 3, 3)`` and ``(..., 3)`` (broadcasting), written out."""
+    return rot[..., 0, :] * u[..., 0:1] + rot[..., 1, :] * u[..., 1:2] + rot[..., 2, :] * u[..., 2:3]

@@ -31,6 +31,8 @@ from realize.controllers.body import BASE_XY, DOF, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.geometry import SceneGeometry
+from realize.jacobians import point_jets, prefix_ends
+from realize.kinematic_chain import matvec3
 from realize.kinematics import FetchKinematics
 
 # spheres that may touch a table top while grasping or placing a cube lying on it
@@ -78,21 +80,20 @@ class _PoseMap:
             kin.tcp_offset,
             kin.tcp_offset - torch.tensor([L, 0.0, 0.0], dtype=dt),  # behind the TCP on the approach axis
             kin.tcp_offset + torch.tensor([0.0, L, 0.0], dtype=dt),  # beside it on the closing axis
-        ])
+        ]).to(kin.device)
+        self._mask = torch.cat([kin._ee_dof_mask.unsqueeze(0).expand(3, -1), kin.sphere_dof_mask], dim=0)
+        self._ends = prefix_ends(self._mask)
 
     def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]:  # pragma: no cover - jets is used
         return self.jets(q, torch.zeros_like(q))[0][0], self.kin(q)[1]
 
     def jets(self, q: Tensor, qd: Tensor):
         k = self.kin
-        fk, z, o = k._chain_terms(q, [k.ee_link] + list(dict.fromkeys(k.sphere_links)), None)
+        fk, z, o = k._chain_terms(q, k._fk_links, None)
         r, p = fk[k.ee_link]
-        ee_pts = (r.unsqueeze(-3) @ self._offsets.to(q).unsqueeze(-1)).squeeze(-1) + p.unsqueeze(-2)  # (N,3,3)
+        ee_pts = matvec3(r.unsqueeze(-3), self._offsets) + p.unsqueeze(-2)  # (N, 3, 3)
         pts = torch.cat([ee_pts, k._sphere_centres(fk)], dim=-2)
-        mask = torch.cat([k._ee_dof_mask.unsqueeze(0).expand(3, -1), k.sphere_dof_mask], dim=0)
-        jac = k._point_jacobian(z, o, pts, mask)
-        vel = (jac @ qd.unsqueeze(-2).unsqueeze(-1)).squeeze(-1)
-        acc = k._jdot_qdot(z, o, pts, mask, qd)
+        jac, vel, acc = point_jets(z, o, pts, self._mask, self._ends, qd, k._rev_mask)
         n = q.shape[0]
         ee = (pts[:, :3].reshape(n, 9), jac[:, :3].reshape(n, 9, -1), vel[:, :3].reshape(n, 9), acc[:, :3].reshape(n, 9))
         sph = (pts[:, 3:], jac[:, 3:], vel[:, 3:], acc[:, 3:])
