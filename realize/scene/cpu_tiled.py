@@ -11,9 +11,8 @@ the running robots that got nothing new, as a write would. Resets are history-fr
 dynamic body leaves the PhysX scene and comes back, see ``after_reset``); frozen robots sleep.
 Threads: PhysX ``cpu_workers`` from the core count unless set; torch runs on
 ``sim.torch_threads_cpu`` threads beside them.
-What it doesn't: decide anything, or keep state beyond the SAPIEN handles and the last targets written (the
-targets of a step live in
-``realize.scene.batched``).
+What it doesn't: decide anything, or keep state beyond the SAPIEN handles and the last targets
+written (a step's targets live in ``realize.scene.batched``).
 """
 
 from __future__ import annotations
