@@ -81,6 +81,7 @@ def _place_bases(scene: BatchedScene, xy: torch.Tensor, yaw: torch.Tensor) -> No
         qpos[0, 2] = yaw[c]
         agent.robot.set_qpos(qpos)
         agent.robot.set_qvel(torch.zeros_like(qpos))
+    scene.state_changed()  # moved behind the scene's back: its cached reads are stale
 
 
 class _TableContacts:

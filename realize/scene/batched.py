@@ -5,7 +5,8 @@ resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, 
 ``num_envs = N`` on PhysX GPU) and is the one interface the realizer sees, whatever runs:
   * reads: base pose, whole-body joint state, end-effector pose, cube pose and velocity, whether
     the gripper holds the cube (finger contact forces), all in one copy's local frame (the frame
-    of ``realize.geometry``), so nothing above it sees tile offsets;
+    of ``realize.geometry``), so nothing above it sees tile offsets; each is read from the
+    simulator once per state (cached until a step, reset, freeze or cube move; ``state_changed``);
   * writes: base velocity commands, torso/arm joint targets, the gripper opening; ``step``
     advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
   * step hooks (``add_step_hook``: a video writer renders there), per-copy cube friction and the
@@ -99,6 +100,7 @@ class BatchedScene:
         self._frozen = torch.zeros(n_envs, dtype=torch.bool, device=self.device)
         self._hooks: list[tuple[StepHook, int]] = []
         self.step_count = 0  # control steps since the last reset
+        self._reads: dict[str, torch.Tensor] = {}  # this state's reads, until the state changes
 
     @classmethod
     def from_spec(cls, spec: SceneSpec, n_envs: int, env: EnvOptions | None = None) -> BatchedScene:
@@ -120,55 +122,74 @@ class BatchedScene:
         self._frozen.zero_()
         self.env.reset(seed=seed, options=dict(randomize=randomize or self.options.randomize_resets))
         self._impl.after_reset()
+        self.state_changed()
         q = self.whole_body_q()
         self._base_cmd.zero_()
         self._arm_target = q[:, UPPER].clone()
         self._arm_vel_target = torch.zeros_like(self._arm_target)
         self._grip_target.fill_(GRIPPER_OPEN)
         self._apply_targets()
+        self.state_changed()  # a caller may move things through ``u`` before the first read
         self.step_count = 0
         for hook, _ in self._hooks:
             hook(0)
 
     # ------------------------------------------------------------------ reads
+    # Each quantity is read from the simulator once per state: the first read after a change
+    # (step, reset, freeze, place_cube, push_cube) asks the backend, later ones get a copy.
+    def state_changed(self) -> None:
+        """Forget the reads of the old state. The scene calls it whenever it changes the
+        simulator; a caller that changes it through ``u``/``env`` (tests teleporting a robot)
+        must call it too."""
+        self._reads.clear()
+
+    def _read(self, key: str, fn: Callable[[], torch.Tensor]) -> torch.Tensor:
+        value = self._reads.get(key)
+        if value is None:
+            value = self._reads[key] = fn()
+        return value
+
     def qpos(self) -> torch.Tensor:
         """(N, 15) every active joint, in ManiSkill Fetch's joint order (``self.joint_names``)."""
-        return self._impl.qpos()
+        return self._read("qpos", self._impl.qpos).clone()
 
     def qvel(self) -> torch.Tensor:
-        return self._impl.qvel()
+        return self._read("qvel", self._impl.qvel).clone()
+
+    def _whole_body_q(self) -> torch.Tensor:
+        q = self._read("qpos", self._impl.qpos)[:, self._wb_idx]
+        return torch.cat([q[:, BASE_XY] + self._start_xy, q[:, YAW:]], dim=1)
 
     def whole_body_q(self) -> torch.Tensor:
         """(N, 11) base x, y (local frame), yaw, torso, 7 arm joints."""
-        q = self.qpos()[:, self._wb_idx]
-        return torch.cat([q[:, BASE_XY] + self._start_xy, q[:, YAW:]], dim=1)
+        return self._read("whole_body_q", self._whole_body_q).clone()
 
     def whole_body_qd(self) -> torch.Tensor:
-        return self.qvel()[:, self._wb_idx]
+        return self._read("whole_body_qd", lambda: self._read("qvel", self._impl.qvel)[:, self._wb_idx]).clone()
 
     def base_pose(self) -> torch.Tensor:
         """(N, 3) base x, y (local frame) and yaw."""
-        return self.whole_body_q()[:, BASE]
+        return self._read("whole_body_q", self._whole_body_q)[:, BASE].clone()
 
     def finger_width(self) -> torch.Tensor:
         """(N,) sum of the two finger joint positions (m): 0.1 fully open."""
-        return self.qpos()[:, self._finger_idx].sum(dim=1)
+        return self._read("qpos", self._impl.qpos)[:, self._finger_idx].sum(dim=1)
 
     def ee_pose(self) -> torch.Tensor:
         """(N, 7) gripper_link position (local frame) and wxyz quaternion."""
-        return self._impl.ee_pose()
+        return self._read("ee_pose", self._impl.ee_pose).clone()
 
     def cube_pose(self) -> torch.Tensor:
         """(N, 7) cube position (local frame) and wxyz quaternion."""
-        return self._impl.cube_pose()
+        return self._read("cube_pose", self._impl.cube_pose).clone()
 
     def cube_velocity(self) -> torch.Tensor:
         """(N, 6) cube linear and angular velocity."""
-        return self._impl.cube_velocity()
+        return self._read("cube_velocity", self._impl.cube_velocity).clone()
 
     def finger_cube_forces(self) -> torch.Tensor:
         """(N, 2) magnitude of the contact force (N) between each finger and the cube."""
-        return self._impl.finger_cube_forces()
+        return self._read("finger_cube_forces", self._impl.finger_cube_forces).clone()
 
     def holds_cube(self) -> torch.Tensor:
         """(N,) bool: both fingers press on the cube with at least ``sim.grasp_min_force``."""
@@ -232,6 +253,7 @@ class BatchedScene:
         idx = torch.nonzero(new).flatten().tolist()
         self._base_cmd[new] = 0.0
         self._impl.freeze(idx)
+        self.state_changed()
 
     def _apply_targets(self) -> None:
         self._impl.apply_targets(self._base_cmd, self._arm_target, self._arm_vel_target, self._grip_target,
@@ -241,6 +263,7 @@ class BatchedScene:
         """Write the pending targets and advance physics by one control period; then the step hooks."""
         self._apply_targets()
         self._impl.step(self.substeps)
+        self.state_changed()
         self.step_count += 1
         for hook, every in self._hooks:
             if self.step_count % every == 0:
@@ -270,11 +293,13 @@ class BatchedScene:
     def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
         """Give one copy's cube a linear velocity (used to check that copies are independent)."""
         self._impl.push_cube(copy, velocity)
+        self.state_changed()
 
     def place_cube(self, positions: torch.Tensor) -> None:
         """Teleport every copy's cube to ``positions`` (N, 3) in its copy's local frame, axis-aligned
         and at rest (tests and what-if checks: where does a cube dropped here end up?)."""
         self._impl.place_cube(torch.as_tensor(positions, dtype=torch.float32).reshape(self.n_envs, 3).cpu())
+        self.state_changed()
 
     # ------------------------------------------------------------------ rendering
     def render(self) -> np.ndarray:

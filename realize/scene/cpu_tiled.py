@@ -3,13 +3,16 @@
 What it does: ManiSkill allows one CPU env only, so the task is built with ``n_tiles = N``: N
 robots (a ManiSkill multi-agent), tables and cubes, laid out far enough apart never to touch,
 with PhysX's enhanced determinism so that copies stay independent and runs repeat bit for bit.
-Reads and writes loop over the copies' SAPIEN objects (poses, joints, contacts); positions are
-shifted back by each tile's offset into the copy's local frame. Resets are history-free (every
+Reads loop over the copies' SAPIEN objects (one bound getter call per copy and quantity, no
+per-body numpy work; contacts other than finger-cube pairs are dropped before their points are
+read); positions are shifted back by each tile's offset into the copy's local frame. Writes set
+only the drive targets that changed since the last write (all of them after a reset), and wake
+the running robots that got nothing new, as a write would. Resets are history-free (every
 dynamic body leaves the PhysX scene and comes back, see ``after_reset``); frozen robots sleep.
 Threads: PhysX ``cpu_workers`` from the core count unless set; torch runs on
 ``sim.torch_threads_cpu`` threads beside them.
-What it doesn't: decide anything, or keep state beyond the SAPIEN handles (the targets live in
-``realize.scene.batched``).
+What it doesn't: decide anything, or keep state beyond the SAPIEN handles and the last targets
+written (a step's targets live in ``realize.scene.batched``).
 """
 
 from __future__ import annotations
@@ -27,6 +30,10 @@ from realize.scene.settings import EnvOptions, SimSettings
 
 __all__ = ["CpuTiledBackend", "available_cores"]
 
+# columns of the per-copy drive-target row: base velocities, torso+arm positions and velocities, fingers
+_BASE, _ARM, _ARM_VEL, _GRIP = slice(0, 3), slice(3, 11), slice(11, 19), slice(19, 21)
+_N_TARGETS = 21
+
 
 def available_cores() -> int:
     try:
@@ -35,11 +42,18 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+def _check_pose_layout(pose: sapien.Pose) -> None:
+    """The reads take a pose's ``__getstate__`` as (p, q); refuse a SAPIEN where it is not."""
+    if not np.array_equal(np.asarray(pose.__getstate__(), dtype=np.float32), np.concatenate([pose.p, pose.q])):
+        raise RuntimeError("sapien.Pose.__getstate__ is not (p, q) in this SAPIEN version")
+
+
 class CpuTiledBackend(PhysicsBackend):
     """N copies tiled in one PhysX CPU scene (see the module docstring)."""
 
     name = "cpu"
     deterministic = True
+    rewrite_all_targets = False  # True: write every target every step, as before (tests compare)
 
     def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions):
         self.n_envs, self.sim = n_envs, sim
@@ -75,12 +89,32 @@ class CpuTiledBackend(PhysicsBackend):
             self._keep_alive.append(body)
             self._contact_role[id(body)] = (c, 2)
         self._px = self.u.scene.px
+        # bound pybind methods, looked up once: the per-step loops only call them
+        self._get_qpos = [a.get_qpos for a in self._arts]
+        self._get_qvel = [a.get_qvel for a in self._arts]
+        self._get_ee_pose = [link.get_entity_pose for link in self._ee_links]
+        self._get_cube_pose = [b.get_entity_pose for b in self._cube_bodies]
+        self._get_cube_lin_vel = [b.get_linear_velocity for b in self._cube_bodies]
+        self._get_cube_ang_vel = [b.get_angular_velocity for b in self._cube_bodies]
+        _check_pose_layout(self._cube_bodies[0].get_entity_pose())
+        self._setters = [
+            [j.set_drive_velocity_target for j in self._base_joints[c]]
+            + [j.set_drive_target for j in self._arm_joints[c]]
+            + [j.set_drive_velocity_target for j in self._arm_joints[c]]
+            + [j.set_drive_target for j in self._finger_joints[c]]
+            for c in range(n_envs)
+        ]
+        assert all(len(row) == _N_TARGETS for row in self._setters)
+        self._wake = [art.root.wake_up for art in self._arts]
+        self._written = np.zeros((n_envs, _N_TARGETS), dtype=np.float64)  # last targets written
+        self._write_all = True  # until the first write after a reset
 
     def after_reset(self) -> None:
         """History-free reset: PhysX keeps contact caches of shape pairs that touched in the
         previous rollout, so every dynamic actor (cube, and the push scene's stick) is taken out
         of the scene and put back in (which drops its pairs). A rollout in a used scene then
         equals one in a fresh scene bit for bit."""
+        self._write_all = True  # the task's reset may have set targets of its own
         for art in self._arts:
             art.root.wake_up()
         # all out in reverse build order, then all back in build order: PhysX hands out the
@@ -96,41 +130,47 @@ class CpuTiledBackend(PhysicsBackend):
             px_scene.add_entity(entity)
 
     # ------------------------------------------------------------------ reads
+    # One pybind call per copy and quantity, straight into one array: a pose's ``__getstate__``
+    # is its (p, q) as 7 Python floats (checked against ``p``/``q`` in ``_check_pose_layout``),
+    # exact copies of PhysX's float32s. ``PhysxCpuSystem.pack()`` holds every body's and
+    # articulation's state in one buffer but took ~12x longer than these loops (measured at N=200).
     def qpos(self) -> torch.Tensor:
-        return torch.from_numpy(np.stack([a.get_qpos() for a in self._arts])).to(torch.float32)
+        return torch.from_numpy(np.array([get() for get in self._get_qpos]))
 
     def qvel(self) -> torch.Tensor:
-        return torch.from_numpy(np.stack([a.get_qvel() for a in self._arts])).to(torch.float32)
+        return torch.from_numpy(np.array([get() for get in self._get_qvel]))
+
+    def _local_poses(self, getters: list) -> torch.Tensor:
+        raw = torch.from_numpy(np.array([get().__getstate__() for get in getters], dtype=np.float32))
+        raw[:, :2] -= self._offsets
+        return raw
 
     def ee_pose(self) -> torch.Tensor:
-        poses = [l.get_entity_pose() for l in self._ee_links]
-        raw = np.array([np.concatenate([p.p, p.q]) for p in poses], dtype=np.float32)
-        raw = torch.from_numpy(raw)
-        raw[:, :2] -= self._offsets
-        return raw
+        return self._local_poses(self._get_ee_pose)
 
     def cube_pose(self) -> torch.Tensor:
-        poses = [b.get_entity_pose() for b in self._cube_bodies]
-        raw = torch.from_numpy(np.array([np.concatenate([p.p, p.q]) for p in poses], dtype=np.float32))
-        raw[:, :2] -= self._offsets
-        return raw
+        return self._local_poses(self._get_cube_pose)
 
     def cube_velocity(self) -> torch.Tensor:
-        v = [np.concatenate([b.get_linear_velocity(), b.get_angular_velocity()]) for b in self._cube_bodies]
-        return torch.from_numpy(np.array(v, dtype=np.float32))
+        out = np.empty((self.n_envs, 6), dtype=np.float32)
+        out[:, :3] = [get() for get in self._get_cube_lin_vel]
+        out[:, 3:] = [get() for get in self._get_cube_ang_vel]
+        return torch.from_numpy(out)
 
     def finger_cube_forces(self) -> torch.Tensor:
+        """Contacts of anything but a finger and its own copy's cube (cubes on tables, the arm on
+        the head, ...) are dropped after two dict look-ups, before any contact point is read."""
         impulse = np.zeros((self.n_envs, 2), dtype=np.float64)
         role = self._contact_role
         for contact in self._px.get_contacts():
             b0, b1 = contact.bodies
-            r0, r1 = role.get(id(b0)), role.get(id(b1))
-            if r0 is None or r1 is None or r0[0] != r1[0]:
+            r0 = role.get(id(b0))
+            if r0 is None:
                 continue
-            pair = {r0[1], r1[1]}
-            if 2 not in pair or len(pair) != 2:
-                continue
-            finger = (pair - {2}).pop()
+            r1 = role.get(id(b1))
+            if r1 is None or r0[0] != r1[0] or (r0[1] == 2) == (r1[1] == 2):
+                continue  # other bodies, another copy's, or finger-finger
+            finger = r1[1] if r0[1] == 2 else r0[1]
             total = np.zeros(3)
             for pt in contact.points:
                 total += pt.impulse
@@ -141,18 +181,29 @@ class CpuTiledBackend(PhysicsBackend):
     # ------------------------------------------------------------------ writes
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
                       grip: torch.Tensor, frozen: torch.Tensor) -> None:
-        base = base_vel.numpy().astype(np.float64)
-        arm_ = arm.numpy().astype(np.float64)
-        arm_v = arm_vel.numpy().astype(np.float64)
-        grip_ = grip.numpy().astype(np.float64)
-        for c in torch.nonzero(~frozen).flatten().tolist():  # writing wakes a sleeping robot
-            for j, joint in enumerate(self._base_joints[c]):
-                joint.set_drive_velocity_target(base[c, j])
-            for j, joint in enumerate(self._arm_joints[c]):
-                joint.set_drive_target(arm_[c, j])
-                joint.set_drive_velocity_target(arm_v[c, j])
-            for joint in self._finger_joints[c]:
-                joint.set_drive_target(grip_[c])
+        """Writes only the targets whose bits differ from the last ones written (after a reset:
+        all of them); a running copy with nothing new is woken up, as a write would (PhysX's
+        setters wake the articulation, and a robot left unwritten could fall asleep). Frozen
+        copies are not touched: writing would wake them."""
+        n = self.n_envs
+        new = np.empty((n, _N_TARGETS), dtype=np.float64)
+        new[:, _BASE] = base_vel.numpy()
+        new[:, _ARM] = arm.numpy()
+        new[:, _ARM_VEL] = arm_vel.numpy()
+        new[:, _GRIP] = grip.numpy()[:, None]
+        running = ~frozen.numpy()
+        changed = new.view(np.int64) != self._written.view(np.int64)
+        if self._write_all or self.rewrite_all_targets:
+            changed[:] = True
+            self._write_all = False
+        changed &= running[:, None]
+        rows, cols = np.nonzero(changed)
+        setters, values = self._setters, new[rows, cols].tolist()
+        for c, k, v in zip(rows.tolist(), cols.tolist(), values):
+            setters[c][k](v)
+        self._written[changed] = new[changed]
+        for c in np.nonzero(running & ~changed.any(axis=1))[0].tolist():
+            self._wake[c]()
 
     def step(self, substeps: int) -> None:
         for _ in range(substeps):
@@ -164,6 +215,7 @@ class CpuTiledBackend(PhysicsBackend):
             art = self._arts[c]
             for joint in self._base_joints[c]:  # a sleeping robot keeps its last targets
                 joint.set_drive_velocity_target(0.0)
+            self._written[c, _BASE] = 0.0
             art.set_qvel(np.zeros(art.dof, dtype=np.float32))
             art.root.put_to_sleep()
 
