@@ -6,6 +6,11 @@ links, gripper materials and collision filtering) with
   * one control mode, ``pd_joint_pos_base_vel``: base x, y, yaw joints velocity-driven in the
     world frame (so the base can move sideways like the paper's Dingo-O), torso + arm joints
     position-driven with absolute targets, head held, gripper fingers mimic position-driven.
+  * ``fetch_omni_lean``: the same robot without the 11 links nothing in these tasks touches or
+    reads (wheels, laser, e-stop, bellows, head camera and its frames: fixed-joint leaves of the
+    tree, 4 of them convex collision meshes), so PhysX simulates 18 links instead of 29. The
+    joints, their order and every other link are unchanged; the dropped links' masses are gone
+    (gravity is off on the robot and the base is velocity-driven, so only inertia changes).
 What it doesn't: decide targets. Controllers in ``realize/controllers`` compute them and the
 batched scene view (``realize.scene``) writes them to the drives.
 """
@@ -24,7 +29,9 @@ from mani_skill.agents.controllers import (
     PDJointVelControllerConfig,
 )
 from mani_skill.agents.registration import register_agent
-from mani_skill.agents.robots.fetch import Fetch
+from mani_skill.agents.robots.fetch import FETCH_BASE_COLLISION_BIT, Fetch
+from mani_skill.utils import sapien_utils
+from mani_skill import format_path
 
 # Drive gains. Arm values are ManiSkill's Fetch defaults; the base is a stiff velocity drive so
 # commanded base velocities are tracked closely (the real base has its own velocity loop).
@@ -72,3 +79,71 @@ class FetchOmni(Fetch):
         return deepcopy(
             dict(pd_joint_pos_base_vel=dict(arm=arm, gripper=gripper, body=body, base=base))
         )
+
+
+# Links the lean robot leaves out: fixed-joint leaves (with their fixed-joint children) that no
+# rollout of the seed task touches (contact log by link name over 200 late-iteration and 200
+# uniform plans: only fingers, gripper, wrist and forearm links ever touch the cube or a table).
+LEAN_DROPPED_LINKS = (
+    "r_wheel_link", "l_wheel_link", "estop_link", "laser_link", "bellows_link", "bellows_link2",
+    "head_camera_link", "head_camera_rgb_frame", "head_camera_depth_frame",
+    "head_camera_rgb_optical_frame", "head_camera_depth_optical_frame",
+)
+
+
+def drop_links(builder, names: tuple[str, ...]) -> None:
+    """Remove the link builders ``names`` from a parsed SAPIEN articulation builder, in place.
+    Only leaves of the tree may go (every child of a dropped link is dropped too) and only links
+    on fixed joints, so the active joints and their order stay as they are."""
+    drop = set(names)
+    found = {b.name for b in builder.link_builders} & drop
+    if found != drop:
+        raise ValueError(f"links not in the robot: {sorted(drop - found)}")
+    keep = []
+    for b in builder.link_builders:
+        if b.name in drop:
+            if b.joint_record.joint_type != "fixed":
+                raise ValueError(f"link {b.name} hangs on a {b.joint_record.joint_type} joint: only fixed links go")
+            continue
+        if b.parent is not None and b.parent.name in drop:
+            raise ValueError(f"link {b.name} is a child of the dropped {b.parent.name}")
+        keep.append(b)
+    for i, b in enumerate(keep):
+        b.index = i
+    builder.link_builders = keep
+
+
+@register_agent()
+class FetchOmniLean(FetchOmni):
+    """``fetch_omni`` without ``LEAN_DROPPED_LINKS`` (see the module docstring)."""
+
+    uid = "fetch_omni_lean"
+
+    def _load_articulation(self, initial_pose=None):
+        if self.build_separate:
+            raise NotImplementedError("fetch_omni_lean builds one articulation builder for all sub-scenes")
+        loader = self.scene.create_urdf_loader()
+        loader.name = self.uid if self._agent_idx is None else f"{self.uid}-agent-{self._agent_idx}"
+        loader.fix_root_link = self.fix_root_link
+        loader.load_multiple_collisions_from_file = self.load_multiple_collisions
+        loader.disable_self_collisions = self.disable_self_collisions
+        if self.urdf_config is not None:  # the gripper's friction materials
+            cfg = sapien_utils.parse_urdf_config(self.urdf_config)
+            sapien_utils.check_urdf_config(cfg)
+            sapien_utils.apply_urdf_config(loader, cfg)
+        builder = loader.parse(format_path(str(self.urdf_path)))["articulation_builders"][0]
+        drop_links(builder, LEAN_DROPPED_LINKS)
+        builder.initial_pose = initial_pose
+        self.robot = builder.build()
+        self.robot_link_names = [link.name for link in self.robot.get_links()]
+
+    def _after_init(self):
+        links = self.robot.links_map
+        self.finger1_link = links["l_gripper_finger_link"]
+        self.finger2_link = links["r_gripper_finger_link"]
+        self.tcp = links[self.ee_link_name]
+        self.base_link = links["base_link"]
+        self.base_link.set_collision_group_bit(group=2, bit_idx=FETCH_BASE_COLLISION_BIT, bit=1)
+        self.torso_lift_link = links["torso_lift_link"]
+        self.head_camera_link = None
+        self.queries = dict()
