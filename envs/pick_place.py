@@ -68,7 +68,7 @@ def yaw_pitch_quat(yaw: float, pitch: float) -> list[float]:
 
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizePickPlaceEnv(BaseEnv):
-    SUPPORTED_ROBOTS = ["fetch_omni"]
+    SUPPORTED_ROBOTS = ["fetch_omni", "fetch_omni_lean"]
     TASK_ID = ENV_ID  # the gym id (for messages)
     VARIANTS: tuple[str, ...] = ("plain", "wall", "ramp")  # the geometry variants this task builds
 
@@ -104,6 +104,8 @@ class RealizePickPlaceEnv(BaseEnv):
         cube_xy_noise: float = 0.02,
         robot_xy_noise: float = 0.05,
         robot_uids: str = "fetch_omni",
+        lean_robot: bool = False,
+        robot_solver_position_iterations: int | None = None,
         **kwargs: Any,
     ):
         if isinstance(n_tiles, bool) or not isinstance(n_tiles, int) or n_tiles < 1:
@@ -127,7 +129,9 @@ class RealizePickPlaceEnv(BaseEnv):
         )
         if robot_uids != "fetch_omni":
             raise ValueError(f"robot_uids = {robot_uids!r}: this task supports only 'fetch_omni'")
-        uids = "fetch_omni" if n_tiles == 1 else tuple(["fetch_omni"] * n_tiles)
+        robot = "fetch_omni_lean" if lean_robot else "fetch_omni"  # lean: no links nothing touches
+        self.robot_solver_position_iterations = robot_solver_position_iterations
+        uids = robot if n_tiles == 1 else tuple([robot] * n_tiles)
         kwargs.setdefault("control_mode", "pd_joint_pos_base_vel")
         super().__init__(*args, robot_uids=uids, **kwargs)
 
@@ -161,7 +165,12 @@ class RealizePickPlaceEnv(BaseEnv):
         poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
         super()._load_agent(options, poses if self.n_tiles > 1 else poses[0])
         # The robot's joint controllers compensate gravity (as Fetch's own do); the cube keeps it.
+        # Robots may run their own solver iteration count (PhysX solves a touching robot and
+        # cube with the larger of their counts; the cubes keep the scene's).
         for agent in self.agents:
+            if self.robot_solver_position_iterations is not None:
+                for art in agent.robot._objs:
+                    art.set_solver_position_iterations(self.robot_solver_position_iterations)
             for link in agent.robot.get_links():
                 for body in link._objs:
                     body.disable_gravity = True

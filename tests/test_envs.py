@@ -9,6 +9,7 @@ not build is refused by name before any scene is built.
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import gymnasium as gym
@@ -62,3 +63,63 @@ def test_wrong_geometry_is_refused_by_kwarg_name(env_id: str, geometry: dict, wo
     with pytest.raises(ConfigError) as e:
         gym.make(env_id, geometry=geometry)
     assert words in str(e.value)
+
+
+def _unprefixed(name: str) -> str:
+    """A link or joint name without its tiled agent's prefix (``scene-0-<uid>-agent-<i>_``)."""
+    return re.sub(r"^.*-agent-\d+_", "", name)
+
+
+def test_lean_fetch_keeps_joints_and_kinematics_and_drops_only_fixed_leaves() -> None:
+    """The lean robot (``sim.lean_robot``) has the full robot's active joints in the same order
+    and, at the same joint positions, the same pose of every link it keeps (checked against the
+    full robot, built from the same URDF); only ``LEAN_DROPPED_LINKS`` are gone."""
+    from envs.fetch_omni import LEAN_DROPPED_LINKS
+    from realize.scene import BatchedScene, SimSettings
+
+    built = {}
+    for lean in (False, True):
+        with BatchedScene(2, None, SimSettings(lean_robot=lean)) as s:
+            art = s._impl._arts[1]
+            names = [_unprefixed(ln.name) for ln in art.get_links()]
+            poses = {n: ln.entity_pose for n, ln in zip(names, art.get_links())}
+            root = art.get_root_pose()
+            built[lean] = (names, [_unprefixed(j.name) for j in art.get_active_joints()],
+                           {n: root.inv() * p for n, p in poses.items()}, s.qpos())
+    (full, jf, pf, qf), (lean, jl, pl, ql) = built[False], built[True]
+    assert len(full) == 29 and len(lean) == 18 and len(LEAN_DROPPED_LINKS) == 11
+    assert set(full) - set(lean) == set(LEAN_DROPPED_LINKS) and set(lean) < set(full)
+    assert jf == jl and torch.equal(qf, ql)
+    for n in lean:
+        assert np.allclose(pf[n].p, pl[n].p, atol=1e-6) and np.allclose(np.abs(pf[n].q @ pl[n].q), 1, atol=1e-6), n
+
+
+def test_drop_links_refuses_moving_or_inner_links() -> None:
+    """Only fixed-joint leaves may be dropped: the head tilt link moves, the head camera link has
+    children that would be left hanging."""
+    import sapien
+    from mani_skill import format_path
+
+    from envs.fetch_omni import FetchOmni, drop_links
+
+    def parsed():
+        loader = sapien.Scene().create_urdf_loader()
+        articulation_builders = loader.parse(format_path(str(FetchOmni.urdf_path)))[0]  # SAPIEN: (articulations, actors, cameras)
+        return articulation_builders[0]
+
+    with pytest.raises(ValueError, match="revolute"):
+        drop_links(parsed(), ("head_tilt_link", "head_camera_link"))
+    with pytest.raises(ValueError, match="child of the dropped head_camera_link"):
+        drop_links(parsed(), ("head_camera_link",))
+    with pytest.raises(ValueError, match="not in the robot"):
+        drop_links(parsed(), ("no_such_link",))
+
+
+def test_robot_solver_iterations_apply_to_robots_only() -> None:
+    """``sim.solver_position_iterations_robot`` sets every robot's count; the cubes keep the
+    scene's ``solver_position_iterations``."""
+    from realize.scene import BatchedScene, SimSettings
+
+    with BatchedScene(2, None, SimSettings(solver_position_iterations=12, solver_position_iterations_robot=3)) as s:
+        assert [a.get_solver_position_iterations() for a in s._impl._arts] == [3, 3]
+        assert [b.get_solver_position_iterations() for b in s._impl._cube_bodies] == [12, 12]

@@ -52,6 +52,8 @@ def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, **ba
         control_freq=sim.control_freq,
         solver_position_iterations=sim.solver_position_iterations,
         solver_velocity_iterations=sim.solver_velocity_iterations,
+        robot_solver_position_iterations=sim.solver_position_iterations_robot,
+        lean_robot=sim.lean_robot,
         render_mode="rgb_array",
     )
     cam = options.camera
