@@ -53,6 +53,7 @@ import torch
 from torch import Tensor
 
 from realize.controllers.astar_search import run_search
+from realize.controllers.grid_cache import grid_cached
 from realize.controllers.grid_cells import as_cells, components, nearest_free
 from realize.controllers.occupancy import GridSpec, cell_in_grid, world_to_cell
 
@@ -182,7 +183,7 @@ def astar(
         s_idx = s_idx.index_put((rows,), torch.where(anyfree, best, s_idx[rows]))
         bad_free = bad_free.index_put((rows,), ~anyfree)
     # connected components (4-connectivity == 8-connectivity under the corner rule)
-    comp = components(free)  # (B, HW)
+    comp = grid_cached("components", free, components) if shared else components(free)  # (B, HW)
     s_comp = comp[grid_row, s_idx]
     g_comp = comp[grid_row, g_idx]
     if snap and bool(goal_snapped.any()):
