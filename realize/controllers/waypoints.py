@@ -117,7 +117,8 @@ def path_to_waypoints(
         keep = torch.zeros(n, l2, dtype=torch.bool, device=dev)
         keep[:, 0] = ln2 > 0
         anchor = pts[:, 0]
-        for jj in range(2, l2):
+        # positions past every plan's last thinned waypoint change nothing: stop there
+        for jj in range(2, min(l2, int(ln2.max()))):
             inpath = jj < ln2
             n_s = _samples(spec, (pts[:, jj] - anchor).norm(dim=-1))
             # only plans whose path reaches jj are checked (the others' answer is not used)
