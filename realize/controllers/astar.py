@@ -52,12 +52,15 @@ from enum import IntEnum
 import torch
 from torch import Tensor
 
+from realize.controllers.astar_field import field_search
 from realize.controllers.astar_search import run_search
 from realize.controllers.grid_cache import grid_cached
 from realize.controllers.grid_cells import as_cells, components, nearest_free
 from realize.controllers.occupancy import GridSpec, cell_in_grid, world_to_cell
 
-__all__ = ["AStarStatus", "AStarResult", "astar", "astar_world"]
+__all__ = ["PLANNERS", "AStarStatus", "AStarResult", "astar", "astar_world"]
+
+PLANNERS = ("astar", "field")  # search engines of ``astar(planner=...)``
 
 
 class AStarStatus(IntEnum):
@@ -86,8 +89,9 @@ class AStarResult:
     start, goal: (N, 2) int64 cells actually searched (after snapping; input cells otherwise,
         -1 where the input was invalid).
     start_snapped, goal_snapped: (N,) bool, True where the input cell was occupied and moved.
-    expansions: (N,) int64 number of node expansions (re-expansions counted).
-    iterations: number of batched iterations the search loop ran.
+    expansions: (N,) int64 number of node expansions (re-expansions counted; planner="field": cells
+        reached by the Dijkstra fields computed in the call).
+    iterations: number of batched iterations the search loop ran (0 for planner="field").
     """
 
     cost: Tensor
@@ -120,6 +124,7 @@ def astar(
     expansions_per_step: int | None = None,
     max_iterations: int | None = None,
     dtype: torch.dtype = torch.float64,
+    planner: str = "astar",
 ) -> AStarResult:
     """Batched A* from ``start[i]`` to ``goal[i]`` for every plan i.
 
@@ -133,6 +138,9 @@ def astar(
     max_iterations: cap on batched iterations (None: run until every search ends); searches cut
         off get ITERATION_LIMIT.
     dtype: float dtype of g / f (float64 keeps sums of many sqrt(2) steps exact enough to compare).
+    planner: "astar" (the batched search loop) or "field" (cached Dijkstra fields per start cell,
+        ``realize.controllers.astar_field``; shared grid only, ignores expansions_per_step and
+        max_iterations). Both return optimal costs; among equal-cost paths they pick differently.
 
     Runs on the device of ``occupied``; start / goal are moved there.
     """
@@ -142,6 +150,10 @@ def astar(
             isinstance(expansions_per_step, bool) or not isinstance(expansions_per_step, int)
             or expansions_per_step < 1):
         raise ValueError(f"expansions_per_step must be None or an int >= 1, got {expansions_per_step!r}")
+    if planner not in PLANNERS:
+        raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
+    if planner == "field" and occupied.ndim != 2:
+        raise ValueError("planner='field' needs one (H, W) grid shared by all plans")
     if max_iterations is not None and max_iterations < 0:
         raise ValueError(f"max_iterations must be >= 0 or None, got {max_iterations}")
     device = occupied.device
@@ -209,8 +221,11 @@ def astar(
     # different components: unreachable without searching (A* would exhaust the start's component)
     searching = ok & (s_comp == g_comp) & (s_comp >= 0)
 
-    out = run_search(free, shared, searching, s_idx, g_idx, expansions_per_step=expansions_per_step,
-                     max_iterations=max_iterations, dtype=dtype)
+    if planner == "field":
+        out = field_search(free, searching, s_idx, g_idx, dtype=dtype)
+    else:
+        out = run_search(free, shared, searching, s_idx, g_idx, expansions_per_step=expansions_per_step,
+                         max_iterations=max_iterations, dtype=dtype)
     cost, reached, limited, expansions = out.cost, out.reached, out.limited, out.expansions
 
     found = reached & ok
