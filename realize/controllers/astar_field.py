@@ -9,7 +9,7 @@ Dijkstra field per *distinct start cell*: distances and a shortest-path tree fro
 every free cell, computed by ``scipy.sparse.csgraph.dijkstra`` (compiled) on a sparse graph built
 once per grid. Fields are kept across calls, keyed by grid content and start cell (the static
 map is the same for every plan, action and CE iteration of a run; every plan of a run's first
-``move_to`` starts from the same cell), at most ``_MAX_FIELDS`` per grid. The result has the
+``move_to`` starts from the same cell), at most ``_MAX_FIELDS`` per grid (least recently used dropped first). The result has the
 ``SearchOutcome`` layout, so ``astar`` walks the tree's parent pointers into cell paths as it
 does for A*.
 
@@ -68,10 +68,14 @@ class _Fields:
             for i, s in enumerate(new):
                 self.dist[s], self.parent[s] = d[i], p[i]
                 fresh[s] = int(np.isfinite(d[i]).sum())
-            for s in list(self.dist)[: max(0, len(self.dist) - max(_MAX_FIELDS, len(starts)))]:
-                del self.dist[s], self.parent[s]
-        return (np.stack([self.dist[s] for s in starts]), np.stack([self.parent[s] for s in starts]),
-                np.asarray([fresh.get(s, 0) for s in starts], dtype=np.int64))
+        out = (np.stack([self.dist[s] for s in starts]), np.stack([self.parent[s] for s in starts]),
+               np.asarray([fresh.get(s, 0) for s in starts], dtype=np.int64))
+        for s in starts:  # least recently used first
+            self.dist[s] = self.dist.pop(s)
+            self.parent[s] = self.parent.pop(s)
+        for s in list(self.dist)[: max(0, len(self.dist) - _MAX_FIELDS)]:
+            del self.dist[s], self.parent[s]
+        return out
 
 
 def field_search(free: Tensor, searching: Tensor, s_idx: Tensor, g_idx: Tensor, *,
