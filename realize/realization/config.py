@@ -26,9 +26,7 @@ class AStarConfig(Settings):
 
     resolution: float = setting(0.05, gt=0)  # m per grid cell
     padding: float = setting(0.2, ge=0)  # m around every obstacle (paper: 20 cm), on top of the robot radius
-    # shortest-path engine: "astar" (batched A*) or "field" (cached Dijkstra fields per start cell,
-    # ~10x faster at a run's first move_to; same optimal costs, other cells among equal-cost paths)
-    planner: str = setting("astar", choices=PLANNERS)
+    planner: str = setting("astar", choices=PLANNERS)  # astar (batched A*) or field (cached Dijkstra fields per start cell: same costs, other equal-cost paths)
 
 
 @dataclass
