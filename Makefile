@@ -3,7 +3,7 @@
 PY := .venv/bin/python
 ARGS ?=
 
-.PHONY: setup run test test-all bench
+.PHONY: setup run test test-all bench gpu-check
 setup:
 	@bash scripts/setup.sh
 
@@ -19,3 +19,7 @@ test-all: setup
 bench: setup
 	$(PY) scripts/bench_sim.py --quick
 	$(PY) scripts/bench_controllers.py --quick
+
+# On a machine with a CUDA GPU: CUDA tests + seed-paper and journal-budget runs on PhysX GPU, one table
+gpu-check: setup
+	$(PY) scripts/gpu_check.py $(ARGS)

@@ -125,6 +125,7 @@ def test_variants_build() -> None:
             assert names == [variant]
 
 
+@pytest.mark.gpu
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (PhysX GPU backend)")
 def test_gpu_backend_matches_shapes() -> None:  # pragma: no cover - GPU machines only
     with BatchedScene(16, sim=SimSettings(backend="gpu")) as s:

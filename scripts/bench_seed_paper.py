@@ -1,0 +1,162 @@
+"""Seed-paper runs over several seeds: wall time, peak memory and fidelity, one CSV row per seed.
+
+Runs ``python -m realize experiment=seed_paper seed=S`` for each seed, one at a time, in a child
+process (so wall time includes start-up, as a user sees it), and appends a row to ``--out`` as
+soon as a run ends: seed, wall_s, peak_rss_mb (the child's maximum resident set), feasible,
+success_iter0, success_last, best_cost, best_cost_iter0, commit. With ``--reference CSV`` it
+prints, for the seeds both files hold, the wall-time ratio and the fidelity checks of the
+throughput issue (feasible in every run, iteration-0 success 3-30 %, last-iteration success
+>= 85 % mean, mean best cost no more than 2 % above the reference's).
+
+What it doesn't: run seeds in parallel (timings would interfere) or judge timing across
+machines: compare only rows measured on the same machine.
+
+    python scripts/bench_seed_paper.py --seeds 0-9 --out bench/seed_paper.csv
+    python scripts/bench_seed_paper.py --seeds 0-9 --out new.csv \
+        --reference benchmarks/seed_paper_reference.csv
+    python scripts/bench_seed_paper.py --summary benchmarks/seed_paper_reference.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from realize.run_dir.directory import RunDir  # noqa: E402
+
+FIELDS = ["seed", "wall_s", "peak_rss_mb", "feasible", "success_iter0", "success_last",
+          "best_cost", "best_cost_iter0", "commit"]
+
+
+def parse_seeds(text: str) -> list[int]:
+    seeds: list[int] = []
+    for part in text.split(","):
+        if "-" in part:
+            lo, hi = part.split("-")
+            seeds.extend(range(int(lo), int(hi) + 1))
+        else:
+            seeds.append(int(part))
+    return seeds
+
+
+def commit_of(code: Path) -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=code, capture_output=True,
+                             text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=code,
+                               capture_output=True, text=True).stdout.strip()
+        return out + ("+dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def run_seed(seed: int, code: Path, run_dir: Path, extra: list[str]) -> dict[str, object]:
+    cmd = [sys.executable, "-m", "realize", "experiment=seed_paper", f"seed={seed}",
+           f"hydra.run.dir={run_dir}", "logging.progress=false", *extra]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=code, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read() if proc.stderr else ""
+    if proc.returncode != 0:
+        raise SystemExit(f"seed {seed}: realize exited {proc.returncode}:\n{err[-2000:]}")
+    rd = RunDir(run_dir)
+    doc = rd.result()
+    success = rd.success_per_iter()
+    per_iter = rd.best_cost_per_iter()
+    return {"seed": seed, "wall_s": round(wall, 1), "peak_rss_mb": round(usage.ru_maxrss / 1024.0),
+            "feasible": int(bool(doc.feasible)), "success_iter0": round(float(success[0]), 4),
+            "success_last": round(float(success[-1]), 4), "best_cost": doc.best_cost,
+            "best_cost_iter0": float(per_iter[0]), "commit": commit_of(code)}
+
+
+def read_rows(path: Path) -> dict[int, dict[str, float]]:
+    with open(path) as f:
+        return {int(r["seed"]): {k: float(v) for k, v in r.items() if k not in ("commit",)}
+                for r in csv.DictReader(f)}
+
+
+def summary(rows: dict[int, dict[str, float]], name: str) -> None:
+    n = len(rows)
+    if not n:
+        print(f"{name}: no rows")
+        return
+    col = lambda k: [r[k] for r in rows.values()]  # noqa: E731
+    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
+    print(f"{name}: {n} seeds, wall {mean(col('wall_s')):.1f} s mean ({min(col('wall_s')):.1f}-"
+          f"{max(col('wall_s')):.1f}), peak rss {max(col('peak_rss_mb')):.0f} MB, feasible "
+          f"{int(sum(col('feasible')))}/{n}, success iter0 {min(col('success_iter0')):.3f}-"
+          f"{max(col('success_iter0')):.3f}, last {mean(col('success_last')):.3f} mean, best cost "
+          f"{mean(col('best_cost')):.1f} mean")
+
+
+def compare(new: dict[int, dict[str, float]], ref: dict[int, dict[str, float]]) -> bool:
+    seeds = sorted(set(new) & set(ref))
+    if not seeds:
+        print("no seeds in common with the reference")
+        return False
+    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
+    wall_ratio = mean([new[s]["wall_s"] for s in seeds]) / mean([ref[s]["wall_s"] for s in seeds])
+    cost_ratio = mean([new[s]["best_cost"] for s in seeds]) / mean([ref[s]["best_cost"] for s in seeds])
+    checks = {
+        "feasible in every run": all(new[s]["feasible"] == 1 for s in seeds),
+        "iteration-0 success 3-30 %": all(0.03 <= new[s]["success_iter0"] <= 0.30 for s in seeds),
+        "last-iteration success >= 85 % mean": mean([new[s]["success_last"] for s in seeds]) >= 0.85,
+        "mean best cost <= 1.02 x reference": cost_ratio <= 1.02,
+        "wall <= 120 s every run": all(new[s]["wall_s"] <= 120.0 for s in seeds),
+    }
+    print(f"seeds compared: {seeds}")
+    for k, ok in checks.items():
+        print(f"  {'ok ' if ok else 'NO '} {k}")
+    print(f"best_cost_ratio_vs_reference: {cost_ratio:.4f}")
+    print(f"wall_ratio_vs_reference: {wall_ratio:.3f}")
+    return all(checks.values())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 0,3,5")
+    ap.add_argument("--out", type=Path, help="CSV to append rows to (seeds already in it are skipped)")
+    ap.add_argument("--code", type=Path, default=REPO, help="checkout whose realize to run (default: this one)")
+    ap.add_argument("--reference", type=Path, help="reference CSV to compare with")
+    ap.add_argument("--summary", type=Path, help="only print the summary of this CSV")
+    ap.add_argument("overrides", nargs="*", help="extra realize overrides")
+    args = ap.parse_args()
+    if args.summary:
+        summary(read_rows(args.summary), str(args.summary))
+        return
+    if args.out is None:
+        ap.error("--out is required unless --summary is given")
+    done = read_rows(args.out) if args.out.exists() else {}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    new_file = not args.out.exists()
+    with open(args.out, "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS)
+        if new_file:
+            w.writeheader()
+        for seed in parse_seeds(args.seeds):
+            if seed in done:
+                continue
+            with tempfile.TemporaryDirectory(prefix=f"seed{seed}-") as tmp:
+                row = run_seed(seed, args.code.resolve(), Path(tmp) / "run", args.overrides)
+            w.writerow(row)
+            f.flush()
+            print(", ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+    rows = read_rows(args.out)
+    summary(rows, str(args.out))
+    if args.reference:
+        compare(rows, read_rows(args.reference))
+
+
+if __name__ == "__main__":
+    main()
