@@ -21,7 +21,11 @@ without a search (otherwise A* would exhaust the start's component).
 
 Determinism: the same call gives the same result. Among several optimal paths (equal cost), the one
 returned may depend on the batch it ran in (``topk`` tie order after buffer compaction); cost,
-status, snapping and path length do not.
+status, snapping and path length do not. ``planner="field"`` (``realize.controllers.astar_field``)
+replaces the search loop by cached per-start Dijkstra fields: same costs, statuses and snapping,
+paths independent of the batch but in general other cells than A* picks among equal-cost paths.
+What the static map alone determines (components, move table) is built once per grid content
+(``realize.controllers.grid_cache``).
 
 Special cases, all per plan, never an exception for the batch:
   * start == goal: cost 0, path = [start], found True.
