@@ -21,7 +21,11 @@ without a search (otherwise A* would exhaust the start's component).
 
 Determinism: the same call gives the same result. Among several optimal paths (equal cost), the one
 returned may depend on the batch it ran in (``topk`` tie order after buffer compaction); cost,
-status, snapping and path length do not.
+status, snapping and path length do not. ``planner="field"`` (``realize.controllers.astar_field``)
+replaces the search loop by cached per-start Dijkstra fields: same costs, statuses and snapping,
+paths independent of the batch but in general other cells than A* picks among equal-cost paths.
+What the static map alone determines (components, move table) is built once per grid content
+(``realize.controllers.grid_cache``).
 
 Special cases, all per plan, never an exception for the batch:
   * start == goal: cost 0, path = [start], found True.
@@ -52,11 +56,15 @@ from enum import IntEnum
 import torch
 from torch import Tensor
 
+from realize.controllers.astar_field import field_search
 from realize.controllers.astar_search import run_search
+from realize.controllers.grid_cache import grid_cached
 from realize.controllers.grid_cells import as_cells, components, nearest_free
 from realize.controllers.occupancy import GridSpec, cell_in_grid, world_to_cell
 
-__all__ = ["AStarStatus", "AStarResult", "astar", "astar_world"]
+__all__ = ["PLANNERS", "AStarStatus", "AStarResult", "astar", "astar_world"]
+
+PLANNERS = ("astar", "field")  # search engines of ``astar(planner=...)``
 
 
 class AStarStatus(IntEnum):
@@ -85,8 +93,9 @@ class AStarResult:
     start, goal: (N, 2) int64 cells actually searched (after snapping; input cells otherwise,
         -1 where the input was invalid).
     start_snapped, goal_snapped: (N,) bool, True where the input cell was occupied and moved.
-    expansions: (N,) int64 number of node expansions (re-expansions counted).
-    iterations: number of batched iterations the search loop ran.
+    expansions: (N,) int64 number of node expansions (re-expansions counted; planner="field": cells
+        reached by the Dijkstra fields computed in the call).
+    iterations: number of batched iterations the search loop ran (0 for planner="field").
     """
 
     cost: Tensor
@@ -119,6 +128,7 @@ def astar(
     expansions_per_step: int | None = None,
     max_iterations: int | None = None,
     dtype: torch.dtype = torch.float64,
+    planner: str = "astar",
 ) -> AStarResult:
     """Batched A* from ``start[i]`` to ``goal[i]`` for every plan i.
 
@@ -132,6 +142,9 @@ def astar(
     max_iterations: cap on batched iterations (None: run until every search ends); searches cut
         off get ITERATION_LIMIT.
     dtype: float dtype of g / f (float64 keeps sums of many sqrt(2) steps exact enough to compare).
+    planner: "astar" (the batched search loop) or "field" (cached Dijkstra fields per start cell,
+        ``realize.controllers.astar_field``; shared grid only, ignores expansions_per_step and
+        max_iterations). Both return optimal costs; among equal-cost paths they pick differently.
 
     Runs on the device of ``occupied``; start / goal are moved there.
     """
@@ -141,6 +154,10 @@ def astar(
             isinstance(expansions_per_step, bool) or not isinstance(expansions_per_step, int)
             or expansions_per_step < 1):
         raise ValueError(f"expansions_per_step must be None or an int >= 1, got {expansions_per_step!r}")
+    if planner not in PLANNERS:
+        raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
+    if planner == "field" and occupied.ndim != 2:
+        raise ValueError("planner='field' needs one (H, W) grid shared by all plans")
     if max_iterations is not None and max_iterations < 0:
         raise ValueError(f"max_iterations must be >= 0 or None, got {max_iterations}")
     device = occupied.device
@@ -182,7 +199,7 @@ def astar(
         s_idx = s_idx.index_put((rows,), torch.where(anyfree, best, s_idx[rows]))
         bad_free = bad_free.index_put((rows,), ~anyfree)
     # connected components (4-connectivity == 8-connectivity under the corner rule)
-    comp = components(free)  # (B, HW)
+    comp = grid_cached("components", free, components) if shared else components(free)  # (B, HW)
     s_comp = comp[grid_row, s_idx]
     g_comp = comp[grid_row, g_idx]
     if snap and bool(goal_snapped.any()):
@@ -208,8 +225,11 @@ def astar(
     # different components: unreachable without searching (A* would exhaust the start's component)
     searching = ok & (s_comp == g_comp) & (s_comp >= 0)
 
-    out = run_search(free, shared, searching, s_idx, g_idx, expansions_per_step=expansions_per_step,
-                     max_iterations=max_iterations, dtype=dtype)
+    if planner == "field":
+        out = field_search(free, searching, s_idx, g_idx, dtype=dtype)
+    else:
+        out = run_search(free, shared, searching, s_idx, g_idx, expansions_per_step=expansions_per_step,
+                         max_iterations=max_iterations, dtype=dtype)
     cost, reached, limited, expansions = out.cost, out.reached, out.limited, out.expansions
 
     found = reached & ok

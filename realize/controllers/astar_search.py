@@ -36,6 +36,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from realize.controllers.grid_cache import grid_cached
+
 __all__ = ["SQRT2", "SearchOutcome", "octile", "run_search"]
 
 SQRT2 = math.sqrt(2.0)
@@ -101,6 +103,36 @@ def _move_bits(free: Tensor) -> Tensor:
     return bits.reshape(b, h * w)
 
 
+def _move_table(free: Tensor) -> Tensor:
+    """free (1, H, W) -> (H*W + 1, 8) int64: flat index reached by each move, H*W (a dummy row and
+    column never read back) where the move is not allowed."""
+    h, w = free.shape[-2:]
+    hw = h * w
+    device = free.device
+    shifts = torch.arange(8, dtype=torch.uint8, device=device)
+    dflat = torch.tensor([dr * w + dc for dr, dc in zip(_DR, _DC)], dtype=torch.int64, device=device)
+    allowed = ((_move_bits(free)[0, :, None] >> shifts) & 1).bool()  # (HW, 8)
+    table = torch.where(allowed, torch.arange(hw, device=device)[:, None] + dflat, hw)
+    return torch.cat([table, torch.full((1, 8), hw, dtype=torch.int64, device=device)], dim=0)
+
+
+def _heuristic(gw: Tensor, h: int, w: int, dtype: torch.dtype) -> Tensor:
+    """(K,) flat goal cells -> (K, H*W + 1) keys' heuristic part (1 + _TIE) * octile(cell, goal).
+
+    Looked up in a table over (|d_row|, |d_col|) built with the same float ops as a direct
+    evaluation, so the values are bit-identical to it; column H*W (the dummy cell) is read as
+    row H, column 0, as ``flat // w``, ``flat % w`` give."""
+    device = gw.device
+    rr = torch.arange(h + 1, device=device, dtype=dtype)
+    cc = torch.arange(w, device=device, dtype=dtype)
+    # key = g + (1 + tie) h: among equal f, pop the node nearer the goal
+    tab = (octile(rr[:, None], cc[None]) * (1.0 + _TIE)).reshape(-1)
+    dr = (torch.arange(h + 1, device=device)[None] - (gw // w)[:, None]).abs()  # (K, H + 1)
+    dc = (torch.arange(w, device=device)[None] - (gw % w)[:, None]).abs()  # (K, W)
+    idx = (dr[:, :, None] * w + dc[:, None, :]).reshape(gw.shape[0], -1)[:, : h * w + 1]
+    return tab[idx]
+
+
 def run_search(
     free: Tensor,
     shared: bool,
@@ -138,15 +170,13 @@ def run_search(
     eps = 1e-9
     # neighbour table: flat index of the cell reached by each of the 8 moves, hw (a dummy
     # column that is never read back) where the move is not allowed
-    bits = _move_bits(free)  # (B, HW) uint8
     shifts = torch.arange(8, dtype=torch.uint8, device=device)
     dflat = torch.tensor([dr * w + dc for dr, dc in zip(_DR, _DC)], dtype=i64, device=device)
     step = torch.tensor(_COST, dtype=dtype, device=device)
-    if shared:
-        allowed = ((bits[0, :, None] >> shifts) & 1).bool()  # (HW, 8)
-        table = torch.where(allowed, torch.arange(hw, device=device)[:, None] + dflat, hw)
-        table = torch.cat([table, torch.full((1, 8), hw, dtype=i64, device=device)], dim=0)
+    if shared:  # the static map of a run: built once (realize.controllers.grid_cache)
+        table = grid_cached("astar_moves", free, _move_table)
     else:
+        bits = _move_bits(free)  # (B, HW) uint8
         bits = torch.cat([bits, torch.zeros_like(bits[:, :1])], dim=1)
     out_parent = torch.full((k_rows, hw + 1), -1, dtype=torch.int32, device=device)
     out_row = torch.arange(k_rows, device=device)  # working row -> row of out_parent
@@ -155,10 +185,7 @@ def run_search(
     f_cur = torch.full_like(g, inf)
     parent = torch.full((k_rows, hw + 1), -1, dtype=torch.int32, device=device)
     sw, gw = s_idx[orig], g_idx[orig]
-    cells = torch.arange(hw + 1, device=device)
-    hh = octile((cells[None] // w - (gw // w)[:, None]).to(dtype),
-                (cells[None] % w - (gw % w)[:, None]).to(dtype))
-    hh = hh * (1.0 + _TIE)  # key = g + (1 + tie) h: among equal f, pop the node nearer the goal
+    hh = _heuristic(gw, h, w, dtype)
     ar = torch.arange(k_rows, device=device)
     g[ar, sw] = 0.0
     f_cur[ar, sw] = hh[ar, sw]

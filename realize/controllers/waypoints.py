@@ -18,7 +18,7 @@ import torch
 from torch import Tensor
 
 from realize.controllers.astar import AStarResult
-from realize.controllers.occupancy import GridSpec, cell_in_grid, cell_to_world, world_to_cell
+from realize.controllers.occupancy import GridSpec, cell_to_world
 
 __all__ = ["Waypoints", "path_to_waypoints"]
 
@@ -47,21 +47,26 @@ def _compact(points: Tensor, keep: Tensor) -> tuple[Tensor, Tensor]:
     return out, lengths
 
 
-def _line_free(free: Tensor, shared: bool, spec: GridSpec, a: Tensor, b: Tensor, rows: Tensor) -> Tensor:
-    """Line of sight between world points a, b (K, 2): samples every quarter cell stay in free cells."""
-    seg = (b - a).norm(dim=-1)
-    n_s = int(torch.ceil(seg.max() / (0.25 * spec.resolution)).item()) + 2 if seg.numel() else 2
+def _samples(spec: GridSpec, seg: Tensor) -> int:
+    """Samples per segment of one shortcut round: every quarter cell of the round's longest segment
+    over the whole batch (so a plan's samples do not depend on which rows are checked)."""
+    return int(torch.ceil(seg.max() / (0.25 * spec.resolution)).item()) + 2 if seg.numel() else 2
+
+
+def _line_free(free_pad: Tensor, shared: bool, spec: GridSpec, a: Tensor, b: Tensor, rows: Tensor,
+               n_s: int) -> Tensor:
+    """Line of sight between finite world points a, b (K, 2): ``n_s`` evenly spaced samples all lie
+    in free cells. free_pad: (B, (H + 2) * (W + 2)) free grid with a blocked one-cell border."""
     t = torch.linspace(0.0, 1.0, n_s, device=a.device, dtype=a.dtype)
     pts = a[:, None] + t[None, :, None] * (b - a)[:, None]
-    cells = world_to_cell(spec, pts)
-    inside = cell_in_grid(spec, cells)
-    r = cells[..., 0].clamp(0, spec.height - 1)
-    c = cells[..., 1].clamp(0, spec.width - 1)
-    if shared:
-        fr = free[0][r, c]
-    else:
-        fr = free[rows[:, None], r, c]
-    return (fr & inside).all(dim=1)
+    # world_to_cell for finite points (its NaN / range guards are identities here); cells off the
+    # grid land on the blocked border of free_pad
+    x0, y0 = spec.origin
+    col = torch.floor((pts[..., 0] - x0) / spec.resolution).to(torch.int64).clamp_(-1, spec.width)
+    row = torch.floor((pts[..., 1] - y0) / spec.resolution).to(torch.int64).clamp_(-1, spec.height)
+    flat = (row + 1) * (spec.width + 2) + (col + 1)
+    fr = free_pad[0][flat] if shared else free_pad[rows[:, None], flat]
+    return fr.all(dim=1)
 
 
 def path_to_waypoints(
@@ -107,14 +112,19 @@ def path_to_waypoints(
     if occupied is not None and l2 > 2:
         free = ~occupied.bool().reshape(-1, spec.height, spec.width)
         shared = free.shape[0] == 1
+        free_pad = torch.nn.functional.pad(free, (1, 1, 1, 1), value=False).reshape(free.shape[0], -1)
         rows = torch.arange(n, device=dev)
         keep = torch.zeros(n, l2, dtype=torch.bool, device=dev)
         keep[:, 0] = ln2 > 0
         anchor = pts[:, 0]
-        for jj in range(2, l2):
+        # positions past every plan's last thinned waypoint change nothing: stop there
+        for jj in range(2, min(l2, int(ln2.max()))):
             inpath = jj < ln2
-            los = _line_free(free, shared, spec, anchor, pts[:, jj], rows)
-            brk = inpath & ~los  # need to keep the previous point
+            n_s = _samples(spec, (pts[:, jj] - anchor).norm(dim=-1))
+            # only plans whose path reaches jj are checked (the others' answer is not used)
+            act = inpath.nonzero().squeeze(1)
+            brk = torch.zeros_like(inpath)
+            brk[act] = ~_line_free(free_pad, shared, spec, anchor[act], pts[act, jj], rows[act], n_s)
             keep[:, jj - 1] = keep[:, jj - 1] | brk
             anchor = torch.where(brk[:, None], pts[:, jj - 1], anchor)
         last = (ln2 - 1).clamp(min=0)

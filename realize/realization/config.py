@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from realize.config import Settings, setting
+from realize.controllers.astar import PLANNERS
 from realize.controllers.pid import PIDConfig
 from realize.controllers.whole_body import WholeBodyConfig
 
@@ -25,6 +26,7 @@ class AStarConfig(Settings):
 
     resolution: float = setting(0.05, gt=0)  # m per grid cell
     padding: float = setting(0.2, ge=0)  # m around every obstacle (paper: 20 cm), on top of the robot radius
+    planner: str = setting("astar", choices=PLANNERS)  # astar (batched A*) or field (cached Dijkstra fields per start cell: same costs, other equal-cost paths)
 
 
 @dataclass

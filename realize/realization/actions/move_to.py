@@ -67,7 +67,7 @@ class MoveTo(Template):
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
         start = ctx.base[rows, BASE_XY]
         goal = params[:, :2].to(start)
-        res = astar_world(ctx.occupancy, ctx.grid, start, goal)
+        res = astar_world(ctx.occupancy, ctx.grid, start, goal, planner=ctx.cfg.astar.planner)
         wps = path_to_waypoints(res, ctx.grid, occupied=ctx.occupancy, start_xy=start, goal_xy=goal)
         pts, lens = wps.points.to(start), wps.lengths
         # append the parameter itself as the final waypoint
