@@ -26,7 +26,7 @@ class AStarConfig(Settings):
 
     resolution: float = setting(0.05, gt=0)  # m per grid cell
     padding: float = setting(0.2, ge=0)  # m around every obstacle (paper: 20 cm), on top of the robot radius
-    planner: str = setting("astar", choices=PLANNERS)  # astar (batched A*) or field (cached Dijkstra fields per start cell: same costs, other equal-cost paths)
+    planner: str = setting("field", choices=PLANNERS)  # field (cached Dijkstra fields per start cell; a path does not depend on its batch) or astar (batched A*, same costs, other equal-cost paths)
 
 
 @dataclass
