@@ -3,7 +3,7 @@
 Runs ``python -m realize experiment=seed_paper seed=S`` for each seed, one at a time, in a child
 process (so wall time includes start-up, as a user sees it), and appends a row to ``--out`` as
 soon as a run ends: seed, wall_s, peak_rss_mb (the child's maximum resident set), feasible,
-success_iter0, success_last, best_cost, best_cost_iter0, commit. With ``--reference CSV`` it
+success_iter0, success_last, best_cost, best_cost_iter0, commit, note. With ``--reference CSV`` it
 prints, for the seeds both files hold, the wall-time ratio and the fidelity checks of the
 throughput issue (feasible in every run, iteration-0 success 3-30 %, last-iteration success
 >= 85 % mean, mean best cost no more than 2 % above the reference's).
@@ -34,7 +34,7 @@ sys.path.insert(0, str(REPO))
 from realize.run_dir.directory import RunDir  # noqa: E402
 
 FIELDS = ["seed", "wall_s", "peak_rss_mb", "feasible", "success_iter0", "success_last",
-          "best_cost", "best_cost_iter0", "commit"]
+          "best_cost", "best_cost_iter0", "commit", "note"]
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -77,13 +77,22 @@ def run_seed(seed: int, code: Path, run_dir: Path, extra: list[str]) -> dict[str
     return {"seed": seed, "wall_s": round(wall, 1), "peak_rss_mb": round(usage.ru_maxrss / 1024.0),
             "feasible": int(bool(doc.feasible)), "success_iter0": round(float(success[0]), 4),
             "success_last": round(float(success[-1]), 4), "best_cost": doc.best_cost,
-            "best_cost_iter0": float(per_iter[0]), "commit": commit_of(code)}
+            "best_cost_iter0": float(per_iter[0]), "commit": commit_of(code), "note": ""}
 
 
 def read_rows(path: Path) -> dict[int, dict[str, float]]:
+    """Numeric columns per seed; text columns (commit, note) and empty cells are left out."""
+    rows: dict[int, dict[str, float]] = {}
     with open(path) as f:
-        return {int(r["seed"]): {k: float(v) for k, v in r.items() if k not in ("commit",)}
-                for r in csv.DictReader(f)}
+        for r in csv.DictReader(f):
+            vals: dict[str, float] = {}
+            for k, v in r.items():
+                try:
+                    vals[k] = float(v)
+                except (TypeError, ValueError):
+                    continue
+            rows[int(r["seed"])] = vals
+    return rows
 
 
 def summary(rows: dict[int, dict[str, float]], name: str) -> None:
@@ -93,8 +102,9 @@ def summary(rows: dict[int, dict[str, float]], name: str) -> None:
         return
     col = lambda k: [r[k] for r in rows.values()]  # noqa: E731
     mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
+    rss = [r["peak_rss_mb"] for r in rows.values() if "peak_rss_mb" in r]
     print(f"{name}: {n} seeds, wall {mean(col('wall_s')):.1f} s mean ({min(col('wall_s')):.1f}-"
-          f"{max(col('wall_s')):.1f}), peak rss {max(col('peak_rss_mb')):.0f} MB, feasible "
+          f"{max(col('wall_s')):.1f}), peak rss {max(rss) if rss else float('nan'):.0f} MB, feasible "
           f"{int(sum(col('feasible')))}/{n}, success iter0 {min(col('success_iter0')):.3f}-"
           f"{max(col('success_iter0')):.3f}, last {mean(col('success_last')):.3f} mean, best cost "
           f"{mean(col('best_cost')):.1f} mean")
@@ -130,6 +140,7 @@ def main() -> None:
     ap.add_argument("--code", type=Path, default=REPO, help="checkout whose realize to run (default: this one)")
     ap.add_argument("--reference", type=Path, help="reference CSV to compare with")
     ap.add_argument("--summary", type=Path, help="only print the summary of this CSV")
+    ap.add_argument("--note", default="", help="text for the note column (e.g. what else ran)")
     ap.add_argument("overrides", nargs="*", help="extra realize overrides")
     args = ap.parse_args()
     if args.summary:
@@ -139,7 +150,7 @@ def main() -> None:
         ap.error("--out is required unless --summary is given")
     done = read_rows(args.out) if args.out.exists() else {}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    new_file = not args.out.exists()
+    new_file = not args.out.exists() or args.out.stat().st_size == 0
     with open(args.out, "a", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         if new_file:
@@ -149,6 +160,7 @@ def main() -> None:
                 continue
             with tempfile.TemporaryDirectory(prefix=f"seed{seed}-") as tmp:
                 row = run_seed(seed, args.code.resolve(), Path(tmp) / "run", args.overrides)
+            row["note"] = args.note
             w.writerow(row)
             f.flush()
             print(", ".join(f"{k}={v}" for k, v in row.items()), flush=True)

@@ -33,7 +33,7 @@ class SimSettings(Settings):
     control_freq: int = setting(20, ge=1)
     solver_position_iterations: int = setting(10, ge=1)
     solver_velocity_iterations: int = setting(1, ge=0)
-    solver_position_iterations_robot: int | None = setting(4, ge=1)  # robots' own count (None: as above); a robot touching a cube gets the cube's count
+    solver_position_iterations_robot: int | None = setting(None, ge=1)  # robots' own count (None: as above); breaks copy independence (a woken cube in one copy changes the others' robots), so off by default
     lean_robot: bool = True  # simulate Fetch without the links nothing touches (envs.fetch_omni)
     cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"
