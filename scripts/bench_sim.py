@@ -62,8 +62,9 @@ def bench_naive(plans: int, seconds: float, sim: SimSettings) -> float:
     env = gym.make(
         "RealizePickPlace-v1", obs_mode="state", sim_backend="physx_cpu", sim_freq=sim.sim_freq,
         control_freq=sim.control_freq, solver_position_iterations=sim.solver_position_iterations,
-        solver_velocity_iterations=sim.solver_velocity_iterations,
-    )
+        solver_velocity_iterations=sim.solver_velocity_iterations, lean_robot=sim.lean_robot,
+        robot_solver_position_iterations=sim.solver_position_iterations_robot,
+    )  # the same robot model and solver settings as the batched scene
     rest_arm = torch.tensor(REST_QPOS)[[3, 5, 7, 8, 9, 10, 11, 12]]
     steps = int(seconds * sim.control_freq)
     t0 = time.perf_counter()
