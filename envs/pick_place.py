@@ -132,6 +132,8 @@ class RealizePickPlaceEnv(BaseEnv):
         robot = "fetch_omni_lean" if lean_robot else "fetch_omni"  # lean: no links nothing touches
         self.robot_solver_position_iterations = robot_solver_position_iterations
         uids = robot if n_tiles == 1 else tuple([robot] * n_tiles)
+        if n_tiles > 1:  # the tiled copies' robots are supported as a whole (no warning listing N names)
+            self.SUPPORTED_ROBOTS = [*type(self).SUPPORTED_ROBOTS, uids]
         kwargs.setdefault("control_mode", "pd_joint_pos_base_vel")
         super().__init__(*args, robot_uids=uids, **kwargs)
 
