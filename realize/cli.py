@@ -23,14 +23,15 @@ from hydra.errors import CompactHydraException
 from omegaconf import DictConfig
 
 from realize.config import ConfigError
-from realize.guard import EXIT_CONFIG
+from realize.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
 from realize.run import run
 from realize.run_dir.names import CHECKPOINT_FILE
+from realize.workers.errors import WorkerFailed
 
 __all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
 
-CONFIG_GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "experiment")
+CONFIG_GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers", "experiment")
 
 
 class SweepJobConfigError(CompactHydraException):
@@ -134,6 +135,11 @@ def _hydra_task(cfg: DictConfig) -> Any:
             raise SweepJobConfigError(e) from None
         print(f"error: {e}", file=sys.stderr, flush=True)
         sys.exit(EXIT_CONFIG)
+    except WorkerFailed as e:  # the run's files (error.txt included) are written; no traceback here
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        if multirun:
+            raise
+        sys.exit(EXIT_FAILED)
     if outcome.interrupted:
         if multirun:
             raise KeyboardInterrupt  # stop the sweep, as a user's Ctrl-C means

@@ -27,11 +27,12 @@ from typing import Any
 
 from realize.run_dir.jsonio import atomic_write_text
 
-__all__ = ["RunInterrupted", "RunSignals", "RunGuard", "shielded", "EXIT_CONFIG", "EXIT_SIGNAL"]
+__all__ = ["RunInterrupted", "RunSignals", "RunGuard", "shielded", "EXIT_CONFIG", "EXIT_FAILED", "EXIT_SIGNAL"]
 
 log = logging.getLogger("realize")
 
 EXIT_CONFIG = 2
+EXIT_FAILED = 1  # a run that failed (error.txt written)
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
 

@@ -3,11 +3,11 @@
 What it does: ``search_loop`` drives any ``realize.searcher.Searcher`` (one CE search, or
 successive halving over candidate plans; it does not know which) to its end:
 
-    open the sinks -> build the scene and realizers -> while searcher.ask() gives a batch:
+    open the sinks -> open the rollout workers -> while searcher.ask() gives a batch:
     rollout on the batch's plan -> searcher.tell -> sinks.on_iteration -> after_iteration hook
 
 inside a ``realize.guard.RunGuard`` (signals -> interrupted status, failures -> error.txt, the
-sinks' final ``close`` shielded from a second Ctrl-C, then the scene closed). It returns the
+sinks' final ``close`` shielded from a second Ctrl-C, then the workers closed). It returns the
 guard (``status``, ``exit_code``) and the count of iterations every sink has seen.
 What it doesn't: choose the searcher, the sinks or the files (``realize.run``), or sample,
 rank and simulate itself.
@@ -26,8 +26,8 @@ from realize.sinks.base import Iteration, SinkSet
 
 __all__ = ["search_loop", "LoopEnd"]
 
-# () -> (scene, realizers): builds the batched scene and one realizer per candidate plan
-OpenScene = Callable[[], "tuple[Any, list[Any]]"]
+# () -> the run's rollout workers (realize.workers.pool.RolloutPool): rollout(candidate, Z, record), close()
+OpenPool = Callable[[], Any]
 
 
 class LoopEnd:
@@ -38,32 +38,31 @@ class LoopEnd:
         self.status, self.exit_code, self.iterations = status, exit_code, iterations
 
 
-def search_loop(searcher: Searcher, sinks: SinkSet, open_scene: OpenScene, *, error_file: Path | None = None,
+def search_loop(searcher: Searcher, sinks: SinkSet, open_pool: OpenPool, *, error_file: Path | None = None,
                 after_iteration: Callable[[int], None] | None = None) -> LoopEnd:
     """Run ``searcher`` to its end (see the module docstring). ``after_iteration(i)`` is called
     once iteration ``i`` (counted over the whole run) has passed every sink; a failure other
     than an interrupt is re-raised after the sinks closed with status ``failed``."""
     done = [searcher.iterations_done]
-    scene: list[Any] = []
+    pools: list[Any] = []
 
-    def close_scene() -> None:
-        for s in scene:
+    def close_pool() -> None:
+        for p in pools:
             try:
-                s.close()
+                p.close()
             except Exception:  # pragma: no cover
                 pass
 
-    guard = RunGuard(lambda: done[0], sinks.close, close_scene, error_file)
+    guard = RunGuard(lambda: done[0], sinks.close, close_pool, error_file)
     with guard:
         with RunSignals():
             sinks.open()
-            sc, realizers = open_scene()
-            scene.append(sc)
+            pool = open_pool()
+            pools.append(pool)
             record = sinks.wants_trajectories
             while (batch := searcher.ask()) is not None:
-                realizer = realizers[0 if batch.candidate is None else batch.candidate]
                 t0 = time.perf_counter()
-                res = realizer.rollout(batch.Z, record=record)
+                res = pool.rollout(batch.candidate, batch.Z, record=record)
                 t_eval = time.perf_counter() - t0
                 rec = searcher.tell(res.to_eval(), eval_time=t_eval)
                 it = Iteration(done[0], batch, rec, res, rec.summary(batch.candidate), searcher.report(),

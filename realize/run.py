@@ -37,13 +37,13 @@ from realize.candidates import CandidateSpec, SuccessiveHalving
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.config import ConfigError
 from realize.loop import search_loop
-from realize.realizers import open_realization
+from realize.workers.pool import RolloutPool, open_pool
 from realize.run_config import RunSpec, build_run_spec
 from realize.run_dir.build import RunInfo, failure_doc, result_doc
 from realize.run_dir.checkpoint import Checkpoint, CheckpointError, load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
-from realize.run_dir.names import CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, RESULT_FILE, candidate_file
+from realize.run_dir.names import CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, RESULT_FILE, WORKER_LOG_DIR, candidate_file
 from realize.run_dir.result_doc import ResultDoc
 from realize.run_dir.summaries import IterationSummary
 from realize.searcher import SearchReport, Searcher
@@ -215,20 +215,23 @@ class _Assembly:
                                   spec.logging.progress))
         return sinks
 
-    def _open_scene(self) -> tuple[Any, list[Any]]:
+    def _open_pool(self) -> RolloutPool:
         spec, t0 = self.spec, time.perf_counter()
-        scene, realizers = open_realization(spec, self.tasks)
-        self.info.backend, self.info.n_envs, self.info.setup_time_s = scene.backend, scene.n_envs, time.perf_counter() - t0
+        pool = open_pool(spec, self.tasks, log_dir=self.run_dir / WORKER_LOG_DIR)
+        self.info.backend, self.info.n_envs, self.info.setup_time_s = pool.backend, pool.n_envs, time.perf_counter() - t0
+        self.info.workers = pool.n_workers
+        if pool.n_workers > 1:
+            log.info("%d rollout workers (%s; logs in %s)", pool.n_workers, pool.kind, self.run_dir / WORKER_LOG_DIR)
         if spec.halving:
             assert spec.budget is not None
             for i, t in enumerate(self.tasks):
                 log.info("candidate %d: %s", i, t.describe())
             log.info("%d candidate(s), halving budget %s; %d copies on %s (setup %.1f s)", len(self.tasks),
-                     spec.budget.to_dict(), scene.n_envs, scene.backend, self.info.setup_time_s)
+                     spec.budget.to_dict(), pool.n_envs, pool.backend, self.info.setup_time_s)
         else:
-            log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), scene.n_envs, scene.backend,
+            log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), pool.n_envs, pool.backend,
                      self.info.setup_time_s)
-        return scene, realizers
+        return pool
 
     def execute(self, after_iteration: Callable[[int], None] | None) -> RunOutcome:
         spec, run_dir = self.spec, self.run_dir
@@ -242,7 +245,7 @@ class _Assembly:
             if spec.halving and len(self.tasks) < spec.planner.top_k:
                 log.info("the planner returned %d distinct plan(s) for top_k = %d", len(self.tasks),
                          spec.planner.top_k)
-            end = search_loop(self.searcher, SinkSet(self.sinks), self._open_scene, error_file=run_dir / ERROR_FILE,
+            end = search_loop(self.searcher, SinkSet(self.sinks), self._open_pool, error_file=run_dir / ERROR_FILE,
                               after_iteration=after_iteration)
             status, exit_code, n_done = end.status, end.exit_code, end.iterations
         report = self.result.report

@@ -1,7 +1,7 @@
 """The edge between Hydra and the library: a whole run config, checked once into a ``RunSpec``.
 
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
-the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging`` and the top-level keys
+the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers`` and the top-level keys
 ``seed``, ``device``, ``resume``, ``task_file``) and returns a ``RunSpec`` of validated objects
 (``TaskSpec``, ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
@@ -30,6 +30,7 @@ from realize.budget import HalvingBudget, plan_budget
 from realize.ce.config import CEConfig
 from realize.config import ConfigError, Settings, as_mapping, check_unknown, setting
 from realize.task_plans import PlannerSettings, build_task_candidates, check_halving_budget, load_task_file
+from realize.workers.settings import WorkersSettings, worker_count
 
 if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` starts fast
     from realize.geometry import GeometryCfg, SceneGeometry
@@ -38,7 +39,7 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
 
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
-GROUPS = ("task", "scene", "sim", "controller", "ce", "logging")
+GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file")
 DEVICES = ("auto", "cpu", "cuda")
 _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
@@ -102,6 +103,7 @@ class RunSpec:
     config: dict[str, Any]
     placement: Placement
     planner: PlannerSettings = field(default_factory=PlannerSettings)
+    workers: WorkersSettings = field(default_factory=WorkersSettings)  # who simulates (never changes the numbers)
     # the candidate plans' tasks ([task] unless planner.top_k > 1) and their halving budget
     candidates: list[TaskSpec] = field(default_factory=list)
     budget: HalvingBudget | None = None
@@ -195,6 +197,11 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     planner = PlannerSettings.from_mapping(task_d.get("planner"), f"{source}:planner")
     check_halving_budget(planner, ce, source)  # before the planner runs
     task, candidates = build_task_candidates(task_d, geometry, source, planner)
+    workers = WorkersSettings.from_mapping(d.get("workers"))
+    from realize.workers.blocks import shard_rows
+
+    n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if placement.backend == "cpu" else ce.n_envs))
+    worker_count(workers, n_shards, placement.backend, cores=n_shards)  # refuses what cannot work
     budget = None
     if planner.top_k > 1:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)
@@ -209,6 +216,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         rollout=_read_rollout(d.get("controller")),
         ce=ce,
         logging=LoggingSettings.from_mapping(d.get("logging")),
+        workers=workers,
         config=dict(d),
         placement=placement,
         planner=planner,

@@ -56,13 +56,14 @@ class TaskInfo(Protocol):
 class RunInfo:
     """How a run was set up: ``segments`` (how often it started: 1, +1 per resume),
     ``resumed_from_iteration`` (None: not resumed), the scene's ``backend`` and copy count
-    ``n_envs``, and ``setup_time_s`` (None until the scene is built)."""
+    ``n_envs``, ``setup_time_s`` (None until the scene is built) and the rollout ``workers``."""
 
     segments: int = 1
     resumed_from_iteration: int | None = None
     backend: str | None = None
     n_envs: int | None = None
     setup_time_s: float | None = None
+    workers: int = 1  # rollout workers (realize.workers); never changes the numbers
 
 
 def package_versions() -> dict[str, str | None]:
@@ -137,6 +138,7 @@ def result_doc(
         backend=info.backend,
         n_envs=info.n_envs,
         setup_time_s=math.nan if info.setup_time_s is None else info.setup_time_s,
+        workers=info.workers,
         halving=halving,
     )
 

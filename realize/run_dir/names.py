@@ -27,6 +27,7 @@ RESULT_FILE = "result.json"
 HISTORY_FILE = "history.npz"
 CHECKPOINT_FILE = "checkpoint.json"
 ERROR_FILE = "error.txt"
+WORKER_LOG_DIR = "workers"  # worker-K.log of each rollout worker process
 SCENE_FILE = "scene.json"
 TRAJ_PATTERN = "trajectories_iter{k}.npz"
 JOB_STATUS_FILE = "job_status.json"

@@ -18,7 +18,7 @@ JSON keys (the ones readers rely on): ``status`` (running | done | interrupted |
 ``elite_per_iter`` ([{n_elite, refit, cost_min, cost_mean, cost_max}]), ``iteration_time_s``,
 ``final_mean``/``final_std``/``final_weights``, ``wall_time_s``, ``seed``, ``task`` ({name,
 source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments``,
-``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``;
+``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``;
 top-k runs add ``top_k``, ``n_candidates``, ``leader``, ``winner``, ``budget``,
 ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
@@ -184,6 +184,7 @@ class ResultDoc:
     backend: str | None = None
     n_envs: int | None = None
     setup_time_s: float = NAN
+    workers: int = 1
     halving: HalvingDoc | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -231,6 +232,7 @@ class ResultDoc:
             "backend": self.backend,
             "n_envs": self.n_envs,
             "setup_time_s": encode_float(self.setup_time_s),
+            "workers": self.workers,
         }
         if h is not None:
             doc.update(h.to_json())
@@ -282,6 +284,7 @@ class ResultDoc:
             backend=d.get("backend"),
             n_envs=_opt_int(d.get("n_envs")),
             setup_time_s=decode_float(d.get("setup_time_s")),
+            workers=int(d.get("workers") or 1),
             halving=HalvingDoc.from_json(d) if d.get("candidates") is not None else None,
             extra={k: v for k, v in d.items() if k not in known},
         )

@@ -38,6 +38,7 @@ class SimSettings(Settings):
     cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"
     torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
+    shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.workers.blocks)
 
     def check(self, where: str) -> None:
         if self.sim_freq % self.control_freq:

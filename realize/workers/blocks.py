@@ -1,0 +1,102 @@
+"""A run's copies as shards (one PhysX scene each), shards grouped per worker, results joined.
+
+Why shards: PhysX's CPU solver does not keep the copies of one scene apart bit for bit. Once a
+gripper touches its cube, a copy's result moves by ~1e-6 m when other copies of the same scene
+run other plans (measured: rows 8-15 of a 16-copy scene, rows 0-7 changed, first difference at
+the grasp, control step 126), so copies split over two scenes would not reproduce one scene.
+The copies are therefore cut into shards of at most ``sim.shard_rows`` copies, fixed by the
+config and never by the machine or the worker count; a worker holds whole shards, and any
+number of workers gives the same numbers as one process.
+
+What it does: ``RowBlock`` (rows ``first .. stop - 1`` of a batch of ``total``), ``shard_rows``
+(the shards of ``n`` copies: ``ceil(n / rows)`` contiguous blocks, sizes differing by at most
+one), ``group_shards`` (consecutive shards per worker), ``RowBlock.rows_of`` (the rows of an
+``M``-row batch in a block) and ``join_results`` (results of consecutive blocks as one, in row
+order: per-plan tensors concatenated, shorter trajectories padded with their last frame).
+What it doesn't: run anything (``realize.workers.pool``, ``.process``, ``.ray_pool``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from realize.realization.result import RolloutResult
+
+__all__ = ["RowBlock", "split_rows", "shard_rows", "group_shards", "join_results"]
+
+
+@dataclass(frozen=True)
+class RowBlock:
+    """Copies ``first .. stop - 1`` of a scene of ``total`` copies (one worker's scene)."""
+
+    first: int
+    stop: int
+    total: int
+
+    @property
+    def size(self) -> int:
+        return self.stop - self.first
+
+    def rows_of(self, m: int) -> slice:
+        """The rows of an ``m``-row batch (``m <= total``) in this block (maybe none)."""
+        return slice(min(self.first, m), min(self.stop, m))
+
+    def describe(self) -> str:
+        return f"rows {self.first}-{self.stop - 1} of {self.total}"
+
+
+def split_rows(total: int, n: int) -> list[RowBlock]:
+    """``n`` contiguous blocks covering ``0 .. total - 1``, sizes differing by at most one."""
+    if not 1 <= n <= total:
+        raise ValueError(f"cannot split {total} rows into {n} blocks (need 1 <= n <= rows)")
+    base, extra = divmod(total, n)
+    blocks, first = [], 0
+    for k in range(n):
+        stop = first + base + (1 if k < extra else 0)
+        blocks.append(RowBlock(first, stop, total))
+        first = stop
+    return blocks
+
+
+def shard_rows(n: int, rows: int) -> list[RowBlock]:
+    """The shards of ``n`` copies with at most ``rows`` copies each."""
+    return split_rows(n, -(-n // rows))
+
+
+def group_shards(shards: Sequence[RowBlock], n_workers: int) -> list[list[RowBlock]]:
+    """``n_workers`` groups of consecutive shards, counts differing by at most one."""
+    groups = split_rows(len(shards), n_workers)
+    return [list(shards[g.first:g.stop]) for g in groups]
+
+
+def _pad_frames(t: Tensor | None, frames: int) -> Tensor | None:
+    """(M, T, k) -> (M, frames, k), the last frame repeated (a finished block holds still)."""
+    if t is None or t.shape[1] == frames:
+        return t
+    return torch.cat([t, t[:, -1:].expand(-1, frames - t.shape[1], -1)], dim=1)
+
+
+def join_results(parts: Sequence[RolloutResult]) -> RolloutResult:
+    """The results of consecutive row blocks as one result, in row order."""
+    if len(parts) == 1:
+        return parts[0]
+    cat = lambda name: torch.cat([getattr(p, name) for p in parts])  # noqa: E731
+    res = RolloutResult(
+        cost=cat("cost"), feasible=cat("feasible"), action_success=cat("action_success"), goal=cat("goal"),
+        steps=cat("steps"), progress=cat("progress"), distance=cat("distance"),
+        failure=[f for p in parts for f in p.failure],
+        wall_time_s=max(p.wall_time_s for p in parts), sim_steps=max(p.sim_steps for p in parts),
+        horizon_cost=parts[0].horizon_cost,
+    )
+    recorded = [p for p in parts if p.traj_t is not None]
+    if len(recorded) == len(parts):
+        longest = max(recorded, key=lambda p: len(p.traj_t))
+        frames = len(longest.traj_t)
+        res.traj_t = longest.traj_t
+        for name in ("traj_base", "traj_ee", "traj_cube"):
+            setattr(res, name, torch.cat([_pad_frames(getattr(p, name), frames) for p in parts]))
+    return res

@@ -1,0 +1,103 @@
+"""Open the rollout workers of a run: the one call the search loop and scripts make.
+
+What it does: ``RolloutPool`` is what the loop talks to (``rollout(candidate, Z, record)``,
+``close``, ``n_envs``, ``backend``, ``n_workers``); ``open_pool(spec, tasks, log_dir)`` cuts the
+run's copies into shards (``sim.shard_rows``, CPU backend; one scene on GPU), decides the
+worker count (``workers``) and opens the shards in this process (``InProcessPool``, one worker)
+or in worker processes (``realize.workers.process``) or Ray actors (``realize.workers.ray_pool``).
+What it doesn't: simulate (``realize.workers.worker``), or know the search.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
+
+from torch import Tensor
+
+from realize.realization.result import RolloutResult
+from realize.workers.blocks import RowBlock, group_shards, shard_rows
+from realize.workers.settings import physx_threads, worker_count
+from realize.workers.worker import ShardWorker
+
+if TYPE_CHECKING:
+    from realize.run_config import RunSpec
+    from realize.task import TaskSpec
+
+__all__ = ["RolloutPool", "InProcessPool", "open_pool", "run_shards"]
+
+log = logging.getLogger("realize")
+
+
+class RolloutPool(Protocol):
+    """Rolls out batches of a run's plans on its copies, wherever they are simulated."""
+
+    n_envs: int
+    backend: str
+    n_workers: int
+    kind: str
+    setup_time_s: float
+
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult: ...
+
+    def close(self) -> None: ...
+
+
+class InProcessPool:
+    """Every shard in this process (``workers.n = 1``)."""
+
+    kind = "in-process"
+    n_workers = 1
+
+    def __init__(self, spec: RunSpec, tasks: Sequence[TaskSpec], shards: Sequence[RowBlock],
+                 physx_threads: int | None = None) -> None:
+        self.worker = ShardWorker(spec, tasks, shards, physx_threads)
+        self.n_envs, self.backend, self.setup_time_s = self.worker.stop, self.worker.backend, self.worker.setup_time_s
+
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
+        if Z.shape[0] > self.n_envs:
+            raise ValueError(f"{Z.shape[0]} samples but the scene has only {self.n_envs} copies (ce.n_envs)")
+        return self.worker.rollout(candidate, Z, record)
+
+    def close(self) -> None:
+        self.worker.close()
+
+    def __enter__(self) -> InProcessPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def run_shards(spec: RunSpec, n_envs: int | None = None) -> list[RowBlock]:
+    """The shards of a run's copies: ``sim.shard_rows`` each on the CPU backend, one otherwise."""
+    n = spec.ce.n_envs if n_envs is None else n_envs
+    return shard_rows(n, spec.sim.shard_rows if spec.placement.backend == "cpu" else n)
+
+
+def open_pool(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None, *, log_dir: Path | None = None,
+              n_envs: int | None = None) -> RolloutPool:
+    """The rollout workers of ``spec`` (``ce.n_envs`` or ``n_envs`` copies) for ``tasks``
+    (default ``[spec.task]``); worker logs go to ``log_dir`` (processes only)."""
+    from realize.scene.cpu_tiled import available_cores
+
+    tasks = [spec.task] if tasks is None else list(tasks)
+    shards = run_shards(spec, n_envs)
+    ws = spec.workers
+    if ws.backend == "ray" and spec.placement.backend == "cpu" and ws.n != 1:
+        from realize.workers.ray_pool import RayPool, ray_cores
+
+        cores = ray_cores(ws.ray_address)
+        n = worker_count(ws, len(shards), spec.placement.backend, cores)
+        if n > 1:
+            return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(ws, n, 1))
+    cores = available_cores()
+    n = worker_count(ws, len(shards), spec.placement.backend, cores)
+    if n == 1:
+        return InProcessPool(spec, tasks, shards)
+    from realize.workers.process import ProcessPool
+
+    return ProcessPool(spec, tasks, group_shards(shards, n), physx_threads=physx_threads(ws, n, cores),
+                       log_dir=log_dir, start_timeout_s=ws.start_timeout_s)

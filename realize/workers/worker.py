@@ -1,0 +1,86 @@
+"""What one rollout worker holds and does, whatever runs it (this process, a local process, a
+Ray actor): the scenes of consecutive shards of a run's copies.
+
+What it does: ``ShardWorker`` builds, once, one batched scene and one plan realizer per task
+for each of its shards (``realize.workers.blocks``), with the given PhysX thread count;
+``rollout`` realizes a batch's rows that fall in its shards, shard after shard, and returns one
+``RolloutResult`` on the CPU. A shard's scene and controllers see only that shard's rows, so a
+row's numbers are the same in whichever worker its shard sits.
+What it doesn't: talk to the search or to other workers (``realize.workers.process``,
+``realize.workers.ray_pool``), or choose the shards (``realize.workers.blocks``).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from torch import Tensor
+
+from realize.realization.result import RolloutResult
+from realize.workers.blocks import RowBlock, join_results
+
+if TYPE_CHECKING:
+    from realize.run_config import RunSpec
+    from realize.task import TaskSpec
+
+__all__ = ["ShardWorker", "worker_spec"]
+
+
+def worker_spec(spec: RunSpec, physx_threads: int | None) -> RunSpec:
+    """``spec`` with ``physx_threads`` PhysX threads per scene (None, or ``sim.cpu_workers``
+    set by the user: as it is)."""
+    if physx_threads is None or spec.sim.cpu_workers is not None:
+        return spec
+    out = copy.copy(spec)
+    out.sim = copy.copy(spec.sim)
+    out.sim.cpu_workers = physx_threads
+    return out
+
+
+class ShardWorker:
+    """The scenes of consecutive shards and a realizer per task on each (module docstring)."""
+
+    def __init__(self, spec: RunSpec, tasks: Sequence[TaskSpec], shards: Sequence[RowBlock],
+                 physx_threads: int | None = None) -> None:
+        from realize.realizers import open_realization
+
+        t0 = time.perf_counter()
+        self.shards = list(shards)
+        self.first, self.stop = self.shards[0].first, self.shards[-1].stop
+        wspec = worker_spec(spec, physx_threads)
+        self.scenes: list[Any] = []
+        self.realizers: list[list[Any]] = []
+        try:
+            for shard in self.shards:
+                scene, realizers = open_realization(wspec, tasks, n_envs=shard.size)
+                self.scenes.append(scene)
+                self.realizers.append(realizers)
+        except BaseException:
+            self.close()
+            raise
+        self.backend = self.scenes[0].backend
+        self.setup_time_s = time.perf_counter() - t0
+
+    def describe(self) -> str:
+        return f"rows {self.first}-{self.stop - 1} ({len(self.shards)} shard(s))"
+
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
+        """Realize ``Z``: rows ``first ..`` of a batch (as many as fall in these shards)."""
+        t0 = time.perf_counter()
+        parts = []
+        for shard, realizers in zip(self.shards, self.realizers):
+            rows = shard.rows_of(self.first + Z.shape[0])
+            if rows.start < rows.stop:
+                Zs = Z[rows.start - self.first:rows.stop - self.first]
+                parts.append(realizers[0 if candidate is None else candidate].rollout(Zs, record=record))
+        res = join_results(parts)
+        res.wall_time_s = time.perf_counter() - t0
+        return res
+
+    def close(self) -> None:
+        for scene in self.scenes:
+            scene.close()
+        self.scenes = []
