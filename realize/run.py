@@ -58,7 +58,7 @@ __all__ = ["run", "RunOutcome", "RESUME_ALLOWED_PREFIXES"]
 log = logging.getLogger("realize")
 
 # overrides a resumed run accepts (everything else comes from the run's saved config)
-RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "hydra.")
+RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "workers.", "hydra.")
 
 
 @dataclass
@@ -93,17 +93,20 @@ def plain_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequence[str]) -> dict[str, Any]:
-    """The config a resumed run uses: the saved one, with the current ``logging`` group."""
+    """The config a resumed run uses: the saved one, with the current ``logging`` and ``workers``
+    groups (neither changes a run's numbers: a run may go on with other workers, e.g. on
+    another machine)."""
     extra = [o for o in overrides if not str(o).lstrip("+~").startswith(RESUME_ALLOWED_PREFIXES)]
     if extra:
         raise ConfigError(
             f"resume: a resumed run uses its saved config; drop the override(s) {extra} "
-            "(only logging.* may change)"
+            "(only logging.* and workers.* may change)"
         )
     cfg = dict(ckpt.config)
     cfg["resume"] = current.get("resume")
-    if "logging" in current:
-        cfg["logging"] = current["logging"]
+    for group in ("logging", "workers"):
+        if group in current:
+            cfg[group] = current[group]
     return cfg
 
 

@@ -198,10 +198,12 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     check_halving_budget(planner, ce, source)  # before the planner runs
     task, candidates = build_task_candidates(task_d, geometry, source, planner)
     workers = WorkersSettings.from_mapping(d.get("workers"))
+    from realize.scene.backends import shardable
     from realize.workers.blocks import shard_rows
 
-    n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if placement.backend == "cpu" else ce.n_envs))
-    worker_count(workers, n_shards, placement.backend, cores=n_shards)  # refuses what cannot work
+    split = shardable(placement.backend)
+    n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if split else ce.n_envs))
+    worker_count(workers, n_shards, split, cores=n_shards)  # refuses what cannot work
     budget = None
     if planner.top_k > 1:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)

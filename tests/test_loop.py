@@ -44,8 +44,16 @@ class FakeRealizer:
         return FakeRollout((Z**2).sum(1), torch.ones(Z.shape[0], dtype=torch.bool))
 
 
-class FakeScene:
+class FakePool:
+    """Rollout workers as the loop sees them: one realizer per candidate plan."""
+
     closed = False
+
+    def __init__(self, realizers: list[FakeRealizer]) -> None:
+        self.realizers = realizers
+
+    def rollout(self, candidate: int | None, Z: torch.Tensor, record: bool = False) -> FakeRollout:
+        return self.realizers[0 if candidate is None else candidate].rollout(Z, record=record)
 
     def close(self) -> None:
         self.closed = True
@@ -72,8 +80,8 @@ class Recorder:
 
 
 def scene_of(n_plans: int, calls: list):
-    scene = FakeScene()
-    return scene, (lambda: (scene, [FakeRealizer(f"r{i}", calls) for i in range(n_plans)]))
+    pool = FakePool([FakeRealizer(f"r{i}", calls) for i in range(n_plans)])
+    return pool, (lambda: pool)
 
 
 def test_both_searchers_implement_the_protocol() -> None:

@@ -20,7 +20,7 @@ from realize.scene.gpu import GpuBackend
 from realize.scene.physics import PhysicsBackend
 from realize.scene.settings import EnvOptions, SimSettings
 
-__all__ = ["resolve_backend", "open_backend"]
+__all__ = ["resolve_backend", "open_backend", "shardable"]
 
 
 def resolve_backend(backend: str, where: str = "sim.backend") -> str:
@@ -30,6 +30,13 @@ def resolve_backend(backend: str, where: str = "sim.backend") -> str:
     if backend == "gpu" and not torch.cuda.is_available():
         raise ConfigError(f"{where} = 'gpu' but torch sees no CUDA device; use device=cpu or {where}=cpu/auto")
     return backend
+
+
+def shardable(backend: str) -> bool:
+    """Whether a resolved backend's copies may be cut into several scenes (shards of
+    ``sim.shard_rows``, ``realize.workers``): the CPU's tiled scenes may; the GPU backend holds
+    every copy in one scene on its device."""
+    return backend == "cpu"
 
 
 def open_backend(n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions) -> PhysicsBackend:

@@ -73,31 +73,49 @@ class InProcessPool:
 
 def run_shards(spec: RunSpec, n_envs: int | None = None) -> list[RowBlock]:
     """The shards of a run's copies: ``sim.shard_rows`` each on the CPU backend, one otherwise."""
+    from realize.scene.backends import shardable
+
     n = spec.ce.n_envs if n_envs is None else n_envs
-    return shard_rows(n, spec.sim.shard_rows if spec.placement.backend == "cpu" else n)
+    return shard_rows(n, spec.sim.shard_rows if shardable(spec.placement.backend) else n)
 
 
-def open_pool(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None, *, log_dir: Path | None = None,
-              n_envs: int | None = None) -> RolloutPool:
-    """The rollout workers of ``spec`` (``ce.n_envs`` or ``n_envs`` copies) for ``tasks``
-    (default ``[spec.task]``); worker logs go to ``log_dir`` (processes only)."""
+def _process_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], log_dir: Path | None) -> RolloutPool:
     from realize.scene.cpu_tiled import available_cores
 
-    tasks = [spec.task] if tasks is None else list(tasks)
-    shards = run_shards(spec, n_envs)
-    ws = spec.workers
-    if ws.backend == "ray" and spec.placement.backend == "cpu" and ws.n != 1:
-        from realize.workers.ray_pool import RayPool, ray_cores
-
-        cores = ray_cores(ws.ray_address)
-        n = worker_count(ws, len(shards), spec.placement.backend, cores)
-        if n > 1:
-            return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(ws, n, 1))
-    cores = available_cores()
-    n = worker_count(ws, len(shards), spec.placement.backend, cores)
+    ws, cores = spec.workers, available_cores()
+    n = worker_count(ws, len(shards), True, cores)
     if n == 1:
         return InProcessPool(spec, tasks, shards)
     from realize.workers.process import ProcessPool
 
     return ProcessPool(spec, tasks, group_shards(shards, n), physx_threads=physx_threads(ws, n, cores),
                        log_dir=log_dir, start_timeout_s=ws.start_timeout_s)
+
+
+def _ray_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], log_dir: Path | None) -> RolloutPool:
+    if spec.workers.n == 1 or len(shards) == 1:  # nothing to spread: no cluster needed
+        return InProcessPool(spec, tasks, shards)
+    from realize.workers.ray_pool import RayPool, ray_cores
+
+    ws = spec.workers
+    n = worker_count(ws, len(shards), True, ray_cores(ws.ray_address))
+    if n == 1:
+        return InProcessPool(spec, tasks, shards)
+    return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(ws, n, 1))
+
+
+_OPENERS = {"process": _process_pool, "ray": _ray_pool}  # by workers.backend
+
+
+def open_pool(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None, *, log_dir: Path | None = None,
+              n_envs: int | None = None) -> RolloutPool:
+    """The rollout workers of ``spec`` (``ce.n_envs`` or ``n_envs`` copies) for ``tasks``
+    (default ``[spec.task]``); worker logs go to ``log_dir`` (processes only). A backend whose
+    copies share one scene (GPU) runs in this process."""
+    from realize.scene.backends import shardable
+
+    tasks = [spec.task] if tasks is None else list(tasks)
+    shards = run_shards(spec, n_envs)
+    if not shardable(spec.placement.backend):
+        return InProcessPool(spec, tasks, shards)
+    return _OPENERS[spec.workers.backend](spec, tasks, shards, log_dir)

@@ -35,13 +35,14 @@ class WorkersSettings(Settings):
     start_timeout_s: float = setting(600.0, gt=0)  # a worker that has not built its scenes by then fails
 
 
-def worker_count(settings: WorkersSettings, n_shards: int, backend: str, cores: int) -> int:
-    """The rollout workers for ``n_shards`` shards on the simulator ``backend`` with ``cores``
-    cores (for Ray: the cluster's CPUs). Raises ``ConfigError`` where ``n`` cannot work."""
-    if backend != "cpu":
+def worker_count(settings: WorkersSettings, n_shards: int, shardable: bool, cores: int) -> int:
+    """The rollout workers for ``n_shards`` shards with ``cores`` cores (for Ray: the cluster's
+    CPUs); ``shardable``: the simulator backend's copies may sit in several scenes
+    (``realize.scene.backends.shardable``). Raises ``ConfigError`` where ``n`` cannot work."""
+    if not shardable:
         if settings.n not in (None, 1):
             raise ConfigError(f"workers.n = {settings.n}: workers split the CPU backend's shards; the "
-                              f"{backend} backend holds every copy in one scene (use workers.n=1)")
+                              f"GPU backend holds every copy in one scene (use workers.n=1)")
         return 1
     if settings.n is not None:
         if settings.n > n_shards:
