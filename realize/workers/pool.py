@@ -95,13 +95,20 @@ def _process_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], 
 def _ray_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], log_dir: Path | None) -> RolloutPool:
     if spec.workers.n == 1 or len(shards) == 1:  # nothing to spread: no cluster needed
         return InProcessPool(spec, tasks, shards)
-    from realize.workers.ray_pool import RayPool, ray_cores
+    from realize.workers.ray_pool import RayPool, ray_cores, ray_release
 
     ws = spec.workers
-    n = worker_count(ws, len(shards), True, ray_cores(ws.ray_address))
+    cores = ray_cores(ws.ray_address)  # the cluster's CPUs (joins it, or starts a local instance)
+    try:
+        n = worker_count(ws, len(shards), True, cores)
+    except BaseException:
+        ray_release()
+        raise
     if n == 1:
+        ray_release()
         return InProcessPool(spec, tasks, shards)
-    return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(ws, n, 1))
+    # the pool undoes ray_cores when it closes (or fails to open)
+    return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(ws, n, cores))
 
 
 _OPENERS = {"process": _process_pool, "ray": _ray_pool}  # by workers.backend
