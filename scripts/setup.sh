@@ -2,7 +2,7 @@
 # One-time setup of a checkout (idempotent, fast when already done):
 #   1. a virtual environment at .venv (Python >= 3.11),
 #   2. torch: a CPU build where there is no NVIDIA GPU (never a multi-GB CUDA download there),
-#   3. this project and its test extras, editable,
+#   3. this project, its test extras and Ray (workers.backend=ray; its tests), editable,
 #   4. a Vulkan driver SAPIEN can use. Without a GPU driver that is Mesa's lavapipe >= 24.3;
 #      on Debian 12 it comes from bookworm-backports, elsewhere we say what to install.
 # Re-run it any time; it only does what is missing.
@@ -42,9 +42,9 @@ if ! "$VENV/bin/python" -c 'import torch' 2>/dev/null; then
 fi
 
 # 3. the project
-say "installing realize (editable) and test extras"
-$PIP install -q -e ".[test]" 2>&1 | grep -v -i "is ignored" || true
-"$VENV/bin/python" -c 'import realize, envs, mani_skill, sapien, hydra, rerun' \
+say "installing realize (editable) with its test and ray extras"
+$PIP install -q -e ".[test,ray]" 2>&1 | grep -v -i "is ignored" || true
+"$VENV/bin/python" -c 'import realize, envs, mani_skill, sapien, hydra, rerun, ray' \
   || { echo "[setup] error: the package install failed (see pip output above)" >&2; exit 1; }
 
 # 4. Vulkan for SAPIEN
