@@ -1,18 +1,23 @@
-"""Rollout workers as Ray actors (realize.workers.ray_pool), on a local Ray instance.
+"""Rollout workers as Ray actors (realize.workers.ray_pool), on a local Ray instance and on a
+cluster started with ``ray start --head``.
 
-Checks: actor CPUs fit the nodes; a run with two Ray actors gives the numbers of one process
-(the issue's must-show, against a live one-process run: best_cost, success_per_iter,
-best_cost_per_iter, best_z); an exception inside an actor stops with its remote traceback and
-no re-run; an actor killed mid-rollout is replaced and its rows re-run to the same result; a
-second kill stops with an error naming the worker, Ray's cause and its last log lines; closing
-the pool, Ctrl-C and a killed run leave no Ray process (raylet, gcs_server, actors: the
-process table is read). Skipped where Ray is not installed (``pip install -e '.[ray]'``).
+Checks: without Ray the backend is a config error; actor CPUs fit the nodes; a run with two
+Ray actors gives the numbers of one process (the issue's must-show, against a live
+one-process run: best_cost, success_per_iter, best_cost_per_iter, best_z); an exception
+inside an actor stops with its remote traceback and no re-run; an actor killed mid-rollout is
+replaced and its rows re-run to the same result; a second kill stops with an error naming the
+worker, Ray's cause and its last log lines; closing the pool, Ctrl-C (exit 130), SIGTERM (exit
+143) and a killed run leave no Ray process (raylet, gcs_server, agents, actors: the process
+table is read); a run on a running cluster puts its actors there and leaves the cluster
+running. The Ray tests are skipped where Ray is not installed (``pip install -e '.[ray]'``).
 """
 
 from __future__ import annotations
 
 import json
+import re
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -27,9 +32,14 @@ from _compose import compose_config
 from realize.run_config import build_run_spec
 from realize.workers.errors import WorkerFailed
 
-pytest.importorskip("ray")
+from realize.config import ConfigError
+from realize.workers.ray_pool import actor_cpus, ray_cores
 
-from realize.workers.ray_pool import actor_cpus  # noqa: E402
+try:
+    import ray
+except ImportError:  # pragma: no cover - setup.sh installs the ray extra
+    ray = None
+needs_ray = pytest.mark.skipif(ray is None, reason="Ray is not installed (pip install -e '.[ray]')")
 
 REPO = Path(__file__).resolve().parents[1]
 RUN16 = ["ce.n_envs=16", "ce.n_elite=4", "ce.iterations=2", "seed=3", "sim.shard_rows=8",
@@ -87,6 +97,12 @@ def _ray_processes(tree: dict[int, str]) -> set[str]:
 
 
 # ------------------------------------------------------------------------------ arithmetic
+def test_without_ray_the_backend_is_a_config_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(ConfigError, match=re.escape("pip install -e '.[ray]'")):
+        ray_cores(None)
+
+
 def test_actor_cpus_fit_the_nodes() -> None:
     assert actor_cpus([2], 2, 1) == 1 and actor_cpus([16], 2, 8) == 8
     assert actor_cpus([16, 16], 3, 10) == 8  # 10 CPUs each would fit only two actors on two nodes
@@ -95,8 +111,8 @@ def test_actor_cpus_fit_the_nodes() -> None:
 
 
 # ------------------------------------------------------------------------------ same numbers
-def _realize(*args: str, run_dir: Path, timeout: float = 600) -> tuple[dict, float]:
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+def _realize(*args: str, run_dir: Path, timeout: float = 600, env: dict[str, str] | None = None) -> tuple[dict, float]:
+    env = dict(os.environ, **(env or {}), PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     t0 = time.perf_counter()
     p = subprocess.run([sys.executable, "-m", "realize", *args, f"hydra.run.dir={run_dir}"], cwd=run_dir.parent,
                        env=env, capture_output=True, text=True, timeout=timeout)
@@ -104,6 +120,8 @@ def _realize(*args: str, run_dir: Path, timeout: float = 600) -> tuple[dict, flo
     return json.loads((run_dir / "result.json").read_text()), time.perf_counter() - t0
 
 
+@needs_ray
+@pytest.mark.slow  # two runs, about 100 s on a 2-core machine
 def test_two_ray_actors_give_the_numbers_of_one_process(tmp_path: Path) -> None:
     one, t1 = _realize(*RUN16, "workers.n=1", run_dir=tmp_path / "one")
     two, t2 = _realize(*RUN16, "workers.n=2", "workers.backend=ray", run_dir=tmp_path / "ray")
@@ -124,9 +142,11 @@ def pool_and_batch():
     spec = build_run_spec(compose_config("ce.n_envs=8", "ce.n_elite=2", "sim.shard_rows=4", "controller.max_time_s=4",
                                          "workers.n=2", "workers.backend=ray"))
     Z = spec.task.layout.sample_uniform(8, generator=torch.Generator().manual_seed(0))
+    sigterm = signal.getsignal(signal.SIGTERM)
     pool = open_pool(spec)
     try:
         assert pool.kind == "ray" and pool.n_workers == 2 and pool.cpus == 1.0
+        assert signal.getsignal(signal.SIGTERM) is sigterm  # ray.init's own handler (sys.exit) undone
         yield spec, pool, Z, _descendants(os.getpid())
     finally:
         pool.close()
@@ -154,6 +174,7 @@ def _kill_on_rollout(pool, times: int) -> threading.Thread:
     return t
 
 
+@needs_ray
 def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and_batch) -> None:
     _, pool, Z, _ = pool_and_batch
     pids = pool.pids()
@@ -164,6 +185,7 @@ def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and
     assert pool.pids() == pids  # a bug is not re-run
 
 
+@needs_ray
 def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
     from realize.workers.pool import InProcessPool, run_shards
 
@@ -181,6 +203,7 @@ def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
     assert res.failure == want.failure
 
 
+@needs_ray
 def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> None:
     _, pool, Z, _ = pool_and_batch
     _kill_on_rollout(pool, times=2)
@@ -193,6 +216,7 @@ def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> No
     assert "rollout of 4 rows" in msg.split("last log lines:")[1]  # the actor's own log, read on its node
 
 
+@needs_ray
 def test_close_leaves_no_ray_process(pool_and_batch) -> None:
     _, pool, _, tree = pool_and_batch
     assert {"raylet", "gcs_server"} <= _ray_processes(tree), tree
@@ -222,12 +246,16 @@ def _start_run(tmp_path: Path) -> tuple[subprocess.Popen, dict[int, str], str]:
     return p, tree, session
 
 
-def test_ctrl_c_stops_every_ray_process(tmp_path: Path) -> None:
+@needs_ray
+@pytest.mark.parametrize("how", ["ctrl-c", pytest.param("sigterm", marks=pytest.mark.slow)])
+def test_ctrl_c_stops_every_ray_process(tmp_path: Path, how: str) -> None:
     p, tree, session = _start_run(tmp_path)
     assert {"raylet", "gcs_server"} <= _ray_processes(tree), tree
-    os.killpg(p.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the run's whole process group
-    assert p.wait(timeout=60) == 130, p.stderr.read()[-3000:] if p.stderr else ""
-    print(p.stderr.read()[-3000:] if p.stderr else "")
+    if how == "ctrl-c":
+        os.killpg(p.pid, signal.SIGINT)  # as a terminal's: the run's whole process group
+    else:
+        p.send_signal(signal.SIGTERM)
+    assert p.wait(timeout=60) == (130 if how == "ctrl-c" else 143), p.stderr.read()[-3000:] if p.stderr else ""
     left = _left(tree, 15)
     assert not left, f"left after Ctrl-C: {left}"
     assert not _session_procs(session)
@@ -235,6 +263,7 @@ def test_ctrl_c_stops_every_ray_process(tmp_path: Path) -> None:
     assert res["interrupted"] is True
 
 
+@needs_ray
 @pytest.mark.slow
 def test_ray_processes_do_not_outlive_a_killed_run(tmp_path: Path) -> None:
     p, tree, session = _start_run(tmp_path)
@@ -246,3 +275,68 @@ def test_ray_processes_do_not_outlive_a_killed_run(tmp_path: Path) -> None:
     left = _left(tree, 90)
     assert not left, f"left after the run was killed: {left}"
     assert not _session_procs(session)
+
+
+# ------------------------------------------------------------------------------ a running cluster
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop_cluster(temp_dir: str) -> None:
+    """End the processes of the cluster started under ``temp_dir`` (and theirs), by pid."""
+    roots = [p for p, (_, c) in _procs().items() if temp_dir in c]
+    pids = {p: "" for p in roots}
+    for r in roots:
+        pids.update(_descendants(r))
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for p in _left(pids, 0):
+            try:
+                os.kill(p, sig)
+            except ProcessLookupError:
+                pass
+        if not _left(pids, 10):
+            return
+
+
+@needs_ray
+def test_a_run_on_a_running_cluster_leaves_the_cluster_running(tmp_path: Path) -> None:
+    """``ray start --head`` (as the README says), then a run with ``workers.ray_address``: its
+    actors run on the cluster and are gone after the run; the cluster's own processes stay."""
+    import tempfile
+
+    temp_dir = tempfile.mkdtemp(prefix="rt", dir="/tmp")  # short: Ray's socket paths live under it
+    port = _free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    env["PYTHONPATH"] = str(REPO)  # the cluster's workers import this checkout (as if installed on the node)
+    ray_cli = str(Path(sys.executable).parent / "ray")
+    address = f"{ray.util.get_node_ip_address()}:{port}"
+    try:
+        subprocess.run([ray_cli, "start", "--head", f"--port={port}", "--num-cpus=2",
+                        "--include-dashboard=false", "--object-store-memory=150000000", f"--temp-dir={temp_dir}",
+                        "--disable-usage-stats"], env=env, cwd=tmp_path, check=True, timeout=120,
+                       stdout=(tmp_path / "ray-start.txt").open("w"), stderr=subprocess.STDOUT)
+        cluster = {p: c for p, (_, c) in _procs().items() if temp_dir in c}
+        assert {"raylet", "gcs_server"} <= _ray_processes(cluster), cluster
+        # Ray enables token authentication where ~/.ray/auth_token exists (a local instance
+        # writes it); a driver given an explicit address uses it only when told to
+        auth = {"RAY_AUTH_MODE": "token"} if "authentication is enabled" in (tmp_path / "ray-start.txt").read_text() else {}
+        res, t = _realize("ce.n_envs=8", "ce.n_elite=2", "ce.iterations=1", "sim.shard_rows=4", "controller.max_time_s=4",
+                          "logging.progress=false", "logging.rerun=false", "workers.n=2", "workers.backend=ray",
+                          f"workers.ray_address={address}", run_dir=tmp_path / "run", env=auth)
+        print(f"run on the cluster: {t:.1f} s")
+        assert res["workers"] == 2 and res["status"] == "done"
+        logs = [f.read_text() for f in Path(temp_dir).glob("session_latest/logs/worker-*.err")]
+        assert sum("rollout of 4 rows" in t for t in logs) == 2, "the actors did not run on the cluster"
+        assert not _left(cluster, 0).keys() ^ cluster.keys(), "the run stopped the cluster"
+        raylet = next(p for p, c in cluster.items() if c.split()[0].endswith("raylet"))
+        deadline = time.monotonic() + 15
+        while any(c.startswith("ray::ShardActor") for c in _descendants(raylet).values()):
+            assert time.monotonic() < deadline, f"actors left on the cluster: {_descendants(raylet)}"
+            time.sleep(0.2)
+    finally:
+        _stop_cluster(temp_dir)
+        shutil.rmtree(temp_dir, ignore_errors=True)

@@ -12,8 +12,10 @@ second death on the same rows raises ``WorkerFailed`` naming the worker (index, 
 pid), Ray's cause of death and the last lines of the actor's log (read on its node). An
 exception inside an actor is raised at once as ``WorkerFailed`` with the remote traceback.
 ``close`` kills our actors, and shuts down Ray only where this module started or joined it
-(a local instance ends with all its processes; a cluster keeps running). Ctrl-C in the run's
-``ray.wait`` reaches the loop, which calls ``close``.
+(a local instance ends with all its processes; a cluster keeps running). Waiting, the run polls
+Ray and sleeps in Python: a signal handler's exception inside a blocking ``ray.wait`` would come
+back as a plain ``KeyboardInterrupt`` (SIGTERM read as Ctrl-C); so Ctrl-C and SIGTERM reach the
+loop as they are, and the loop calls ``close``.
 What it doesn't: choose the number of workers or shards (``realize.workers.settings``,
 ``realize.workers.blocks``), install this project on the cluster's nodes (every node needs the
 same environment), or use Ray's own actor restarts (``max_restarts=0``: one re-run, ours).
@@ -27,6 +29,7 @@ import os
 import pickle
 import re
 import signal
+import socket
 import sys
 import threading
 import time
@@ -52,7 +55,7 @@ log = logging.getLogger("realize")
 
 LOCAL_OBJECT_STORE_BYTES = 256 * 2**20  # a local instance's shared memory: plans and results are small
 _RAY_MARKER = re.compile(r"^:(job_id|actor_name|task_name):")
-_POLL_S = 0.5  # ray.wait returns this often, so that signals reach the main thread at once
+_POLL_S = 0.05  # the run's sleep between looks at its actors (see the module docstring)
 _owner = {"joined": False, "users": 0}  # ray_cores started or joined Ray here; pools (and callers) using it
 
 
@@ -76,6 +79,7 @@ def ray_cores(address: str | None) -> int:
             kwargs.update(address="local", num_cpus=available_cores(), include_dashboard=False,
                           object_store_memory=LOCAL_OBJECT_STORE_BYTES)
         else:
+            _check_reachable(os.environ.get("RAY_ADDRESS") or address if address == "auto" else address)
             kwargs["address"] = address
         main = threading.current_thread() is threading.main_thread()
         sigterm = signal.getsignal(signal.SIGTERM) if main else None
@@ -83,7 +87,10 @@ def ray_cores(address: str | None) -> int:
             ray.init(**kwargs)
         except (ConnectionError, RuntimeError, ValueError) as e:
             where = "a local Ray instance" if address is None else f"the Ray cluster at workers.ray_address={address}"
-            raise ConfigError(f"could not start or join {where}: {e}") from e
+            hint = "" if address is None else (
+                " (is it running: `ray status`? A cluster with token authentication needs RAY_AUTH_MODE=token here "
+                "when the address is given, and its token in ~/.ray/auth_token or RAY_AUTH_TOKEN)")
+            raise ConfigError(f"could not start or join {where}: {e}{hint}") from e
         finally:
             if main:  # ray.init sets its own SIGTERM handler (sys.exit); the run's handler decides
                 signal.signal(signal.SIGTERM, sigterm)
@@ -96,6 +103,18 @@ def ray_cores(address: str | None) -> int:
         ray_release()
         raise ConfigError(f"the Ray cluster at {address} has no CPUs")
     return cpus
+
+
+def _check_reachable(address: str, timeout_s: float = 10.0) -> None:
+    """Refuse a ``host:port`` where nothing listens (``ray.init`` would wait for it for ever)."""
+    host, _, port = address.rpartition(":")
+    if "://" in address or not host or not port.isdigit():
+        return  # "auto" (Ray finds the cluster it started last on this node) or a form Ray checks itself
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as e:
+        raise ConfigError(f"nothing answers at workers.ray_address={address} ({e.strerror or e}): start the "
+                          f"cluster first (`ray start --head` on its head node) or correct the address") from None
 
 
 def ray_release() -> None:
@@ -118,10 +137,12 @@ def actor_cpus(node_cpus: Sequence[float], n: int, want: float) -> float:
     c = max(1, int(want))
     while c > 1 and not fits(c):
         c -= 1
-    k = 1
+    if fits(c):
+        return float(c)
+    k = 2
     while not fits(1 / k) and k < 10_000:
         k += 1
-    return float(c) if fits(c) else 1 / k
+    return 1 / k
 
 
 def _tail(path: str, n: int = 20) -> list[str]:
@@ -253,8 +274,7 @@ class RayPool:
                     f"{s.name()} did not build its scenes within workers.start_timeout_s = {self._timeout:.0f} s "
                     f"(each actor needs {self.cpus:g} CPU(s); Ray cluster: {ray.cluster_resources().get('CPU', 0):g} "
                     f"CPU(s), {ray.available_resources().get('CPU', 0):g} free)")
-            done, _ = ray.wait(list(pending), num_returns=1, timeout=min(_POLL_S, left))
-            for ref in done:
+            for ref in _finished(ray, list(pending)):
                 s = pending.pop(ref)
                 try:
                     s.info = ray.get(ref)
@@ -262,7 +282,8 @@ class RayPool:
                     raise WorkerFailed(f"{s.name()} could not build its scenes:\n{e}") from None
                 except _deaths(ray) as e:
                     raise self._failure(s, e, "died while building its scenes") from None
-                log.info("%s ready (setup %.1f s)", s.name(), s.info["setup_time_s"])
+                log.info("%s ready (setup %.1f s; its log: %s on that node)", s.name(), s.info["setup_time_s"],
+                         s.info["logs"][0] if s.info["logs"] else "Ray's worker log")
 
     def _failure(self, s: _Slot, e: BaseException, what: str) -> WorkerFailed:
         cause = "\n".join("    " + ln for ln in str(e).strip().splitlines())
@@ -333,8 +354,7 @@ class RayPool:
         results: dict[int, RolloutResult] = {}
         retried: set[int] = set()
         while pending:
-            done, _ = ray.wait(list(pending), num_returns=1, timeout=_POLL_S)
-            for ref in done:
+            for ref in _finished(ray, list(pending)):
                 k = pending.pop(ref)
                 s = self.slots[k]
                 try:
@@ -356,6 +376,14 @@ class RayPool:
     def pids(self) -> list[int]:
         """The actors' process ids (for tests and tools)."""
         return [s.info["pid"] for s in self.slots]
+
+
+def _finished(ray: ModuleType, refs: list[Any]) -> list[Any]:
+    """Those of ``refs`` that are done, after a short sleep in Python if none is."""
+    done, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
+    if not done:
+        time.sleep(_POLL_S)
+    return done
 
 
 def _deaths(ray: ModuleType) -> tuple[type[BaseException], ...]:
