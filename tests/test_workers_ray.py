@@ -288,7 +288,11 @@ def _free_port() -> int:
 
 def _stop_cluster(temp_dir: str) -> None:
     """End the processes of the cluster started under ``temp_dir`` (and theirs), by pid."""
-    roots = [p for p, (_, c) in _procs().items() if temp_dir in c]
+    procs, mine, p = _procs(), set(), os.getpid()
+    while p in procs and p not in mine:  # this process and its parents: never
+        mine.add(p)
+        p = procs[p][0]
+    roots = [p for p, (_, c) in procs.items() if temp_dir in c and p not in mine]
     pids = {p: "" for p in roots}
     for r in roots:
         pids.update(_descendants(r))
