@@ -26,7 +26,7 @@ from _compose import compose_config
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.run_config import build_run_spec
-from realize.workers.blocks import RowBlock, group_shards, join_results, shard_rows, split_rows
+from realize.workers.blocks import deal_rows, group_shards, join_results, shard_rows, split_rows, worker_parts
 from realize.workers.errors import WorkerFailed
 from realize.workers.settings import WorkersSettings, physx_threads, worker_count
 
@@ -53,9 +53,17 @@ def test_groups_are_consecutive_whole_shards() -> None:
         split_rows(3, 4)
 
 
-def test_rows_of_a_short_batch() -> None:
-    b = RowBlock(8, 16, 16)
-    assert b.rows_of(16) == slice(8, 16) and b.rows_of(12) == slice(8, 12) and b.rows_of(5) == slice(5, 5)
+@pytest.mark.parametrize("n,rows", [(16, 8), (200, 100), (3000, 100), (201, 100), (7, 3)])
+def test_a_short_batch_is_dealt_to_every_shard_and_fits(n: int, rows: int) -> None:
+    shards = shard_rows(n, rows)
+    for m in range(0, n + 1, max(1, n // 37)):
+        parts = deal_rows(m, len(shards))
+        assert parts[0].start == 0 and parts[-1].stop == m and all(a.stop == b.start for a, b in zip(parts, parts[1:]))
+        assert all(p.stop - p.start <= s.size for p, s in zip(parts, shards))
+        assert max(p.stop - p.start for p in parts) - min(p.stop - p.start for p in parts) <= 1
+    Z = torch.arange(10.0)[:, None]
+    per_worker = worker_parts(Z, group_shards(shard_rows(16, 4), 2))
+    assert [[p[:, 0].tolist() for p in w] for w in per_worker] == [[[0, 1, 2], [3, 4, 5]], [[6, 7], [8, 9]]]
 
 
 def _result(rows: range, steps: int, frames: int) -> RolloutResult:

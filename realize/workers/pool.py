@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 from torch import Tensor
 
 from realize.realization.result import RolloutResult
-from realize.workers.blocks import RowBlock, group_shards, shard_rows
+from realize.workers.blocks import RowBlock, check_batch, deal_rows, group_shards, shard_rows
 from realize.workers.settings import physx_threads, worker_count
 from realize.workers.worker import ShardWorker
 
@@ -57,9 +57,8 @@ class InProcessPool:
         self.n_envs, self.backend, self.setup_time_s = self.worker.stop, self.worker.backend, self.worker.setup_time_s
 
     def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
-        if Z.shape[0] > self.n_envs:
-            raise ValueError(f"{Z.shape[0]} samples but the scene has only {self.n_envs} copies (ce.n_envs)")
-        return self.worker.rollout(candidate, Z, record)
+        check_batch(Z, self.n_envs)
+        return self.worker.rollout(candidate, [Z[s] for s in deal_rows(Z.shape[0], len(self.worker.shards))], record)
 
     def close(self) -> None:
         self.worker.close()
