@@ -11,12 +11,14 @@ What it doesn't: simulate (``realize.workers.worker``), or know the search.
 from __future__ import annotations
 
 import logging
+import multiprocessing as mp
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 from torch import Tensor
 
+from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.workers.blocks import RowBlock, check_batch, deal_rows, group_shards, shard_rows
 from realize.workers.settings import physx_threads, worker_count
@@ -83,6 +85,12 @@ def _process_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], 
 
     ws, cores = spec.workers, available_cores()
     n = worker_count(ws, len(shards), True, cores)
+    if n > 1 and mp.current_process().daemon:  # e.g. a job of a process-pool launcher: no children allowed
+        if ws.n is not None:
+            raise ConfigError(f"workers.n = {ws.n}: this run is itself a daemonic worker process (a launcher's job), "
+                              "which may not start processes; use workers.n=1 or workers.backend=ray")
+        log.info("running in a daemonic process (a launcher's job): rollout workers in this process")
+        n = 1
     if n == 1:
         return InProcessPool(spec, tasks, shards)
     from realize.workers.process import ProcessPool
