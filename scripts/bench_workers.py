@@ -8,7 +8,8 @@ worker count. It checks that every run produced the same numbers (best_cost, suc
 per iteration, best_z): the workers must not change them (``realize.workers.blocks``).
 The last lines estimate the journal budget (3000 -> 300 samples x 20 iterations) from the
 measured throughput per worker: nodes of ``--node-cores`` cores, one worker per core, every
-worker as fast as one measured here, shards limiting the workers (``sim.shard_rows``).
+worker as fast as one measured here, ``sim.shard_rows`` small enough that every worker holds a
+shard (a worker holds whole shards; ``deal_rows`` spreads the late, smaller batches over all).
 
     python scripts/bench_workers.py                  # seed paper, 1 vs 2 workers (~15 min here)
     python scripts/bench_workers.py --quick          # one CE iteration of 200 samples
@@ -84,18 +85,15 @@ def main() -> None:
     w_top, _, rate_top = max(runs, key=lambda r: r[2])
     per_worker = rate_top / w_top
     rows = journal_rows()
-    shard = 100
-    for o in overrides:
-        if o.startswith("sim.shard_rows="):
-            shard = int(o.split("=", 1)[1])
-    shards = -(-max(rows) // shard)
-    print(f"journal budget: {sum(rows)} realizations over {len(rows)} iterations, {shards} shards of <= {shard} copies; "
-          f"{per_worker:.2f} realizations/s per worker (measured with {w_top} workers)")
+    print(f"journal budget: {sum(rows)} realizations over {len(rows)} iterations; {per_worker:.2f} realizations/s "
+          f"per worker (measured with {w_top} workers, 100-copy shards); one worker: {sum(rows) / per_worker / 60:.0f} min")
     for nodes in (1, 4, 16):
-        workers = min(nodes * args.node_cores, shards)
-        est = sum(rows) / (workers * per_worker)
-        print(f"  {nodes:>2} node(s) x {args.node_cores} cores: {workers} workers, ~{est / 60:.1f} min "
-              f"(1 worker: {sum(rows) / per_worker / 60:.0f} min)")
+        workers = nodes * args.node_cores
+        shard = -(-max(rows) // workers)  # sim.shard_rows that gives every worker a shard at iteration 0
+        est = sum(r / workers for r in rows) / per_worker
+        print(f"  {nodes:>2} node(s) x {args.node_cores} cores: {workers} workers with sim.shard_rows={shard}: "
+              f"~{est / 60:.1f} min if a worker keeps its measured rate ({min(100, shard)} copies per shard or fewer "
+              f"run less efficiently: a lower bound)")
     if not same:
         raise SystemExit("the worker counts gave different numbers")
 

@@ -130,6 +130,37 @@ def test_two_worker_processes_give_the_numbers_of_one_process(one_process: dict,
     assert (tmp_path / "run" / "workers" / "worker-1.log").read_text().count("rollout of 8 rows") == 2
 
 
+@pytest.mark.slow
+def test_a_run_resumed_with_other_workers_gives_the_same_numbers(one_process: dict, tmp_path: Path) -> None:
+    from omegaconf import OmegaConf
+
+    from realize.run import run
+
+    def stop(i: int) -> None:
+        if i == 0:
+            raise KeyboardInterrupt
+
+    cfg = OmegaConf.create(compose_config(*RUN16, "workers.n=2"))
+    out = run(cfg, tmp_path / "run", after_iteration=stop)
+    assert out.status == "interrupted" and out.iterations_done == 1
+    done = _realize(f"resume={tmp_path / 'run'}", "workers.n=1", run_dir=tmp_path / "run")
+    assert done["segments"] == 2 and done["workers"] == 1
+    for k in KEYS:
+        assert done[k] == one_process[k], k
+
+
+@pytest.mark.slow
+def test_top_k_halving_gives_the_same_numbers_with_workers(tmp_path: Path) -> None:
+    top_k = ["experiment=carry_or_push", "task.planner.top_k=2", "ce.n_envs=8", "ce.n_elite=2", "ce.iterations=3",
+             "seed=0", "sim.shard_rows=4", "logging.progress=false", "logging.rerun=false"]
+    one = _realize(*top_k, "workers.n=1", run_dir=tmp_path / "one")
+    two = _realize(*top_k, "workers.n=2", run_dir=tmp_path / "two")
+    assert two["workers"] == 2
+    for k in ("best_cost", "success_per_iter", "best_z", "winner"):
+        assert two[k] == one[k], k
+    assert [c["best_cost"] for c in two["candidates"]] == [c["best_cost"] for c in one["candidates"]]
+
+
 # ------------------------------------------------------------------------------ faults
 def _pool(tmp_path: Path):
     from realize.workers.pool import run_shards
