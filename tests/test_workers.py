@@ -26,7 +26,7 @@ from _compose import compose_config
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.run_config import build_run_spec
-from realize.workers.blocks import RowBlock, group_shards, join_results, shard_rows, split_rows
+from realize.workers.blocks import deal_rows, group_shards, join_results, shard_rows, split_rows, worker_parts
 from realize.workers.errors import WorkerFailed
 from realize.workers.settings import WorkersSettings, physx_threads, worker_count
 
@@ -53,9 +53,17 @@ def test_groups_are_consecutive_whole_shards() -> None:
         split_rows(3, 4)
 
 
-def test_rows_of_a_short_batch() -> None:
-    b = RowBlock(8, 16, 16)
-    assert b.rows_of(16) == slice(8, 16) and b.rows_of(12) == slice(8, 12) and b.rows_of(5) == slice(5, 5)
+@pytest.mark.parametrize("n,rows", [(16, 8), (200, 100), (3000, 100), (201, 100), (7, 3)])
+def test_a_short_batch_is_dealt_to_every_shard_and_fits(n: int, rows: int) -> None:
+    shards = shard_rows(n, rows)
+    for m in range(0, n + 1, max(1, n // 37)):
+        parts = deal_rows(m, len(shards))
+        assert parts[0].start == 0 and parts[-1].stop == m and all(a.stop == b.start for a, b in zip(parts, parts[1:]))
+        assert all(p.stop - p.start <= s.size for p, s in zip(parts, shards))
+        assert max(p.stop - p.start for p in parts) - min(p.stop - p.start for p in parts) <= 1
+    Z = torch.arange(10.0)[:, None]
+    per_worker = worker_parts(Z, group_shards(shard_rows(16, 4), 2))
+    assert [[p[:, 0].tolist() for p in w] for w in per_worker] == [[[0, 1, 2], [3, 4, 5]], [[6, 7], [8, 9]]]
 
 
 def _result(rows: range, steps: int, frames: int) -> RolloutResult:
@@ -120,6 +128,37 @@ def test_two_worker_processes_give_the_numbers_of_one_process(one_process: dict,
     for k in KEYS:
         assert two[k] == one_process[k], k
     assert (tmp_path / "run" / "workers" / "worker-1.log").read_text().count("rollout of 8 rows") == 2
+
+
+@pytest.mark.slow
+def test_a_run_resumed_with_other_workers_gives_the_same_numbers(one_process: dict, tmp_path: Path) -> None:
+    from omegaconf import OmegaConf
+
+    from realize.run import run
+
+    def stop(i: int) -> None:
+        if i == 0:
+            raise KeyboardInterrupt
+
+    cfg = OmegaConf.create(compose_config(*RUN16, "workers.n=2"))
+    out = run(cfg, tmp_path / "run", after_iteration=stop)
+    assert out.status == "interrupted" and out.iterations_done == 1
+    done = _realize(f"resume={tmp_path / 'run'}", "workers.n=1", run_dir=tmp_path / "run")
+    assert done["segments"] == 2 and done["workers"] == 1
+    for k in KEYS:
+        assert done[k] == one_process[k], k
+
+
+@pytest.mark.slow
+def test_top_k_halving_gives_the_same_numbers_with_workers(tmp_path: Path) -> None:
+    top_k = ["experiment=carry_or_push", "task.planner.top_k=2", "ce.n_envs=8", "ce.n_elite=2", "ce.iterations=3",
+             "seed=0", "sim.shard_rows=4", "logging.progress=false", "logging.rerun=false"]
+    one = _realize(*top_k, "workers.n=1", run_dir=tmp_path / "one")
+    two = _realize(*top_k, "workers.n=2", run_dir=tmp_path / "two")
+    assert two["workers"] == 2
+    for k in ("best_cost", "success_per_iter", "best_z", "winner"):
+        assert two[k] == one[k], k
+    assert [c["best_cost"] for c in two["candidates"]] == [c["best_cost"] for c in one["candidates"]]
 
 
 # ------------------------------------------------------------------------------ faults

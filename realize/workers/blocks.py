@@ -8,11 +8,13 @@ The copies are therefore cut into shards of at most ``sim.shard_rows`` copies, f
 config and never by the machine or the worker count; a worker holds whole shards, and any
 number of workers gives the same numbers as one process.
 
-What it does: ``RowBlock`` (rows ``first .. stop - 1`` of a batch of ``total``), ``shard_rows``
-(the shards of ``n`` copies: ``ceil(n / rows)`` contiguous blocks, sizes differing by at most
-one), ``group_shards`` (consecutive shards per worker), ``RowBlock.rows_of`` (the rows of an
-``M``-row batch in a block) and ``join_results`` (results of consecutive blocks as one, in row
-order: per-plan tensors concatenated, shorter trajectories padded with their last frame).
+What it does: ``RowBlock`` (copies ``first .. stop - 1`` of ``total``), ``shard_rows`` (the
+shards of ``n`` copies: ``ceil(n / rows)`` contiguous blocks, sizes differing by at most one),
+``group_shards`` (consecutive shards per worker), ``deal_rows`` (an ``M``-row batch dealt to the
+shards in contiguous parts of near-equal size, so that a batch smaller than the copies (a
+linear sample schedule, successive halving) still keeps every shard, and so every worker, busy;
+a part always fits its shard) and ``join_results`` (results of consecutive parts as one, in
+row order: per-plan tensors concatenated, shorter trajectories padded with their last frame).
 What it doesn't: run anything (``realize.workers.pool``, ``.process``, ``.ray_pool``).
 """
 
@@ -26,7 +28,8 @@ from torch import Tensor
 
 from realize.realization.result import RolloutResult
 
-__all__ = ["RowBlock", "split_rows", "shard_rows", "group_shards", "join_results"]
+__all__ = ["RowBlock", "split_rows", "shard_rows", "group_shards", "deal_rows", "worker_parts", "check_batch",
+           "join_results"]
 
 
 @dataclass(frozen=True)
@@ -40,10 +43,6 @@ class RowBlock:
     @property
     def size(self) -> int:
         return self.stop - self.first
-
-    def rows_of(self, m: int) -> slice:
-        """The rows of an ``m``-row batch (``m <= total``) in this block (maybe none)."""
-        return slice(min(self.first, m), min(self.stop, m))
 
     def describe(self) -> str:
         return f"rows {self.first}-{self.stop - 1} of {self.total}"
@@ -71,6 +70,34 @@ def group_shards(shards: Sequence[RowBlock], n_workers: int) -> list[list[RowBlo
     """``n_workers`` groups of consecutive shards, counts differing by at most one."""
     groups = split_rows(len(shards), n_workers)
     return [list(shards[g.first:g.stop]) for g in groups]
+
+
+def deal_rows(m: int, n_shards: int) -> list[slice]:
+    """The rows of an ``m``-row batch each of ``n_shards`` shards realizes: contiguous, in order,
+    sizes differing by at most one (empty where ``m < n_shards``)."""
+    base, extra = divmod(m, n_shards)
+    out, first = [], 0
+    for k in range(n_shards):
+        stop = first + base + (1 if k < extra else 0)
+        out.append(slice(first, stop))
+        first = stop
+    return out
+
+
+def check_batch(Z: Tensor, n_envs: int) -> None:
+    """Refuse a batch of more rows than the run has copies."""
+    if Z.shape[0] > n_envs:
+        raise ValueError(f"{Z.shape[0]} samples but the run has only {n_envs} copies (ce.n_envs)")
+
+
+def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]]) -> list[list[Tensor]]:
+    """Per worker (a group of consecutive shards), the parts of ``Z`` its shards realize."""
+    parts = [Z[s] for s in deal_rows(Z.shape[0], sum(len(g) for g in groups))]
+    out, k = [], 0
+    for g in groups:
+        out.append(parts[k:k + len(g)])
+        k += len(g)
+    return out
 
 
 def _pad_frames(t: Tensor | None, frames: int) -> Tensor | None:

@@ -11,14 +11,16 @@ What it doesn't: simulate (``realize.workers.worker``), or know the search.
 from __future__ import annotations
 
 import logging
+import multiprocessing as mp
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 from torch import Tensor
 
+from realize.config import ConfigError
 from realize.realization.result import RolloutResult
-from realize.workers.blocks import RowBlock, group_shards, shard_rows
+from realize.workers.blocks import RowBlock, check_batch, deal_rows, group_shards, shard_rows
 from realize.workers.settings import physx_threads, worker_count
 from realize.workers.worker import ShardWorker
 
@@ -57,9 +59,8 @@ class InProcessPool:
         self.n_envs, self.backend, self.setup_time_s = self.worker.stop, self.worker.backend, self.worker.setup_time_s
 
     def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
-        if Z.shape[0] > self.n_envs:
-            raise ValueError(f"{Z.shape[0]} samples but the scene has only {self.n_envs} copies (ce.n_envs)")
-        return self.worker.rollout(candidate, Z, record)
+        check_batch(Z, self.n_envs)
+        return self.worker.rollout(candidate, [Z[s] for s in deal_rows(Z.shape[0], len(self.worker.shards))], record)
 
     def close(self) -> None:
         self.worker.close()
@@ -84,6 +85,12 @@ def _process_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], 
 
     ws, cores = spec.workers, available_cores()
     n = worker_count(ws, len(shards), True, cores)
+    if n > 1 and mp.current_process().daemon:  # e.g. a job of a process-pool launcher: no children allowed
+        if ws.n is not None:
+            raise ConfigError(f"workers.n = {ws.n}: this run is itself a daemonic worker process (a launcher's job), "
+                              "which may not start processes; use workers.n=1 or workers.backend=ray")
+        log.info("running in a daemonic process (a launcher's job): rollout workers in this process")
+        n = 1
     if n == 1:
         return InProcessPool(spec, tasks, shards)
     from realize.workers.process import ProcessPool

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 from torch import Tensor
 
 from realize.realization.result import RolloutResult
-from realize.workers.blocks import RowBlock, join_results
+from realize.workers.blocks import RowBlock, check_batch, join_results, worker_parts
 from realize.workers.errors import WorkerFailed
 
 if TYPE_CHECKING:
@@ -118,11 +118,11 @@ def worker_main(conn: Connection, payload: bytes, k: int, log_path: str | None, 
             break
         if msg[0] == "close":
             break
-        _, candidate, Z, record = msg
-        log.info("rollout of %d rows (candidate %s)", Z.shape[0], candidate)
+        _, candidate, parts, record = msg
+        log.info("rollout of %d rows (candidate %s)", sum(p.shape[0] for p in parts), candidate)
         t0 = time.perf_counter()
         try:
-            res = worker.rollout(candidate, Z, record)
+            res = worker.rollout(candidate, parts, record)
         except Exception:
             _send(conn, ("error", traceback.format_exc()))
             continue
@@ -139,9 +139,6 @@ class _Slot:
         self.k, self.shards, self.proc, self.conn, self.log_path = k, shards, proc, conn, log_path
         self.first, self.stop = shards[0].first, shards[-1].stop
         self.pid: int | None = None
-
-    def rows_of(self, m: int) -> slice:
-        return slice(min(self.first, m), min(self.stop, m))
 
     def name(self) -> str:
         return f"worker {self.k} (rows {self.first}-{self.stop - 1}, pid {self.pid or self.proc.pid})"
@@ -256,14 +253,12 @@ class ProcessPool:
     # -------------------------------------------------------------- work
     def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
         """Realize the ``M <= n_envs`` rows of ``Z``: each worker its shards' rows, joined in order."""
-        m = Z.shape[0]
-        if m > self.n_envs:
-            raise ValueError(f"{m} samples but the workers hold only {self.n_envs} copies (ce.n_envs)")
+        check_batch(Z, self.n_envs)
         t0 = time.perf_counter()
-        Z = Z.detach().cpu()
-        jobs = {s.k: s.rows_of(m) for s in self.slots if s.rows_of(m).start < s.rows_of(m).stop}
-        for k, rows in jobs.items():
-            _send(self.slots[k].conn, ("rollout", candidate, Z[rows], record))
+        per_worker = worker_parts(Z.detach().cpu(), self.groups)
+        jobs = {k: parts for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
+        for k, parts in jobs.items():
+            _send(self.slots[k].conn, ("rollout", candidate, parts, record))
         results: dict[int, RolloutResult] = {}
         retried: set[int] = set()
         while len(results) < len(jobs):
@@ -288,7 +283,7 @@ class ProcessPool:
                                 _exit_text(s.proc.exitcode))
                     retried.add(s.k)
                     fresh = self._restart(s)
-                    _send(fresh.conn, ("rollout", candidate, Z[jobs[s.k]], record))
+                    _send(fresh.conn, ("rollout", candidate, jobs[s.k], record))
         res = join_results([results[k] for k in sorted(results)])
         res.wall_time_s = time.perf_counter() - t0
         return res

@@ -3,8 +3,8 @@ Ray actor): the scenes of consecutive shards of a run's copies.
 
 What it does: ``ShardWorker`` builds, once, one batched scene and one plan realizer per task
 for each of its shards (``realize.workers.blocks``), with the given PhysX thread count;
-``rollout`` realizes a batch's rows that fall in its shards, shard after shard, and returns one
-``RolloutResult`` on the CPU. A shard's scene and controllers see only that shard's rows, so a
+``rollout`` realizes one part of a batch per shard (``realize.workers.blocks.deal_rows``),
+shard after shard, and returns their ``RolloutResult`` joined, on the CPU. A shard's scene and controllers see only that shard's rows, so a
 row's numbers are the same in whichever worker its shard sits.
 What it doesn't: talk to the search or to other workers (``realize.workers.process``,
 ``realize.workers.ray_pool``), or choose the shards (``realize.workers.blocks``).
@@ -67,16 +67,14 @@ class ShardWorker:
     def describe(self) -> str:
         return f"rows {self.first}-{self.stop - 1} ({len(self.shards)} shard(s))"
 
-    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
-        """Realize ``Z``: rows ``first ..`` of a batch (as many as fall in these shards)."""
+    def rollout(self, candidate: int | None, parts: Sequence[Tensor], record: bool = False) -> RolloutResult:
+        """Realize ``parts[k]`` (rows of a batch, maybe none) in shard ``k`` of this worker."""
+        if len(parts) != len(self.shards):
+            raise ValueError(f"{len(parts)} parts for {len(self.shards)} shards")
         t0 = time.perf_counter()
-        parts = []
-        for shard, realizers in zip(self.shards, self.realizers):
-            rows = shard.rows_of(self.first + Z.shape[0])
-            if rows.start < rows.stop:
-                Zs = Z[rows.start - self.first:rows.stop - self.first]
-                parts.append(realizers[0 if candidate is None else candidate].rollout(Zs, record=record))
-        res = join_results(parts)
+        results = [realizers[0 if candidate is None else candidate].rollout(Z, record=record)
+                   for Z, realizers in zip(parts, self.realizers) if Z.shape[0]]
+        res = join_results(results)
         res.wall_time_s = time.perf_counter() - t0
         return res
 
