@@ -129,7 +129,6 @@ def test_two_ray_actors_give_the_numbers_of_one_process(tmp_path: Path) -> None:
     assert one["workers"] == 1 and two["workers"] == 2
     for k in KEYS:
         assert two[k] == one[k], k
-    assert one["best_cost"] == 597.0 and one["success_per_iter"] == [0.0625, 0.0]  # the coordinator's numbers
 
 
 # ------------------------------------------------------------------------------ faults
@@ -327,10 +326,11 @@ def test_a_run_on_a_running_cluster_leaves_the_cluster_running(tmp_path: Path) -
         assert {"raylet", "gcs_server"} <= _ray_processes(cluster), cluster
         # Ray enables token authentication where ~/.ray/auth_token exists (a local instance
         # writes it); a driver given an explicit address uses it only when told to
-        auth = {"RAY_AUTH_MODE": "token"} if "authentication is enabled" in (tmp_path / "ray-start.txt").read_text() else {}
-        res, t = _realize("ce.n_envs=8", "ce.n_elite=2", "ce.iterations=1", "sim.shard_rows=4", "controller.max_time_s=4",
-                          "logging.progress=false", "logging.rerun=false", "workers.n=2", "workers.backend=ray",
-                          f"workers.ray_address={address}", run_dir=tmp_path / "run", env=auth)
+        token = "authentication is enabled" in (tmp_path / "ray-start.txt").read_text()
+        res, t = _realize("ce.n_envs=8", "ce.n_elite=2", "ce.iterations=1", "sim.shard_rows=4",
+                          "controller.max_time_s=4", "logging.progress=false", "logging.rerun=false", "workers.n=2",
+                          "workers.backend=ray", f"workers.ray_address={address}", run_dir=tmp_path / "run",
+                          env={"RAY_AUTH_MODE": "token"} if token else {})
         print(f"run on the cluster: {t:.1f} s")
         assert res["workers"] == 2 and res["status"] == "done"
         logs = [f.read_text() for f in Path(temp_dir).glob("session_latest/logs/worker-*.err")]

@@ -3,14 +3,15 @@
 What it does: ``ray_cores(address)`` connects this process to Ray (``workers.ray_address``:
 ``None`` starts a local instance, ``"auto"`` or ``"host:port"`` joins a running cluster) and
 returns the cluster's CPUs; ``RayPool`` starts one actor per group of shards, each building its
-``ShardWorker`` once (all at once) and keeping it for the run, hands each actor its rows of
-every batch and joins the results in row order (``join_results``). Each actor asks for
-``num_cpus`` CPUs (its PhysX threads, fitted to the nodes by ``actor_cpus``), so Ray never puts
-more simulating threads on a node than it has cores. Faults: an actor that dies (its process
-killed, out of memory, its node lost) is replaced by a fresh one that re-runs its rows; a
-second death on the same rows raises ``WorkerFailed`` naming the worker (index, rows, node,
-pid), Ray's cause of death and the last lines of the actor's log (read on its node). An
-exception inside an actor is raised at once as ``WorkerFailed`` with the remote traceback.
+``ShardWorker`` once (all at once) and keeping it for the run, hands each actor its shards'
+parts of every batch (``worker_parts``) and joins the results in row order (``join_results``).
+Each actor asks for ``num_cpus`` CPUs (its PhysX threads, fitted to the nodes by
+``actor_cpus``), so Ray never puts more simulating threads on a node than it has cores.
+Faults: an actor that dies (its process killed, out of memory, its node lost) is replaced by a
+fresh one that re-runs its rows; a second death on the same rows raises ``WorkerFailed``
+naming the worker (index, rows, node, pid), Ray's cause of death and the last lines of the
+actor's log (read on its node). An exception inside an actor is raised at once as
+``WorkerFailed`` with the remote traceback.
 ``close`` kills our actors, and shuts down Ray only where this module started or joined it
 (a local instance ends with all its processes; a cluster keeps running). Waiting, the run polls
 Ray and sleeps in Python: a signal handler's exception inside a blocking ``ray.wait`` would come
@@ -41,7 +42,7 @@ from torch import Tensor
 
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
-from realize.workers.blocks import RowBlock, join_results
+from realize.workers.blocks import RowBlock, check_batch, join_results, worker_parts
 from realize.workers.errors import WorkerFailed
 
 if TYPE_CHECKING:
@@ -183,10 +184,11 @@ class ShardActor:
                     node_ip=ray.util.get_node_ip_address(), logs=[p for p in logs if p.startswith("/")],
                     setup_time_s=self.worker.setup_time_s)
 
-    def rollout(self, candidate: int | None, Z: Tensor, record: bool) -> RolloutResult:
+    def rollout(self, candidate: int | None, parts: list[Tensor], record: bool) -> RolloutResult:
+        """Realize ``parts[k]`` in shard ``k`` (``ShardWorker.rollout``)."""
         assert self.worker is not None
-        log.info("rollout of %d rows (candidate %s)", Z.shape[0], candidate)
-        res = self.worker.rollout(candidate, Z, record)
+        log.info("rollout of %d rows (candidate %s)", sum(p.shape[0] for p in parts), candidate)
+        res = self.worker.rollout(candidate, parts, record)
         log.info("done in %.1f s, %d control steps", res.wall_time_s, res.sim_steps)
         return res
 
@@ -214,9 +216,6 @@ class _Slot:
         self.k, self.shards, self.actor, self.ready = k, shards, actor, ready
         self.first, self.stop = shards[0].first, shards[-1].stop
         self.info: dict[str, Any] = {}
-
-    def rows_of(self, m: int) -> slice:
-        return slice(min(self.first, m), min(self.stop, m))
 
     def name(self) -> str:
         where = f", node {self.info['node_ip']}, pid {self.info['pid']}" if self.info else ""
@@ -343,14 +342,14 @@ class RayPool:
 
     # -------------------------------------------------------------- work
     def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
-        """Realize the ``M <= n_envs`` rows of ``Z``: each actor its shards' rows, joined in order."""
-        ray, m = self._ray, Z.shape[0]
-        if m > self.n_envs:
-            raise ValueError(f"{m} samples but the workers hold only {self.n_envs} copies (ce.n_envs)")
+        """Realize the ``M <= n_envs`` rows of ``Z``: each actor its shards' parts, joined in order."""
+        ray = self._ray
+        check_batch(Z, self.n_envs)
         t0 = time.perf_counter()
-        Z = Z.detach().cpu()
-        jobs = {s.k: Z[s.rows_of(m)].clone() for s in self.slots if s.rows_of(m).start < s.rows_of(m).stop}
-        pending = {self.slots[k].actor.rollout.remote(candidate, z, record): k for k, z in jobs.items()}
+        per_worker = worker_parts(Z.detach().cpu(), self.groups)
+        # each part copied out of Z: a view would send Z's whole storage to every actor
+        jobs = {k: [p.clone() for p in parts] for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
+        pending = {self.slots[k].actor.rollout.remote(candidate, parts, record): k for k, parts in jobs.items()}
         results: dict[int, RolloutResult] = {}
         retried: set[int] = set()
         while pending:
