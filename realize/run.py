@@ -224,7 +224,8 @@ class _Assembly:
         self.info.backend, self.info.n_envs, self.info.setup_time_s = pool.backend, pool.n_envs, time.perf_counter() - t0
         self.info.workers = pool.n_workers
         if pool.n_workers > 1:
-            log.info("%d rollout workers (%s; logs in %s)", pool.n_workers, pool.kind, self.run_dir / WORKER_LOG_DIR)
+            where = getattr(pool, "log_location", None) or self.run_dir / WORKER_LOG_DIR
+            log.info("%d rollout workers (%s; logs: %s)", pool.n_workers, pool.kind, where)
         if spec.halving:
             assert spec.budget is not None
             for i, t in enumerate(self.tasks):

@@ -234,6 +234,7 @@ class RayPool:
         self.groups = [list(g) for g in groups]
         self.n_envs = self.groups[-1][-1].stop
         self.n_workers = len(self.groups)
+        self.log_location = "each actor's worker-*.err in its node's Ray session logs (/tmp/ray/session_latest/logs)"
         self._timeout = settings.start_timeout_s
         self.slots: list[_Slot] = []
         self._payloads: dict[int, Any] = {}
