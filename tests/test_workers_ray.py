@@ -142,11 +142,12 @@ def pool_and_batch():
                                          "workers.n=2", "workers.backend=ray"))
     Z = spec.task.layout.sample_uniform(8, generator=torch.Generator().manual_seed(0))
     sigterm = signal.getsignal(signal.SIGTERM)
+    before = set(_descendants(os.getpid()))  # e.g. multiprocessing's resource tracker of earlier tests
     pool = open_pool(spec)
     try:
         assert pool.kind == "ray" and pool.n_workers == 2 and pool.cpus == 1.0
         assert signal.getsignal(signal.SIGTERM) is sigterm  # ray.init's own handler (sys.exit) undone
-        yield spec, pool, Z, _descendants(os.getpid())
+        yield spec, pool, Z, (before, {p: c for p, c in _descendants(os.getpid()).items() if p not in before})
     finally:
         pool.close()
 
@@ -217,9 +218,9 @@ def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> No
 
 @needs_ray
 def test_close_leaves_no_ray_process(pool_and_batch) -> None:
-    _, pool, _, tree = pool_and_batch
+    _, pool, _, (before, tree) = pool_and_batch
     assert {"raylet", "gcs_server"} <= _ray_processes(tree), tree
-    tree.update(_descendants(os.getpid()))  # the actors started since
+    tree.update({p: c for p, c in _descendants(os.getpid()).items() if p not in before})  # the actors started since
     pool.close()
     left = _left(tree, 15)
     assert not left, f"left after close: {left}"
@@ -306,6 +307,7 @@ def _stop_cluster(temp_dir: str) -> None:
 
 
 @needs_ray
+@pytest.mark.slow  # starts a cluster with `ray start --head`: about 35 s
 def test_a_run_on_a_running_cluster_leaves_the_cluster_running(tmp_path: Path) -> None:
     """``ray start --head`` (as the README says), then a run with ``workers.ray_address``: its
     actors run on the cluster and are gone after the run; the cluster's own processes stay."""
