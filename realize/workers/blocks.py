@@ -52,13 +52,7 @@ def split_rows(total: int, n: int) -> list[RowBlock]:
     """``n`` contiguous blocks covering ``0 .. total - 1``, sizes differing by at most one."""
     if not 1 <= n <= total:
         raise ValueError(f"cannot split {total} rows into {n} blocks (need 1 <= n <= rows)")
-    base, extra = divmod(total, n)
-    blocks, first = [], 0
-    for k in range(n):
-        stop = first + base + (1 if k < extra else 0)
-        blocks.append(RowBlock(first, stop, total))
-        first = stop
-    return blocks
+    return [RowBlock(s.start, s.stop, total) for s in deal_rows(total, n)]
 
 
 def shard_rows(n: int, rows: int) -> list[RowBlock]:
