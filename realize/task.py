@@ -3,7 +3,9 @@ the goal predicate psi_g and the final cost, parsed and checked from a task conf
 
 What it does: turns a mapping such as ``configs/task/pick_place.yaml`` into a ``TaskSpec`` and
 checks every name against the scene and the action templates, with errors that name the file
-and key (``realize.config.ConfigError``). A plan is written as strings ``"move_to(Table1)"`` or
+and key (``realize.config.ConfigError``). A region may name the object it is written relative to
+(``frame: cube``; ``realize.frames``): the layout holds it placed in the world frame, and
+``TaskSpec.frames`` remembers the frame (a warm start carries distributions with it). A plan is written as strings ``"move_to(Table1)"`` or
 as ``{move_to: [Table1]}``.
 What it doesn't: simulate (``realize.realization``), or plan symbolically (``realize.pddl``; the
 resulting actions enter here through ``plan_from_actions``).
@@ -16,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 from realize.config import ConfigError
+from realize.frames import WORLD, object_frames, place_region
 from realize.geometry import SceneGeometry
 from realize.param_layout import ParamLayout, region_from_dict
 from realize.regions import Box, Region
@@ -50,6 +53,12 @@ class TaskSpec:
     final_cost: float = 0.0
     source: str = "task"
     planner: dict[str, Any] = field(default_factory=dict)
+    # the frame each parameter's region was written in (``realize.frames``); the layout holds
+    # the regions placed in the world frame
+    frames: dict[str, str] = field(default_factory=dict)
+
+    def frame_of(self, param: str) -> str:
+        return self.frames.get(param, WORLD)
 
     @property
     def n_actions(self) -> int:
@@ -115,13 +124,23 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
     if not isinstance(params, Mapping) or not params:
         raise ConfigError(f"{source}:params must be a non-empty mapping of name -> region")
     regions: dict[str, Region] = {}
+    frames: dict[str, str] = {}
+    known_frames = object_frames(scene)
     for name, rd in params.items():
+        where = f"{source}:params.{name}"
+        rd = dict(rd) if isinstance(rd, Mapping) else rd
+        frame = str(rd.pop("frame", WORLD)) if isinstance(rd, dict) else WORLD
+        if frame not in known_frames:
+            raise ConfigError(f"{where}.frame = {frame!r} is invalid: this scene's frames are {sorted(known_frames)}")
         try:
-            regions[str(name)] = region_from_dict(dict(rd), where=f"{source}:params.{name}")
+            region = region_from_dict(rd, where=where)
         except ConfigError:
             raise
         except (ValueError, TypeError, KeyError) as e:
             raise ConfigError(str(e)) from None
+        regions[str(name)] = place_region(region, known_frames[frame], where)
+        if frame != WORLD:
+            frames[str(name)] = frame
     layout = ParamLayout(regions)
     planner = dict(d.get("planner") or {})
     plan_items = d.get("plan")
@@ -151,7 +170,7 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
         if goal.cube_in_box not in containers:
             raise ConfigError(f"{source}:goal.cube_in_box names unknown object {goal.cube_in_box!r}; containers: {containers}")
     final_cost = float(d.get("final_cost", 0.0))
-    return TaskSpec(str(d.get("name", "task")), layout, plan, goal, final_cost, source, planner)
+    return TaskSpec(str(d.get("name", "task")), layout, plan, goal, final_cost, source, planner, frames)
 
 
 def plan_from_actions(actions: Sequence[Any], layout: ParamLayout, templates: Mapping[str, Any],
@@ -171,4 +190,4 @@ def task_for_plan(task: TaskSpec, plan: Sequence[ActionSpec]) -> TaskSpec:
         used.add(task.goal.base_in)
     regions = {n: r for n, r in task.layout.regions.items() if n in used}
     return TaskSpec(task.name, ParamLayout(regions), list(plan), task.goal, task.final_cost, task.source,
-                    dict(task.planner))
+                    dict(task.planner), {n: f for n, f in task.frames.items() if n in regions})
