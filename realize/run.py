@@ -16,7 +16,8 @@ with ``task.planner.top_k > 1``) and the sinks, in their order per iteration:
 and runs ``realize.loop.search_loop``. ``resume=<run dir>`` continues that run (one plan or
 top-k) in its own directory from its checkpoint with its saved config: the searcher's
 ``load_state_dict`` and the history files restore it, and on CPU the final result equals that
-of an uninterrupted run. SIGINT/SIGTERM end a run as ``interrupted`` (exit code 130/143).
+of an uninterrupted run. ``warm_start=<run dir>`` starts the search from that earlier run's
+final distribution (``realize.warm_start``; read before anything is simulated). SIGINT/SIGTERM end a run as ``interrupted`` (exit code 130/143).
 What it doesn't: parse the command line (``realize.cli``), or search, simulate and write
 files itself (``realize.loop``, ``realize.sinks``, ``realize.run_dir``).
 """
@@ -52,6 +53,7 @@ from realize.sinks.files import CheckpointSink, ResultSink, RunClock
 from realize.sinks.progress import ProgressSink
 from realize.sinks.rerun import RerunSink, recording_name
 from realize.sinks.trajectories import TrajectorySink
+from realize.warm_start import WarmStart, load_warm_start
 
 __all__ = ["run", "RunOutcome", "RESUME_ALLOWED_PREFIXES"]
 
@@ -151,12 +153,16 @@ class _Assembly:
         self.spec, self.run_dir, self.rd, self.clock = spec, run_dir, RunDir(run_dir), clock
         self.tasks = list(spec.candidates) if spec.halving else [spec.task]
         self.keys: list[int | None] = list(range(len(self.tasks))) if spec.halving else [None]
+        self.warm: WarmStart | None = None
+        if spec.warm_start is not None and ckpt is None:  # a resumed run goes on from its checkpoint
+            self.warm = load_warm_start(spec.warm_start, spec.task, spec.geometry, spec.ce)
         self.searcher = self._searcher()
         histories, records = self._restore(ckpt)
         self.start = self.searcher.iterations_done
         clock.before = 0.0 if ckpt is None else ckpt.wall_time_s
         self.info = RunInfo(segments=1 if ckpt is None else ckpt.segments + 1,
-                            resumed_from_iteration=None if ckpt is None else ckpt.iteration)
+                            resumed_from_iteration=None if ckpt is None else ckpt.iteration,
+                            warm_start=self._warm_record(ckpt))
         self.result = ResultSink(self.rd, self._doc, self.searcher.report(), records)
         self.sinks = self._sinks(histories, records)
 
@@ -167,7 +173,17 @@ class _Assembly:
             plans = [CandidateSpec(t.describe(), t.layout, t.n_actions) for t in self.tasks]
             return SuccessiveHalving(plans, spec.ce, spec.budget, device=spec.placement.device,
                                      top_k=spec.planner.top_k)
-        return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device)
+        return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device,
+                                     warm=None if self.warm is None else self.warm.distribution)
+
+    def _warm_record(self, ckpt: Checkpoint | None) -> dict[str, Any] | None:
+        """What result.json says of the warm start (a resumed run keeps its earlier record)."""
+        if self.warm is not None:
+            return self.warm.to_dict()
+        if ckpt is not None and self.spec.warm_start is not None:
+            earlier = (self.rd.result_json() or {}).get("warm_start")
+            return earlier if isinstance(earlier, dict) else {"run_dir": self.spec.warm_start}
+        return None
 
     def _restore(self, ckpt: Checkpoint | None) -> tuple[dict[int | None, History], list[IterationSummary]]:
         """Fresh histories, or the checkpoint's state, histories and records (``ConfigError``)."""

@@ -40,7 +40,7 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers")
-TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file")
+TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "warm_start")
 DEVICES = ("auto", "cpu", "cuda")
 _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
 _BACKEND_DEVICE = {"cpu": "cpu", "gpu": "cuda"}
@@ -72,6 +72,7 @@ class _TopLevel(Settings):
     device: str = setting("auto", choices=DEVICES)
     resume: str | None = None
     task_file: str | None = None
+    warm_start: str | None = None
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,7 @@ class RunSpec:
     # the candidate plans' tasks ([task] unless planner.top_k > 1) and their halving budget
     candidates: list[TaskSpec] = field(default_factory=list)
     budget: HalvingBudget | None = None
+    warm_start: str | None = None  # an earlier run directory the search starts from (realize.warm_start)
 
     @property
     def halving(self) -> bool:
@@ -178,7 +180,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     d = as_mapping(d, "config")
     check_unknown(d, list(TOP_LEVEL_KEYS), "config")
     top = {k: v for k, v in d.items() if k not in GROUPS}
-    for k in ("resume", "task_file"):
+    for k in ("resume", "task_file", "warm_start"):
         if top.get(k) is not None:
             top[k] = str(top[k])
     keys = _TopLevel.from_mapping(top, "")
@@ -204,6 +206,9 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     split = shardable(placement.backend)
     n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if split else ce.n_envs))
     worker_count(workers, n_shards, split, cores=n_shards)  # refuses what cannot work
+    if keys.warm_start is not None and planner.top_k > 1:
+        raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
+                          f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
     budget = None
     if planner.top_k > 1:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)
@@ -224,4 +229,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         planner=planner,
         candidates=candidates,
         budget=budget,
+        warm_start=keys.warm_start,
     )

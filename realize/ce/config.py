@@ -50,6 +50,10 @@ class CEConfig(Settings):
     number) is what an infeasible neighbour costs there (null: the evaluator's
     ``EvalResult.failure_cost``, e.g. the rollout's horizon in control steps).
 
+    Warm start (top-level ``warm_start=RUN_DIR``, ``realize.warm_start``): iteration 0 draws
+    from that run's final distribution, its std times ``warm_widen``, with a share
+    ``warm_uniform_share`` of uniform samples so that a changed world is still explored.
+
     ``dtype``: the search's bookkeeping dtype (sampling, ranking, refits). ``keep_samples``:
     keep each iteration's ``Z`` in its record.
     """
@@ -72,6 +76,8 @@ class CEConfig(Settings):
     n_modes: int = setting(1, ge=1, help="1 = a single Gaussian")
     knn_robust: int = setting(0, ge=0, help="0 = off")
     failure_cost: float | None = None
+    warm_widen: float = setting(2.0, ge=1, help="warm start: the earlier run's std times this")
+    warm_uniform_share: float = setting(0.2, ge=0, lt=1, help="warm start: share of iteration 0 drawn uniformly")
     dtype: str = setting("float64", choices=tuple(DTYPES))
     keep_samples: bool = True
 

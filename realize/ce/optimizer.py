@@ -3,7 +3,9 @@
 What it does: generic over any batched evaluator (cost, feasibility and a progress score per
 row), so it runs and is tested without a simulator; it implements ``realize.searcher.Searcher``.
 
-* Iteration 0 samples each parameter uniformly over its region (``ParamLayout.sample_uniform``).
+* Iteration 0 samples each parameter uniformly over its region (``ParamLayout.sample_uniform``),
+  or, warm-started (``warm``: a ``WarmDistribution``), from a given distribution with a share
+  of uniform samples.
 * Later iterations sample an independent normal per column of Z (or a mixture of ``n_modes``
   of them, ``realize.ce.mixture``) refit from the elite set of the previous iteration and
   ``project`` the draws back into the regions. Optionally a share of each batch is drawn
@@ -48,7 +50,7 @@ from realize.ce.ranking import (
     robust_order,
     sort_key,
 )
-from realize.ce.state import CEResult, CEState, IterationRecord
+from realize.ce.state import CEResult, CEState, IterationRecord, WarmDistribution
 from realize.param_layout import ParamLayout
 from realize.searcher import Batch, EvalResult, SearchReport
 
@@ -73,6 +75,7 @@ class CrossEntropyOptimizer:
         config: CEConfig,
         device: torch.device | str | None = None,
         state: CEState | None = None,
+        warm: WarmDistribution | None = None,
     ) -> None:
         if not isinstance(layout, ParamLayout):
             raise TypeError(f"layout must be a ParamLayout, got {type(layout).__name__}")
@@ -82,7 +85,12 @@ class CrossEntropyOptimizer:
         self.dtype = config.torch_dtype
         self._gen = torch.Generator(device="cpu")
         self._gen.manual_seed(config.seed)
-        if state is None:
+        self._warm_share: float | None = None
+        if state is None and warm is not None:
+            self._state = self._check_state(CEState(iteration=0, rng_state=self._gen.get_state(), mean=warm.mean,
+                                                    std=warm.std, weights=warm.weights))
+            self._warm_share = warm.uniform_share
+        elif state is None:
             self._state = CEState(iteration=0, rng_state=self._gen.get_state())
         else:
             self._state = self._check_state(state.copy())
@@ -162,7 +170,7 @@ class CrossEntropyOptimizer:
             raise RuntimeError("tell() called without a pending batch; call ask() first")
         batch, t0 = self._pending
         Z = batch.Z
-        source = "uniform" if batch.mean is None else "gaussian"
+        source = "uniform" if batch.mean is None else "warm" if self._warm_first else "gaussian"
         cfg, s = self.config, self._state
         n = Z.shape[0]
         r = result.to_cpu(n, self.dtype)
@@ -268,11 +276,17 @@ class CrossEntropyOptimizer:
 
     # ---- internals ---------------------------------------------------------------------
 
+    @property
+    def _warm_first(self) -> bool:
+        """Whether the current iteration is the first of a warm-started search."""
+        return self._warm_share is not None and self._state.iteration == 0
+
     def _sample(self, n: int) -> Tensor:
         s, g = self._state, self._gen
         if s.mean is None or s.std is None:
             return self.layout.sample_uniform(n, g, self.dtype)
-        n_u = int(round(self.config.uniform_share * n))
+        share = self._warm_share if self._warm_first else self.config.uniform_share
+        n_u = int(round(share * n))
         n_g = n - n_u
         eps = torch.randn(n_g, self.layout.dim, generator=g, dtype=self.dtype)
         if s.weights is None:

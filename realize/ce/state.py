@@ -24,7 +24,7 @@ from torch import Tensor
 
 from realize.run_dir.summaries import IterationSummary
 
-__all__ = ["CEState", "IterationRecord", "CEResult"]
+__all__ = ["CEState", "IterationRecord", "CEResult", "WarmDistribution"]
 
 
 def _t2l(t: Tensor | None) -> list | None:
@@ -131,6 +131,19 @@ class CEState:
 
 
 @dataclass
+class WarmDistribution:
+    """Where a warm-started search begins instead of uniform sampling (``realize.warm_start``
+    builds it from an earlier run): ``mean``/``std`` ``(D,)``, or ``(k, D)`` with ``weights``
+    ``(k,)`` for a k-mode mixture (k = ``ce.n_modes``), and the share of iteration 0's batch
+    that is still drawn uniformly over the regions (later iterations use ``ce.uniform_share``)."""
+
+    mean: Tensor
+    std: Tensor
+    weights: Tensor | None = None
+    uniform_share: float = 0.0
+
+
+@dataclass
 class IterationRecord:
     """One CE iteration, all tensors on the CPU.
 
@@ -138,7 +151,7 @@ class IterationRecord:
     ``progress``/``distance`` (N,) the evaluation; ``elite_idx`` the rows used for the refit, best first
     (or, when the distribution was kept, the feasible rows); ``mean``/``std`` (D,) the
     distribution *after* this iteration's update (``None`` while still uniform);
-    ``sampled_from`` is ``"uniform"`` or ``"gaussian"``; ``refit`` says what happened:
+    ``sampled_from`` is ``"uniform"``, ``"gaussian"`` or ``"warm"`` (iteration 0 of a warm start); ``refit`` says what happened:
     ``"elite"`` (>= n_elite feasible), ``"fallback_progress"``, ``"feasible_only"`` or ``"kept"``.
     ``best_cost`` is the best feasible cost of all iterations so far (inf if none; never
     increases); ``iteration_best_cost`` the best feasible cost of this batch. Elite cost stats

@@ -64,6 +64,7 @@ class RunInfo:
     n_envs: int | None = None
     setup_time_s: float | None = None
     workers: int = 1  # rollout workers (realize.workers); never changes the numbers
+    warm_start: dict[str, Any] | None = None  # the earlier run the search started from (realize.warm_start)
 
 
 def package_versions() -> dict[str, str | None]:
@@ -139,6 +140,7 @@ def result_doc(
         n_envs=info.n_envs,
         setup_time_s=math.nan if info.setup_time_s is None else info.setup_time_s,
         workers=info.workers,
+        warm_start=info.warm_start,
         halving=halving,
     )
 

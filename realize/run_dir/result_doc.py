@@ -18,7 +18,8 @@ JSON keys (the ones readers rely on): ``status`` (running | done | interrupted |
 ``elite_per_iter`` ([{n_elite, refit, cost_min, cost_mean, cost_max}]), ``iteration_time_s``,
 ``final_mean``/``final_std``/``final_weights``, ``wall_time_s``, ``seed``, ``task`` ({name,
 source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments``,
-``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``;
+``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``,
+``warm_start`` (null, or the earlier run it started from: ``realize.warm_start``);
 top-k runs add ``top_k``, ``n_candidates``, ``leader``, ``winner``, ``budget``,
 ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
@@ -185,6 +186,7 @@ class ResultDoc:
     n_envs: int | None = None
     setup_time_s: float = NAN
     workers: int = 1
+    warm_start: dict[str, Any] | None = None  # realize.warm_start.WarmStart.to_dict(): where the search began
     halving: HalvingDoc | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -233,6 +235,7 @@ class ResultDoc:
             "n_envs": self.n_envs,
             "setup_time_s": encode_float(self.setup_time_s),
             "workers": self.workers,
+            "warm_start": json_safe(self.warm_start),
         }
         if h is not None:
             doc.update(h.to_json())
@@ -285,6 +288,7 @@ class ResultDoc:
             n_envs=_opt_int(d.get("n_envs")),
             setup_time_s=decode_float(d.get("setup_time_s")),
             workers=int(d.get("workers") or 1),
+            warm_start=d.get("warm_start") if isinstance(d.get("warm_start"), dict) else None,
             halving=HalvingDoc.from_json(d) if d.get("candidates") is not None else None,
             extra={k: v for k, v in d.items() if k not in known},
         )
