@@ -198,6 +198,9 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
             raise ConfigError("task: no task given (choose task=<name> or task_file=<path.yaml>)")
     planner = PlannerSettings.from_mapping(task_d.get("planner"), f"{source}:planner")
     check_halving_budget(planner, ce, source)  # before the planner runs
+    if keys.warm_start is not None and planner.top_k > 1:
+        raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
+                          f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
     task, candidates = build_task_candidates(task_d, geometry, source, planner)
     workers = WorkersSettings.from_mapping(d.get("workers"))
     from realize.scene.backends import shardable
@@ -206,9 +209,6 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     split = shardable(placement.backend)
     n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if split else ce.n_envs))
     worker_count(workers, n_shards, split, cores=n_shards)  # refuses what cannot work
-    if keys.warm_start is not None and planner.top_k > 1:
-        raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
-                          f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
     budget = None
     if planner.top_k > 1:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)

@@ -144,12 +144,11 @@ def test_a_warm_start_at_the_optimum_beats_a_cold_start_of_the_same_budget():
     assert hot.best_cost < 0.05 < cold.best_cost
 
 
-def test_cli_refuses_a_missing_warm_start_run_before_simulating(tmp_path):
-    from tests.test_app import realize_cmd
+def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path):
+    from realize.run import run
 
-    p = realize_cmd(f"warm_start={tmp_path / 'nowhere'}", "ce.n_envs=4", "ce.n_elite=2", "ce.iterations=1",
-                    f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
-    assert p.returncode == 2, p.stderr[-2000:]
-    assert "warm_start = " in p.stderr and "is not a directory" in p.stderr
-    assert "Traceback" not in p.stderr
-    assert json.loads((tmp_path / "run" / "result.json").read_text())["status"] == "failed"
+    cfg = compose_config(f"warm_start={tmp_path / 'nowhere'}", "ce.n_envs=4", "ce.n_elite=2", "ce.iterations=1")
+    with pytest.raises(ConfigError, match="warm_start = .*nowhere.*is not a directory"):
+        run(cfg, tmp_path / "run")
+    doc = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert doc["status"] == "failed" and "is not a directory" in doc["error"]
