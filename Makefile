@@ -11,7 +11,7 @@ run: setup
 	$(PY) -m realize experiment=seed_paper $(ARGS)
 
 test: setup
-	$(PY) -m pytest -m "not slow" -q $(ARGS)
+	$(PY) -m pytest -m "not slow" -q --durations=20 $(ARGS)
 
 test-all: setup
 	$(PY) -m pytest -q $(ARGS)
