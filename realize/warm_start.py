@@ -3,7 +3,9 @@
 What it does: ``load_warm_start(run_dir, task, geometry, ce)`` reads the earlier run's
 ``result.json`` (its plan, parameter columns, final distribution and resolved config), refuses a
 run that cannot seed this one (another plan, other parameters, no fitted distribution yet, a
-top-k run) with a ``ConfigError`` that names both sides, and returns a ``WarmStart``:
+top-k run) with a ``ConfigError`` that names both sides, and returns a ``WarmStart``. This
+run's plan may be the tail of the earlier one (a replan of the remaining actions): the
+distribution is then the marginal over the columns this run has.
   * every parameter whose region follows an object (``frame: cube``, ``frame: table2``;
     ``realize.frames``) has its mean moved by how far that object moved between the earlier
     run's scene config and this one's, so a grasp distribution learnt around the cube stays
@@ -92,14 +94,18 @@ def _source_distribution(d: dict[str, Any], run_dir: str, dtype: torch.dtype) ->
     return m, s, (None if w is None else torch.tensor(w, dtype=dtype))
 
 
-def _check_same_search(d: dict[str, Any], run_dir: str, task: TaskSpec) -> None:
-    plan = d.get("plan")
-    if plan is not None and str(plan) != task.describe():
-        raise _err(run_dir, f"that run realized the plan {plan}; this run realizes {task.describe()}")
+def _columns_of(d: dict[str, Any], run_dir: str, task: TaskSpec) -> list[int]:
+    """Which of the earlier run's columns this run's are (its plan equal to, or the tail of, the
+    earlier plan; its columns among the earlier ones)."""
+    plan, mine = d.get("plan"), task.describe()
+    if plan is not None and not (str(plan) == mine or str(plan).endswith(", " + mine)):
+        raise _err(run_dir, f"that run realized the plan {plan}; this run realizes {mine}")
     cols = [str(c) for c in d.get("columns") or []]
     want = task.layout.column_names
-    if cols != want:
+    missing = [c for c in want if c not in cols]
+    if missing or (str(plan) == mine and cols != want):
         raise _err(run_dir, f"that run's parameters are {cols}; this run's are {want}")
+    return [cols.index(c) for c in want]
 
 
 def _old_frames(d: dict[str, Any], run_dir: str) -> dict[str, Any]:
@@ -117,12 +123,14 @@ def load_warm_start(run_dir: str | Path, task: TaskSpec, geometry: SceneGeometry
     cannot be; see the module docstring)."""
     where = str(run_dir)
     d, _ = _read(where)
-    _check_same_search(d, where, task)
+    keep = _columns_of(d, where, task)
     dtype = ce.torch_dtype
     mean, std, weights = _source_distribution(d, where, dtype)
     D, k_old = task.layout.dim, (1 if weights is None else weights.numel())
-    if mean.shape[-1] != D or std.shape != mean.shape:
-        raise _err(where, f"its final distribution has shape {tuple(mean.shape)}; this run's parameters need {D} columns")
+    n_cols = len(d.get("columns") or [])
+    if mean.shape[-1] != n_cols or std.shape != mean.shape:
+        raise _err(where, f"its final distribution has shape {tuple(mean.shape)} for {n_cols} parameter columns")
+    mean, std = mean[..., keep], std[..., keep]
     old_frames, new_frames = _old_frames(d, where), object_frames(geometry)
     moved: dict[str, list[float]] = {}
     rows = mean.reshape(-1, D).clone()

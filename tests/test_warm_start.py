@@ -152,3 +152,18 @@ def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path):
         run(cfg, tmp_path / "run")
     doc = json.loads((tmp_path / "run" / "result.json").read_text())
     assert doc["status"] == "failed" and "is not a directory" in doc["error"]
+
+
+def test_a_plan_tail_starts_from_the_marginal_of_the_earlier_run(tmp_path):
+    from realize.task import task_for_plan
+
+    src = _source_run(tmp_path / "src")
+    spec = _spec("ce.warm_widen=1.0")
+    tail = task_for_plan(spec.task, spec.task.plan[2:])  # move_to(Table2), place(Cube_p), move_to(Exit)
+    ws = load_warm_start(str(src), tail, spec.geometry, spec.ce)
+    full = spec.task.layout.column_names
+    want = torch.tensor([0.1 * full.index(c) for c in tail.layout.column_names], dtype=F64)
+    assert tail.layout.column_names[0] == "Table2.x" and torch.allclose(ws.distribution.mean, want)
+    head = task_for_plan(spec.task, spec.task.plan[:2])  # not a tail: refused
+    with pytest.raises(ConfigError, match="this run realizes move_to\\(Table1\\), grasp\\(Cube_g\\)"):
+        load_warm_start(str(src), head, spec.geometry, spec.ce)
