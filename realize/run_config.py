@@ -34,7 +34,9 @@ from realize.workers.settings import WorkersSettings, worker_count
 
 if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` starts fast
     from realize.geometry import GeometryCfg, SceneGeometry
+    from realize.replan import ReplanSpec
     from realize.scene.settings import SimSettings
+    from realize.scene.state import SceneState
     from realize.task import TaskSpec
 
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
@@ -107,6 +109,13 @@ class RunSpec:
     # the candidate plans' tasks ([task] unless planner.top_k > 1) and their halving budget
     candidates: list[TaskSpec] = field(default_factory=list)
     budget: HalvingBudget | None = None
+    # replan_from: the plan's remaining actions from a given state (realize.replan); None otherwise
+    replan: ReplanSpec | None = None
+
+    @property
+    def start(self) -> SceneState | None:
+        """The state every rollout starts from (a replan's), or None: the task's initial state."""
+        return None if self.replan is None else self.replan.state
 
     @property
     def halving(self) -> bool:

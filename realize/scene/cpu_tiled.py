@@ -230,6 +230,18 @@ class CpuTiledBackend(PhysicsBackend):
             body.set_linear_velocity(np.zeros(3, dtype=np.float32))
             body.set_angular_velocity(np.zeros(3, dtype=np.float32))
 
+    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+        zeros = np.zeros(self._arts[0].dof, dtype=np.float32)
+        for c, art in enumerate(self._arts):
+            art.set_qpos(qpos[c].numpy().astype(np.float32))
+            art.set_qvel(zeros)
+        for c, body in enumerate(self._cube_bodies):
+            p = cube_pose[c, :3].numpy() + np.array([*self._offsets[c].tolist(), 0.0], dtype=np.float32)
+            body.entity.set_pose(sapien.Pose(p, cube_pose[c, 3:].numpy()))
+            body.set_linear_velocity(np.zeros(3, dtype=np.float32))
+            body.set_angular_velocity(np.zeros(3, dtype=np.float32))
+        self._write_all = True
+
     def _cube_shapes(self) -> list:
         shapes = []
         for body in self._cube_bodies:

@@ -142,6 +142,12 @@ class PhysicsBackend(ABC):
         """Teleport every copy's cube to ``positions`` (N, 3, CPU float32), axis-aligned, at rest."""
 
     @abstractmethod
+    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+        """Teleport every copy, after a reset: robot joints to ``qpos`` (N, 15, in the order of
+        ``qpos()``, base joints relative to the task's robot start) at rest, cube to ``cube_pose``
+        (N, 7, local frame, wxyz) at rest. Both CPU float32."""
+
+    @abstractmethod
     def cube_friction(self) -> torch.Tensor:
         """(N, 2) static and dynamic friction of each copy's cube (float64)."""
 
