@@ -16,7 +16,9 @@ with ``task.planner.top_k > 1``) and the sinks, in their order per iteration:
 and runs ``realize.loop.search_loop``. ``resume=<run dir>`` continues that run (one plan or
 top-k) in its own directory from its checkpoint with its saved config: the searcher's
 ``load_state_dict`` and the history files restore it, and on CPU the final result equals that
-of an uninterrupted run. SIGINT/SIGTERM end a run as ``interrupted`` (exit code 130/143).
+of an uninterrupted run. ``replan_from=<run dir>`` (``realize.replan``) starts a new run from
+that run's saved config with the command line's changes on top, over the plan's remaining
+actions from a given state. SIGINT/SIGTERM end a run as ``interrupted`` (exit code 130/143).
 What it doesn't: parse the command line (``realize.cli``), or search, simulate and write
 files itself (``realize.loop``, ``realize.sinks``, ``realize.run_dir``).
 """
@@ -37,6 +39,7 @@ from realize.candidates import CandidateSpec, SuccessiveHalving
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.config import ConfigError
 from realize.loop import search_loop
+from realize.replan import replan_config, replan_search_state
 from realize.workers.pool import RolloutPool, open_pool
 from realize.run_config import RunSpec, build_run_spec
 from realize.run_dir.build import RunInfo, failure_doc, result_doc
@@ -137,6 +140,8 @@ def run(
                 raise ConfigError(str(e)) from None
             run_dir = Path(str(current["resume"]))
             current = _resume_config(current, ckpt, cli_overrides)
+        elif current.get("replan_from") is not None:  # the earlier run's config, the world's changes on top
+            current = replan_config(current, cli_overrides)
         assembled = _Assembly(build_run_spec(current), run_dir, ckpt, clock)
     except ConfigError as e:
         RunDir(out_dir).write_failure(failure_doc(str(e), config=current))
@@ -167,7 +172,8 @@ class _Assembly:
             plans = [CandidateSpec(t.describe(), t.layout, t.n_actions) for t in self.tasks]
             return SuccessiveHalving(plans, spec.ce, spec.budget, device=spec.placement.device,
                                      top_k=spec.planner.top_k)
-        return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device)
+        start = None if spec.replan is None else replan_search_state(spec)  # the warm-start seam
+        return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device, state=start)
 
     def _restore(self, ckpt: Checkpoint | None) -> tuple[dict[int | None, History], list[IterationSummary]]:
         """Fresh histories, or the checkpoint's state, histories and records (``ConfigError``)."""
@@ -199,10 +205,13 @@ class _Assembly:
     def _doc(self, status: str, error: str | None, report: SearchReport,
              records: Sequence[IterationSummary]) -> ResultDoc:
         spec, lead = self.spec, report.lead
-        return result_doc(status=status, state=report.state, summaries=[r for r in records if r.candidate == lead],
+        doc = result_doc(status=status, state=report.state, summaries=[r for r in records if r.candidate == lead],
                           task=self.tasks[0 if lead is None else lead], iterations=spec.ce.iterations,
                           seed=spec.seed, config=spec.config, run_dir=self.run_dir, wall_time_s=self.clock.wall(),
                           error=error, info=self.info, halving=report.halving)
+        if spec.replan is not None:  # where this run replanned from
+            doc.extra["replan"] = spec.replan.to_json()
+        return doc
 
     def _sinks(self, histories: dict[int | None, History], records: list[IterationSummary]) -> list[Sink]:
         spec, padding = self.spec, self.spec.rollout.astar.padding

@@ -2,8 +2,8 @@
 
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
 the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers`` and the top-level keys
-``seed``, ``device``, ``resume``, ``task_file``) and returns a ``RunSpec`` of validated objects
-(``TaskSpec``, ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
+``seed``, ``device``, ``resume``, ``task_file``, ``replan_from``, ``replan``) and returns a
+``RunSpec`` of validated objects (``TaskSpec`` (a replan's: the remaining actions, ``realize.replan``), ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
 tensors live and the search's dtype). Every problem raises ``realize.config.ConfigError`` with
 a one-line message naming the key (or file), the value and what is allowed; nothing later
@@ -36,13 +36,13 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
     from realize.geometry import GeometryCfg, SceneGeometry
     from realize.replan import ReplanSpec
     from realize.scene.settings import SimSettings
-    from realize.scene.state import SceneState
+    from realize.scene_state import SceneState
     from realize.task import TaskSpec
 
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers")
-TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file")
+TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "replan_from", "replan")
 DEVICES = ("auto", "cpu", "cuda")
 _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
 _BACKEND_DEVICE = {"cpu": "cpu", "gpu": "cuda"}
@@ -74,6 +74,7 @@ class _TopLevel(Settings):
     device: str = setting("auto", choices=DEVICES)
     resume: str | None = None
     task_file: str | None = None
+    replan_from: str | None = None  # an earlier run whose remaining actions to realize (realize.replan)
 
 
 @dataclass(frozen=True)
@@ -186,8 +187,8 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
     check_unknown(d, list(TOP_LEVEL_KEYS), "config")
-    top = {k: v for k, v in d.items() if k not in GROUPS}
-    for k in ("resume", "task_file"):
+    top = {k: v for k, v in d.items() if k not in GROUPS and k != "replan"}
+    for k in ("resume", "task_file", "replan_from"):
         if top.get(k) is not None:
             top[k] = str(top[k])
     keys = _TopLevel.from_mapping(top, "")
@@ -206,6 +207,14 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     planner = PlannerSettings.from_mapping(task_d.get("planner"), f"{source}:planner")
     check_halving_budget(planner, ce, source)  # before the planner runs
     task, candidates = build_task_candidates(task_d, geometry, source, planner)
+    from realize.replan import check_no_replan, read_replan
+
+    replan = None
+    if keys.replan_from is None:
+        check_no_replan(d.get("replan"))
+    else:  # the plan's remaining actions only, from the given state
+        task, replan = read_replan(keys.replan_from, d.get("replan"), task, planner.top_k)
+        candidates = [task]
     workers = WorkersSettings.from_mapping(d.get("workers"))
     from realize.scene.backends import shardable
     from realize.workers.blocks import shard_rows
@@ -233,4 +242,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         planner=planner,
         candidates=candidates,
         budget=budget,
+        replan=replan,
     )

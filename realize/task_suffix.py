@@ -14,14 +14,14 @@ What it does:
     state without a held cube (it would drop it); ``push`` drives a closed gripper and needs
     none in hand. ``move_to`` assumes nothing: it plans from where the base is and holds the
     arm and the gripper as they are (the rollout starts the gripper command from the state).
-What it doesn't: simulate (``realize.realization``), load state files (``realize.scene.state``)
+What it doesn't: simulate (``realize.realization``), load state files (``realize.scene_state``)
 or read run directories (``realize.replan``).
 """
 
 from __future__ import annotations
 
 from realize.config import ConfigError
-from realize.scene.state import SceneState
+from realize.scene_state import SceneState
 from realize.task import TaskSpec, task_for_plan
 
 __all__ = ["task_suffix", "suffix_columns", "check_suffix_start"]

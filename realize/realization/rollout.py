@@ -39,7 +39,7 @@ from realize.realization.failures import Failure
 from realize.realization.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
 from realize.scene import BatchedScene
-from realize.scene.state import SceneState
+from realize.scene_state import SceneState
 from realize.task import TaskSpec
 
 

@@ -33,7 +33,7 @@ from realize.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
 from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN, WHOLE_BODY_JOINTS
 from realize.scene.settings import EnvOptions, SimSettings
-from realize.scene.state import STATE_JOINTS, SceneState
+from realize.scene_state import STATE_JOINTS, SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
 
