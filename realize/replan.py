@@ -36,8 +36,9 @@ from realize.task import TaskSpec
 from realize.task_suffix import check_suffix_start, suffix_columns, task_suffix
 
 if TYPE_CHECKING:
+    from realize.ce.config import CEConfig
     from realize.ce.state import CEState
-    from realize.run_config import RunSpec
+    from realize.param_layout import ParamLayout
 
 __all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "read_replan", "check_no_replan", "replan_search_state",
            "REFUSED_OVERRIDES"]
@@ -159,15 +160,16 @@ def check_no_replan(d: Any) -> None:
                           "(replan_from=RUN_DIR)")
 
 
-def replan_search_state(spec: RunSpec) -> CEState | None:
-    """THE WARM-START SEAM of a replan: the CE state its search starts from (None: iteration 0
-    draws uniformly over the remaining parameters' regions, as today).
+def replan_search_state(replan: ReplanSpec, ce: CEConfig, layout: ParamLayout) -> CEState | None:
+    """THE WARM-START SEAM of a replan: the CE state its search over ``layout`` (the remaining
+    parameters) starts from; None: iteration 0 draws uniformly over their regions, as today.
 
     To warm-start, return a ``realize.ce.state.CEState`` at iteration 0 (its ``rng_state`` from
-    a generator seeded with ``spec.ce.seed``) whose ``mean``/``std`` (and ``weights`` for
+    a generator seeded with ``ce.seed``) whose ``mean``/``std`` (and ``weights`` for
     ``ce.n_modes > 1``) are the marginal of the earlier run's final distribution
-    (``RunDir(spec.replan.run_dir).result()``: ``final_mean``/``final_std``/``final_weights``)
-    over the columns ``spec.replan.column_index`` (named ``spec.replan.columns``); a
-    diagonal normal's marginal is those columns. ``realize.run`` passes it to the optimizer
-    and records ``warm_start`` in result.json's ``replan``."""
+    (``RunDir(replan.run_dir).result()``: ``final_mean``/``final_std``/``final_weights``) over
+    the columns ``replan.column_index`` (named ``replan.columns``, ``layout``'s columns); a
+    diagonal normal's marginal is those columns. ``realize.run._Assembly._searcher`` passes it
+    to the optimizer; record what was used in result.json's ``replan.warm_start``
+    (``ReplanSpec.to_json(warm_start=...)``, called in ``realize.run._Assembly._doc``)."""
     return None

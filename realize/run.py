@@ -172,7 +172,7 @@ class _Assembly:
             plans = [CandidateSpec(t.describe(), t.layout, t.n_actions) for t in self.tasks]
             return SuccessiveHalving(plans, spec.ce, spec.budget, device=spec.placement.device,
                                      top_k=spec.planner.top_k)
-        start = None if spec.replan is None else replan_search_state(spec)  # the warm-start seam
+        start = None if spec.replan is None else replan_search_state(spec.replan, spec.ce, spec.task.layout)
         return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device, state=start)
 
     def _restore(self, ckpt: Checkpoint | None) -> tuple[dict[int | None, History], list[IterationSummary]]:
