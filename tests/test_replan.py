@@ -116,3 +116,31 @@ def test_captured_state_continues_the_rollout(torch_single_thread: None) -> None
     assert abs(dict(again)[3] - (at[3] - at[2])) <= 2  # move_to(Table2) from the restored base pose
     remainder = float(full.cost[0]) - at[2]
     assert abs(float(rest.cost[0]) - remainder) <= 0.05 * remainder
+
+
+def test_replan_run_writes_where_it_started(tmp_path: Path, torch_single_thread: None) -> None:
+    """``realize replan_from=RUN replan.action=2 replan.state=FILE`` with table 2 moved: one
+    iteration of two plans over the remaining parameters (a short horizon), result.json says
+    where it started."""
+    from realize.cli import preflight
+    from realize.config import ConfigError
+    from realize.run import run
+    from realize.run_dir.jsonio import atomic_write_json, read_json
+
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    atomic_write_json(earlier / "result.json", {"status": "done", "config": compose_config()})
+    with pytest.raises(ConfigError, match="not a realize run directory"):
+        preflight([f"replan_from={tmp_path / 'none'}"])
+    args = [f"replan_from={earlier}", "replan.action=2", f"replan.state={FIXTURE}",
+            "scene.tables.1.center=[0.3,-1.2]", "task.params.Table2.center=[0.3,-1.2]",
+            "task.params.Cube_p.center=[0.3,-1.2,0.7475]", "ce.n_envs=2", "ce.n_elite=1", "ce.iterations=1",
+            "workers.n=1", "controller.max_time_s=4", "logging.rerun=false", "logging.progress=false"]
+    out = run(compose_config(*args), tmp_path / "replan", cli_overrides=args)
+    doc = read_json(tmp_path / "replan" / "result.json")
+    assert out.iterations_done == 1 and doc["plan"] == "move_to(Table2), place(Cube_p), move_to(Exit)"
+    assert doc["columns"] == ["Table2.x", "Table2.y", "Cube_p.x", "Cube_p.y", "Cube_p.z", "Exit.x", "Exit.y"]
+    rp = doc["replan"]
+    assert (rp["from"], rp["action"], rp["state_file"]) == (str(earlier), 2, str(FIXTURE))
+    assert rp["warm_start"] is None and rp["state"]["cube_held"]
+    assert doc["config"]["scene"]["tables"][1]["center"] == [0.3, -1.2]
