@@ -160,7 +160,7 @@ def load_state(path: str | Path, key: str = "state") -> SceneState:
     the file for anything wrong with it."""
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"{key} = {str(path)!r}: no such file (a scene state JSON, see realize/scene/state.py)")
+        raise ConfigError(f"{key} = {str(path)!r}: no such file (a scene state JSON, see realize/scene_state.py)")
     try:
         d = json.loads(p.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:

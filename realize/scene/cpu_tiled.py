@@ -8,7 +8,8 @@ per-body numpy work; contacts other than finger-cube pairs are dropped before th
 read); positions are shifted back by each tile's offset into the copy's local frame. Writes set
 only the drive targets that changed since the last write (all of them after a reset), and wake
 the running robots that got nothing new, as a write would. Resets are history-free (every
-dynamic body leaves the PhysX scene and comes back, see ``after_reset``); frozen robots sleep.
+dynamic body leaves the PhysX scene and comes back, see ``after_reset``; a restored state,
+``set_state``, first flushes the robots' self-contact caches); frozen robots sleep.
 Threads: PhysX ``cpu_workers`` from the core count unless set; torch runs on
 ``sim.torch_threads_cpu`` threads beside them.
 What it doesn't: decide anything, or keep state beyond the SAPIEN handles and the last targets

@@ -6,7 +6,8 @@ written with ManiSkill's batched drive setters and applied by PhysX GPU, and aft
 the GPU buffers are fetched once.
 What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
 copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
-the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA.
+the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA
+(nor has ``set_state``, the restore of a saved state, which no test runs on a GPU).
 """
 
 from __future__ import annotations

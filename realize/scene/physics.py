@@ -4,8 +4,8 @@ What it does:
   * ``PhysicsBackend``: the contract of a backend (``realize.scene.cpu_tiled``,
     ``realize.scene.gpu``): raw per-copy reads in a copy's local frame (joint state, gripper and
     cube poses, cube velocity, finger-cube contact forces), drive-target writes, physics
-    substeps, putting finished copies to sleep, history-free resets, per-copy cube friction and
-    test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
+    substeps, putting finished copies to sleep, history-free resets, teleporting every copy into
+    a restored state (``set_state``), per-copy cube friction and test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
   * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
     variant, ``envs.env_id_for``) with the physics settings and the ``EnvOptions`` (render camera,
     reset noise) as ``gym.make`` kwargs; each backend adds its own (tiles or ``num_envs``).
