@@ -1,9 +1,9 @@
 """The ``realize`` command: check the command line, hand it to Hydra, run, exit with a clear code.
 
 What it does: ``main()`` (console script ``realize`` and ``python -m realize``) runs
-``preflight`` on the arguments (config group choices such as ``experiment=``, a ``resume=``
-directory, and, for a single run, the whole composition), then Hydra, whose task function calls
-``realize.run.run``. Bad input ends with one line ``error: <message>`` on stderr and exit code 2
+``preflight`` on the arguments (config group choices such as ``experiment=``, a ``resume=`` or
+``replan_from=`` directory, and, for a single run, the whole composition), then Hydra, whose
+task function calls ``realize.run.run``. Bad input ends with one line ``error: <message>`` on stderr and exit code 2
 (``realize.guard.EXIT_CONFIG``) before any simulator is built; in a sweep (``-m``) such a job is
 marked failed by Hydra (``SweepJobConfigError``) and the other jobs run. An interrupted run
 exits with 130 (SIGINT) or 143 (SIGTERM); an interrupted sweep stops.
@@ -26,7 +26,7 @@ from realize.config import ConfigError
 from realize.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
 from realize.run import run
-from realize.run_dir.names import CHECKPOINT_FILE
+from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.workers.errors import WorkerFailed
 
 __all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
@@ -97,6 +97,10 @@ def preflight(args: list[str]) -> list[str]:
                 if not (Path(v) / CHECKPOINT_FILE).is_file():
                     raise ConfigError(f"resume: {v} is not a realize run directory (no {CHECKPOINT_FILE})")
                 resume_dir = v
+        if key == "replan_from":
+            for v in values:
+                if v not in ("null", "None") and not (Path(v) / RESULT_FILE).is_file():
+                    raise ConfigError(f"replan_from: {v} is not a realize run directory (no {RESULT_FILE})")
     if resume_dir is not None and not multirun and not has_run_dir:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         args = args + [f"hydra.run.dir={resume_dir}", f"hydra.output_subdir=.hydra/resume-{stamp}"]

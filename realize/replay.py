@@ -41,6 +41,7 @@ from realize.run_dir.directory import BestPlan, RunDir, RunDirError
 from realize.run_dir.names import RESULT_FILE
 from realize.run_config import RunSpec, build_run_spec
 from realize.scene import BatchedScene, Camera, EnvOptions
+from realize.scene_state import SceneState, save_state
 
 __all__ = [
     "ReplayError", "VideoRecorder", "VideoReport", "ReplayReport",
@@ -200,6 +201,9 @@ class ReplayReport:
     backend: str
     wall_time_s: float
     video: VideoReport | None = None
+    state_at: int | None = None  # the action whose starting state was captured (0-based)
+    state_out: str | None = None  # where that state was written
+
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -208,7 +212,7 @@ class ReplayReport:
 def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float = 20.0, every: int = 2,
            width: int | None = 640, height: int | None = 480, eye: Sequence[float] | None = None,
            target: Sequence[float] | None = None, task_camera: bool = False, backend: str = "cpu",
-           hold_s: float = 1.0) -> ReplayReport:
+           hold_s: float = 1.0, state_at: int | None = None, state_out: str | Path | None = None) -> ReplayReport:
     """Re-simulate the run's best plan in one copy; with ``video`` write an MP4 of it.
 
     The video shows every ``every``-th control step at ``fps`` frames per second (the control
@@ -216,12 +220,24 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
     holds the last frame for ``hold_s`` seconds. ``width``/``height`` set the frame size (None:
     the task camera's); the camera sits at ``eye`` looking at ``target``, by default at
     ``video_camera(geometry)``, or where the task's render camera is with ``task_camera``.
+
+    With ``state_at=K`` and ``state_out``, the scene's state at the moment action K (0-based)
+    begins, right after action K-1 succeeded, is written there as a
+    ``realize.scene_state.SceneState`` JSON (``ReplayError`` if the replay never gets there).
     """
     from realize.realizers import open_realization
 
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     spec = build_replay_spec(run, backend)
+    if (state_at is None) != (state_out is None):
+        raise ReplayError("state_at and state_out go together: the action to capture and the file to write")
+    n_actions = spec.task.n_actions
+    if state_at is not None and (isinstance(state_at, bool) or not isinstance(state_at, int)
+                                 or not 0 <= state_at < n_actions):
+        raise ReplayError(f"state_at = {state_at!r} is invalid: the plan {spec.task.describe()} has {n_actions} "
+                          "actions, numbered from 0")
+    captured: list[SceneState] = []
     options = EnvOptions()
     if video is not None:
         if eye is None and target is None and not task_camera:
@@ -235,12 +251,26 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
         with scene:
             if recorder is not None:
                 recorder.attach(scene)
+            if state_at is not None:
+                where = f"replay of {run.run_dir} at the start of action {state_at} ({spec.task.plan[state_at]})"
+
+                def capture(a: int, rows: torch.Tensor) -> None:
+                    if a == state_at and bool((rows == 0).any()):
+                        captured.append(scene.capture_state(0, source=where))
+
+                realizer.action_hook = capture
             res = realizer.rollout(best_z_rows(run))
             vid = recorder.close(hold_s) if recorder is not None else None
             recorder = None
     finally:
         if recorder is not None:  # an error mid-rollout: still close the file
             recorder.close()
+    if state_at is not None:
+        if not captured:
+            raise ReplayError(f"the replay of {run.run_dir} never began action {state_at} (it failed: "
+                              f"{res.failure[0]}); no state written")
+        assert state_out is not None
+        save_state(captured[0], state_out)
     cost = float(res.cost[0])
     saved = run.best_cost if math.isfinite(run.best_cost) else None
     diff = None if saved is None else cost - saved
@@ -248,5 +278,6 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
         run_dir=str(run.run_dir), feasible=bool(res.feasible[0]), cost=cost, saved_cost=saved,
         cost_diff=diff, matches=None if diff is None else diff == 0.0, failure=res.failure[0],
         steps=int(res.steps[0]), n_envs_run=run.n_envs, backend=scene.backend,
-        wall_time_s=time.perf_counter() - t0, video=vid,
+        wall_time_s=time.perf_counter() - t0, video=vid, state_at=state_at,
+        state_out=None if state_out is None else str(state_out),
     )

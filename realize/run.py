@@ -17,7 +17,11 @@ and runs ``realize.loop.search_loop``. ``resume=<run dir>`` continues that run (
 top-k) in its own directory from its checkpoint with its saved config: the searcher's
 ``load_state_dict`` and the history files restore it, and on CPU the final result equals that
 of an uninterrupted run. ``warm_start=<run dir>`` starts the search from that earlier run's
-final distribution (``realize.warm_start``; read before anything is simulated). SIGINT/SIGTERM end a run as ``interrupted`` (exit code 130/143).
+final distribution (``realize.warm_start``; read before anything is simulated).
+``replan_from=<run dir>`` (``realize.replan``) starts a new run from that run's saved config with
+the command line's changes on top, over the plan's remaining actions from a given state,
+warm-started from that run's distribution of those actions (``replan.warm``). SIGINT/SIGTERM
+end a run as ``interrupted`` (exit code 130/143).
 What it doesn't: parse the command line (``realize.cli``), or search, simulate and write
 files itself (``realize.loop``, ``realize.sinks``, ``realize.run_dir``).
 """
@@ -38,6 +42,7 @@ from realize.candidates import CandidateSpec, SuccessiveHalving
 from realize.ce.optimizer import CrossEntropyOptimizer
 from realize.config import ConfigError
 from realize.loop import search_loop
+from realize.replan import replan_config
 from realize.workers.pool import RolloutPool, open_pool
 from realize.run_config import RunSpec, build_run_spec
 from realize.run_dir.build import RunInfo, failure_doc, result_doc
@@ -139,6 +144,8 @@ def run(
                 raise ConfigError(str(e)) from None
             run_dir = Path(str(current["resume"]))
             current = _resume_config(current, ckpt, cli_overrides)
+        elif current.get("replan_from") is not None:  # the earlier run's config, the world's changes on top
+            current = replan_config(current, cli_overrides)
         assembled = _Assembly(build_run_spec(current), run_dir, ckpt, clock)
     except ConfigError as e:
         RunDir(out_dir).write_failure(failure_doc(str(e), config=current))
@@ -154,8 +161,11 @@ class _Assembly:
         self.tasks = list(spec.candidates) if spec.halving else [spec.task]
         self.keys: list[int | None] = list(range(len(self.tasks))) if spec.halving else [None]
         self.warm: WarmStart | None = None
-        if spec.warm_start is not None and ckpt is None:  # a resumed run goes on from its checkpoint
-            self.warm = load_warm_start(spec.warm_start, spec.task, spec.geometry, spec.ce)
+        warm_from = spec.warm_start
+        if warm_from is None and spec.replan is not None and spec.replan.warm:
+            warm_from = spec.replan.run_dir  # a replan starts from that run's distribution of the remaining actions
+        if warm_from is not None and ckpt is None:  # a resumed run goes on from its checkpoint
+            self.warm = load_warm_start(warm_from, spec.task, spec.geometry, spec.ce)
         self.searcher = self._searcher()
         histories, records = self._restore(ckpt)
         self.start = self.searcher.iterations_done
@@ -215,10 +225,13 @@ class _Assembly:
     def _doc(self, status: str, error: str | None, report: SearchReport,
              records: Sequence[IterationSummary]) -> ResultDoc:
         spec, lead = self.spec, report.lead
-        return result_doc(status=status, state=report.state, summaries=[r for r in records if r.candidate == lead],
+        doc = result_doc(status=status, state=report.state, summaries=[r for r in records if r.candidate == lead],
                           task=self.tasks[0 if lead is None else lead], iterations=spec.ce.iterations,
                           seed=spec.seed, config=spec.config, run_dir=self.run_dir, wall_time_s=self.clock.wall(),
                           error=error, info=self.info, halving=report.halving)
+        if spec.replan is not None:  # where this run replanned from
+            doc.extra["replan"] = spec.replan.to_json(warm_start=self.info.warm_start)
+        return doc
 
     def _sinks(self, histories: dict[int | None, History], records: list[IterationSummary]) -> list[Sink]:
         spec, padding = self.spec, self.spec.rollout.astar.padding

@@ -2,8 +2,8 @@
 
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
 the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers`` and the top-level keys
-``seed``, ``device``, ``resume``, ``task_file``) and returns a ``RunSpec`` of validated objects
-(``TaskSpec``, ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
+``seed``, ``device``, ``resume``, ``task_file``, ``replan_from``, ``replan``) and returns a
+``RunSpec`` of validated objects (``TaskSpec`` (a replan's: the remaining actions, ``realize.replan``), ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
 tensors live and the search's dtype). Every problem raises ``realize.config.ConfigError`` with
 a one-line message naming the key (or file), the value and what is allowed; nothing later
@@ -34,13 +34,15 @@ from realize.workers.settings import WorkersSettings, worker_count
 
 if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` starts fast
     from realize.geometry import GeometryCfg, SceneGeometry
+    from realize.replan import ReplanSpec
     from realize.scene.settings import SimSettings
+    from realize.scene_state import SceneState
     from realize.task import TaskSpec
 
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers")
-TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "warm_start")
+TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "warm_start", "replan_from", "replan")
 DEVICES = ("auto", "cpu", "cuda")
 _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
 _BACKEND_DEVICE = {"cpu": "cpu", "gpu": "cuda"}
@@ -73,6 +75,7 @@ class _TopLevel(Settings):
     resume: str | None = None
     task_file: str | None = None
     warm_start: str | None = None
+    replan_from: str | None = None  # an earlier run whose remaining actions to realize (realize.replan)
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,13 @@ class RunSpec:
     candidates: list[TaskSpec] = field(default_factory=list)
     budget: HalvingBudget | None = None
     warm_start: str | None = None  # an earlier run directory the search starts from (realize.warm_start)
+    # replan_from: the plan's remaining actions from a given state (realize.replan); None otherwise
+    replan: ReplanSpec | None = None
+
+    @property
+    def start(self) -> SceneState | None:
+        """The state every rollout starts from (a replan's), or None: the task's initial state."""
+        return None if self.replan is None else self.replan.state
 
     @property
     def halving(self) -> bool:
@@ -179,8 +189,8 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
     check_unknown(d, list(TOP_LEVEL_KEYS), "config")
-    top = {k: v for k, v in d.items() if k not in GROUPS}
-    for k in ("resume", "task_file", "warm_start"):
+    top = {k: v for k, v in d.items() if k not in GROUPS and k != "replan"}
+    for k in ("resume", "task_file", "warm_start", "replan_from"):
         if top.get(k) is not None:
             top[k] = str(top[k])
     keys = _TopLevel.from_mapping(top, "")
@@ -202,6 +212,14 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
                           f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
     task, candidates = build_task_candidates(task_d, geometry, source, planner)
+    from realize.replan import check_no_replan, read_replan
+
+    replan = None
+    if keys.replan_from is None:
+        check_no_replan(d.get("replan"))
+    else:  # the plan's remaining actions only, from the given state
+        task, replan = read_replan(keys.replan_from, d.get("replan"), task, planner.top_k)
+        candidates = [task]
     workers = WorkersSettings.from_mapping(d.get("workers"))
     from realize.scene.backends import shardable
     from realize.workers.blocks import shard_rows
@@ -230,4 +248,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         candidates=candidates,
         budget=budget,
         warm_start=keys.warm_start,
+        replan=replan,
     )

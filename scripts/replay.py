@@ -2,12 +2,14 @@
 
 Usage: python scripts/replay.py RUN_DIR [--video out.mp4] [--fps 20] [--every 2]
                                 [--width 640 --height 480] [--eye X Y Z --target X Y Z | --task-camera]
-                                [--backend cpu|gpu|auto] [--json]
+                                [--backend cpu|gpu|auto] [--json] [--state-at K --state-out FILE]
 
 Reads RUN_DIR/result.json (the resolved config and best_z), rebuilds the task, scene and
 controllers from that config, re-simulates the plan and prints its cost next to the saved
 best_cost. With --video it renders every --every-th control step of copy 0 into an MP4 (on CPU
-through lavapipe). Exit status: 0 if the replay reaches the goal, 1 if not, 2 on a bad run dir.
+through lavapipe). With --state-at K --state-out FILE it writes the scene state at the moment
+action K (0-based) begins, right after action K-1 succeeded (realize/scene_state.py), the state
+`realize replan_from=RUN_DIR replan.action=K replan.state=FILE` starts from. Exit status: 0 if the replay reaches the goal, 1 if not, 2 on a bad run dir.
 """
 
 from __future__ import annotations
@@ -38,13 +40,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hold", type=float, default=1.0, help="seconds to hold the last frame")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
+    ap.add_argument("--state-at", type=int, default=None, metavar="K",
+                    help="capture the scene state when action K (0-based) begins")
+    ap.add_argument("--state-out", type=Path, default=None, metavar="FILE", help="write that state here (JSON)")
     args = ap.parse_args(argv)
     if args.every < 1 or args.fps <= 0 or args.width < 16 or args.height < 16:
         ap.error("--every >= 1, --fps > 0, --width/--height >= 16")
+    if (args.state_at is None) != (args.state_out is None):
+        ap.error("--state-at and --state-out go together")
     try:
         rep = replay(args.run_dir, args.video, fps=args.fps, every=args.every, width=args.width,
                      height=args.height, eye=args.eye, target=args.target,
-                     task_camera=args.task_camera, backend=args.backend, hold_s=args.hold)
+                     task_camera=args.task_camera, backend=args.backend, hold_s=args.hold,
+                     state_at=args.state_at, state_out=args.state_out)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -65,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {v.path}: {v.frames} frames {v.width}x{v.height} @ {v.fps:g} fps = {v.seconds:.1f} s, "
                   f"{v.bytes / 1e6:.2f} MB; render {v.render_s_per_frame * 1e3:.0f} ms/frame "
                   f"(first {v.first_render_s:.1f} s)")
+        if rep.state_out is not None:
+            print(f"wrote {rep.state_out}: the state at the start of action {rep.state_at}")
         print(f"wall time {rep.wall_time_s:.1f} s")
     return 0 if rep.feasible else 1
 

@@ -1,8 +1,9 @@
 """Batched rollout: realize N parameterized plans at once and score them by eq. (2) of the paper.
 
 What it does: for a sample matrix Z (M, D) (M <= the scene's N copies) ``PlanRealizer.rollout``
-resets the batched scene and runs a per-plan action state machine (each plan is in one action of
-the task's plan at a time; a plan whose action fails or times out stops there and is held still),
+resets the batched scene (to the realizer's ``start`` state, if it has one) and runs a per-plan
+action state machine (each plan is in one action of the task's plan at a time; a plan whose
+action fails or times out stops there and is held still),
 stepping physics for all plans together. One ``Rollout`` object holds the per-plan state and runs
 the phases of every control step: ``act`` (templates -> controllers -> commands), ``physics``,
 ``check_faults`` (a plan that diverges, NaN or exploding joint speeds, fails alone),
@@ -20,6 +21,7 @@ know any backend details (``realize.scene``).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 import torch
@@ -37,6 +39,7 @@ from realize.realization.failures import Failure
 from realize.realization.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
 from realize.scene import BatchedScene
+from realize.scene_state import SceneState
 from realize.task import TaskSpec
 
 
@@ -46,6 +49,7 @@ class RealizerSpec(Protocol):
     task: TaskSpec
     rollout: RolloutConfig
     seed: int
+    start: SceneState | None
 
 
 class Rollout:
@@ -57,7 +61,7 @@ class Rollout:
         self.templates = realizer.templates
         n, dev = scene.n_envs, realizer.device
         self.n_envs, self.device, self.m = n, dev, Z.shape[0]
-        scene.reset(seed=realizer.seed)
+        scene.reset(seed=realizer.seed, state=realizer.start)
         self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy)
         self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
         self.n_actions = task.n_actions
@@ -98,10 +102,12 @@ class Rollout:
 
     # ------------------------------------------------------------------ phases
     def start(self) -> None:
-        """Read the reset scene, hold every arm, begin the first action."""
+        """Read the reset scene, hold every arm, keep the gripper as the scene starts it (closed
+        on a held cube of a restored state), begin the first action."""
         ctx = self.ctx
         ctx.read()
         ctx.arm_hold[:] = ctx.q[:, UPPER]
+        ctx.grip_cmd[:] = self.scene.gripper_command()
         self.begin_action(0, torch.nonzero(self.running).flatten())
 
     def _rows_in(self, a: int, mask: Tensor) -> Tensor:
@@ -125,6 +131,8 @@ class Rollout:
         """Plans ``rows`` enter action ``a``; those that fail at once stop, arm held."""
         spec = self.task.plan[a]
         name = spec.params[0]
+        if self.realizer.action_hook is not None:
+            self.realizer.action_hook(a, rows)
         code = self._template(a).begin(self.ctx, rows, self._padded(name, rows), self.realizer.layout.regions[name])
         bad = code > 0
         if bad.any():
@@ -274,8 +282,12 @@ class PlanRealizer:
     """Realizes a task's plan for batches of parameter samples in one batched scene."""
 
     def __init__(self, task: TaskSpec, scene: BatchedScene, cfg: RolloutConfig | None = None, seed: int = 0,
-                 fabric_dtype: torch.dtype = torch.float32):
+                 fabric_dtype: torch.dtype = torch.float32, start: SceneState | None = None):
         self.task, self.scene = task, scene
+        self.start = start  # every rollout starts from this state (None: the task's initial state)
+        # called as hook(a, rows) when plans ``rows`` (copy indices) are about to begin action a
+        # (replay uses it to capture the state there); None in a search
+        self.action_hook: Callable[[int, Tensor], None] | None = None
         self.cfg = cfg or RolloutConfig()  # checked when it was built
         self.seed = seed
         self.layout = task.layout
@@ -300,7 +312,7 @@ class PlanRealizer:
         """The realizer of a run spec: its task (or ``task``, e.g. a candidate plan's), its
         controller settings and its seed (or ``seed``), in ``scene``."""
         return cls(spec.task if task is None else task, scene, spec.rollout,
-                   seed=spec.seed if seed is None else seed)
+                   seed=spec.seed if seed is None else seed, start=spec.start)
 
     def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
         """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it."""

@@ -31,12 +31,14 @@ from realize.config import ConfigError
 from realize.controllers.body import BASE, BASE_XY, UPPER, YAW
 from realize.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
-from realize.scene.physics import ARM_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN, WHOLE_BODY_JOINTS
+from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN, WHOLE_BODY_JOINTS
 from realize.scene.settings import EnvOptions, SimSettings
+from realize.scene_state import STATE_JOINTS, SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
 
 StepHook = Callable[[int], None]
+RESTORE_SETTLE_STEPS = 1  # control periods a restored held cube is simulated before the first read
 
 
 class SceneSpec(Protocol):
@@ -115,24 +117,58 @@ class BatchedScene:
             raise ConfigError(f"every = {every!r} is invalid: must be an integer >= 1")
         self._hooks.append((hook, every))
 
-    def reset(self, seed: int = 0, randomize: bool = False) -> None:
+    def reset(self, seed: int = 0, randomize: bool = False, state: SceneState | None = None) -> None:
         """Put every copy back in the task's initial state (same state for all unless randomize,
-        or ``env.randomize_resets``). Resets are history-free on a deterministic backend: a
-        rollout in a used scene equals one in a fresh scene bit for bit."""
+        or ``env.randomize_resets``), or, with ``state``, every copy in that state (robot joints,
+        cube pose, gripper command; at rest). Resets are history-free on a deterministic
+        backend: a rollout in a used scene equals one in a fresh scene bit for bit.
+
+        A state whose cube is held is simulated for ``RESTORE_SETTLE_STEPS`` control periods
+        with every target holding (not counted in ``step_count``): the closed fingers then press
+        on the cube, and the contact forces that ``holds_cube`` reads exist before the first
+        action asks."""
         self._frozen.zero_()
         self.env.reset(seed=seed, options=dict(randomize=randomize or self.options.randomize_resets))
         self._impl.after_reset()
+        if state is not None:
+            self._restore(state)
         self.state_changed()
         q = self.whole_body_q()
         self._base_cmd.zero_()
         self._arm_target = q[:, UPPER].clone()
         self._arm_vel_target = torch.zeros_like(self._arm_target)
-        self._grip_target.fill_(GRIPPER_OPEN)
+        closed = state is not None and state.gripper_closed
+        self._grip_target.fill_(GRIPPER_CLOSED if closed else GRIPPER_OPEN)
         self._apply_targets()
+        if state is not None and state.cube_held:
+            for _ in range(RESTORE_SETTLE_STEPS):
+                self._impl.step(self.substeps)
         self.state_changed()  # a caller may move things through ``u`` before the first read
         self.step_count = 0
         for hook, _ in self._hooks:
             hook(0)
+
+    def _restore(self, state: SceneState) -> None:
+        n = self.n_envs
+        row = torch.zeros(len(self.joint_names))
+        base = torch.tensor(state.base, dtype=torch.float32)
+        base[:2] -= self._start_xy.cpu()  # the base joints are relative to the task's robot start
+        for name, v in zip(BASE_JOINTS, base.tolist()):
+            row[self.joint_names.index(name)] = v
+        for name, v in zip(STATE_JOINTS, state.joint_positions()):
+            row[self.joint_names.index(name)] = v
+        pose = torch.tensor([*state.cube_position, *state.cube_quaternion], dtype=torch.float32)
+        self._impl.set_state(row.repeat(n, 1), pose.repeat(n, 1))
+
+    def capture_state(self, copy: int = 0, source: str = "") -> SceneState:
+        """Copy ``copy``'s state now (velocities dropped): what ``reset(state=...)`` restores."""
+        qpos = self._read("qpos", self._impl.qpos)[copy].tolist()
+        base = self.base_pose()[copy].tolist()
+        cube = self.cube_pose()[copy].tolist()
+        return SceneState(base=tuple(base), joints={n: qpos[self.joint_names.index(n)] for n in STATE_JOINTS},
+                          gripper_closed=bool(self._grip_target[copy] == GRIPPER_CLOSED),
+                          cube_position=tuple(cube[:3]), cube_quaternion=tuple(cube[3:]),
+                          cube_held=bool(self.holds_cube()[copy]), source=source)
 
     # ------------------------------------------------------------------ reads
     # Each quantity is read from the simulator once per state: the first read after a change
@@ -170,6 +206,10 @@ class BatchedScene:
     def base_pose(self) -> torch.Tensor:
         """(N, 3) base x, y (local frame) and yaw."""
         return self._read("whole_body_q", self._whole_body_q)[:, BASE].clone()
+
+    def gripper_command(self) -> torch.Tensor:
+        """(N,) bool: the gripper target is closed (the last ``set_gripper``, or the reset's)."""
+        return self._grip_target == GRIPPER_CLOSED
 
     def finger_width(self) -> torch.Tensor:
         """(N,) sum of the two finger joint positions (m): 0.1 fully open."""

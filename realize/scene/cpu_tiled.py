@@ -8,7 +8,8 @@ per-body numpy work; contacts other than finger-cube pairs are dropped before th
 read); positions are shifted back by each tile's offset into the copy's local frame. Writes set
 only the drive targets that changed since the last write (all of them after a reset), and wake
 the running robots that got nothing new, as a write would. Resets are history-free (every
-dynamic body leaves the PhysX scene and comes back, see ``after_reset``); frozen robots sleep.
+dynamic body leaves the PhysX scene and comes back, see ``after_reset``; a restored state,
+``set_state``, first flushes the robots' self-contact caches); frozen robots sleep.
 Threads: PhysX ``cpu_workers`` from the core count unless set; torch runs on
 ``sim.torch_threads_cpu`` threads beside them.
 What it doesn't: decide anything, or keep state beyond the SAPIEN handles and the last targets
@@ -229,6 +230,24 @@ class CpuTiledBackend(PhysicsBackend):
             body.entity.set_pose(sapien.Pose(xyz))
             body.set_linear_velocity(np.zeros(3, dtype=np.float32))
             body.set_angular_velocity(np.zeros(3, dtype=np.float32))
+
+    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+        """One physics substep in the task's initial state first: PhysX keeps the contact caches
+        of the robots' own touching links (the robots stay in the scene on reset), and a state
+        with the arm near the body would otherwise start from the previous rollout's caches
+        (measured: 265 vs 276 steps for the same plan after another restore). The substep
+        replaces them with those of the initial state, the same every time."""
+        self._px.step()
+        zeros = np.zeros(self._arts[0].dof, dtype=np.float32)
+        for c, art in enumerate(self._arts):
+            art.set_qpos(qpos[c].numpy().astype(np.float32))
+            art.set_qvel(zeros)
+        for c, body in enumerate(self._cube_bodies):
+            p = cube_pose[c, :3].numpy() + np.array([*self._offsets[c].tolist(), 0.0], dtype=np.float32)
+            body.entity.set_pose(sapien.Pose(p, cube_pose[c, 3:].numpy()))
+            body.set_linear_velocity(np.zeros(3, dtype=np.float32))
+            body.set_angular_velocity(np.zeros(3, dtype=np.float32))
+        self._write_all = True
 
     def _cube_shapes(self) -> list:
         shapes = []

@@ -6,7 +6,8 @@ written with ManiSkill's batched drive setters and applied by PhysX GPU, and aft
 the GPU buffers are fetched once.
 What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
 copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
-the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA.
+the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA
+(nor has ``set_state``, the restore of a saved state, which no test runs on a GPU).
 """
 
 from __future__ import annotations
@@ -100,6 +101,16 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         self._cube.set_pose(pose)
         self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
         self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+
+    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+        """Not run on a GPU yet: ManiSkill's batched setters, then one apply and fetch."""
+        self._robot.set_qpos(qpos.to(self.device))
+        self._robot.set_qvel(torch.zeros_like(qpos, device=self.device))
+        self._cube.set_pose(cube_pose.to(self.device))  # every GPU sub-scene has its own frame
+        self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        self.u.scene._gpu_apply_all()
+        self.u.scene._gpu_fetch_all()
 
     def cube_friction(self) -> torch.Tensor:
         raise ConfigError(_NO_FRICTION)

@@ -4,8 +4,8 @@ What it does:
   * ``PhysicsBackend``: the contract of a backend (``realize.scene.cpu_tiled``,
     ``realize.scene.gpu``): raw per-copy reads in a copy's local frame (joint state, gripper and
     cube poses, cube velocity, finger-cube contact forces), drive-target writes, physics
-    substeps, putting finished copies to sleep, history-free resets, per-copy cube friction and
-    test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
+    substeps, putting finished copies to sleep, history-free resets, teleporting every copy into
+    a restored state (``set_state``), per-copy cube friction and test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
   * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
     variant, ``envs.env_id_for``) with the physics settings and the ``EnvOptions`` (render camera,
     reset noise) as ``gym.make`` kwargs; each backend adds its own (tiles or ``num_envs``).
@@ -140,6 +140,12 @@ class PhysicsBackend(ABC):
     @abstractmethod
     def place_cube(self, positions: torch.Tensor) -> None:
         """Teleport every copy's cube to ``positions`` (N, 3, CPU float32), axis-aligned, at rest."""
+
+    @abstractmethod
+    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+        """Teleport every copy, after a reset: robot joints to ``qpos`` (N, 15, in the order of
+        ``qpos()``, base joints relative to the task's robot start) at rest, cube to ``cube_pose``
+        (N, 7, local frame, wxyz) at rest. Both CPU float32."""
 
     @abstractmethod
     def cube_friction(self) -> torch.Tensor:

@@ -1,0 +1,135 @@
+"""Scene states as JSON, a plan's remaining actions as a task, and the replan config (no simulator)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from realize.config import ConfigError
+from realize.fetch_joints import FULL_JOINT_NAMES
+from realize.replan import replan_config
+from realize.run_config import build_run_spec
+from realize.run_dir.jsonio import atomic_write_json
+from realize.run_dir.names import RESULT_FILE
+from realize.scene_state import REST_JOINTS, STATE_JOINTS, SceneState, load_state, save_state
+from realize.task_suffix import check_suffix_start, suffix_columns, task_suffix
+from _compose import compose_config
+
+FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"
+MOVED = ["scene.tables.1.center=[0.3,-1.2]"]  # Table2 and Cube_p follow table 2 (frame: table2)
+
+
+def _held() -> SceneState:
+    return SceneState(base=(1.0, 2.0, 0.5), gripper_closed=True, cube_position=(1.0, 2.5, 0.9), cube_held=True)
+
+
+def test_round_trip_and_defaults(tmp_path: Path) -> None:
+    s = _held()
+    assert s.joints == REST_JOINTS  # unspecified joints: the rest pose
+    back = load_state(save_state(s, tmp_path / "a" / "s.json"))
+    assert back.base == s.base and back.joints == s.joints and back.cube_held and back.gripper_closed
+    assert back.cube_quaternion == (1.0, 0.0, 0.0, 0.0)
+    fixture = load_state(FIXTURE)
+    assert fixture.cube_held and set(fixture.joints) == set(STATE_JOINTS)
+
+
+def test_rest_joints_are_fetch_rest_pose() -> None:
+    """The defaults of a hand-written state are the robot's rest keyframe (the env's own table)."""
+    from envs.fetch_omni import REST_QPOS
+
+    rest = dict(zip(FULL_JOINT_NAMES, REST_QPOS.tolist()))
+    assert np.allclose([REST_JOINTS[n] for n in STATE_JOINTS], [rest[n] for n in STATE_JOINTS], atol=1e-6)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d.pop("base"), "missing key"),
+    (lambda d: d.update(speed=1), "unknown key"),
+    (lambda d: d.update(base=[0, 0]), "base has 2 values, expected 3"),
+    (lambda d: d["cube"].update(quaternion=[1, 1, 0, 0]), "not a unit quaternion"),
+    (lambda d: d["joints"].update(knee_joint=0.1), "unknown joint"),
+    (lambda d: d["joints"].update(torso_lift_joint="up"), "joints.torso_lift_joint"),
+    (lambda d: d.update(gripper_closed=False), "needs a closed gripper"),
+    (lambda d: d.update(cube_held="yes"), "cube_held"),
+])
+def test_bad_state_files(tmp_path: Path, edit, message: str) -> None:
+    d = json.loads(FIXTURE.read_text())
+    edit(d)
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(d))
+    with pytest.raises(ConfigError, match=message):
+        load_state(p)
+
+
+def test_missing_and_unreadable_files(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="replan.state = .*no such file"):
+        load_state(tmp_path / "nope.json", "replan.state")
+    (tmp_path / "x.json").write_text("{not json")
+    with pytest.raises(ConfigError, match="not a readable JSON"):
+        load_state(tmp_path / "x.json")
+
+
+def test_task_suffix() -> None:
+    task = build_run_spec(compose_config()).task
+    sub = task_suffix(task, 2)
+    assert sub.describe() == "move_to(Table2), place(Cube_p), move_to(Exit)"
+    assert sub.layout.names == ["Table2", "Cube_p", "Exit"]
+    assert [task.layout.column_names[i] for i in suffix_columns(task, 2)] == sub.layout.column_names
+    assert task_suffix(task, 0).describe() == task.describe()
+    for k in (5, -1):
+        with pytest.raises(ConfigError, match="replan.action = .* the plan has 5 actions"):
+            task_suffix(task, k)
+    held, empty = _held(), SceneState(base=(0.0, 0.0, 0.0), cube_position=(0.0, 1.2, 0.7425))
+    check_suffix_start(sub, held)
+    with pytest.raises(ConfigError, match="needs the cube in hand"):
+        check_suffix_start(sub, empty)
+    check_suffix_start(task_suffix(task, 1), empty)
+    with pytest.raises(ConfigError, match="starts with no cube in hand"):
+        check_suffix_start(task_suffix(task, 1), held)
+
+
+def _run_dir(tmp_path: Path) -> Path:
+    run = tmp_path / "run"
+    run.mkdir()
+    atomic_write_json(run / RESULT_FILE, {"status": "done", "config": compose_config("seed=3", "ce.n_envs=50")})
+    return run
+
+
+def _replan(run: Path, *overrides: str, action: int = 2, state: Path = FIXTURE) -> dict:
+    extra = [f"replan_from={run}", f"replan.action={action}", f"replan.state={state}"]
+    current = compose_config(*extra, *overrides)
+    return replan_config(current, [*extra, *overrides])
+
+
+def test_replan_config_and_spec(tmp_path: Path) -> None:
+    run = _run_dir(tmp_path)
+    cfg = _replan(run, *MOVED, "ce.iterations=3")
+    assert cfg["seed"] == 3 and cfg["ce"]["n_envs"] == 50  # the earlier run's config ...
+    assert cfg["ce"]["iterations"] == 3 and cfg["scene"]["tables"][1]["center"] == [0.3, -1.2]  # ... changed
+    assert cfg["scene"]["tables"][0]["center"] == [0.0, 1.2]
+    spec = build_run_spec(cfg)
+    assert spec.task.describe() == "move_to(Table2), place(Cube_p), move_to(Exit)"
+    assert spec.task.layout.regions["Table2"].center == (0.3, -1.2)
+    assert spec.geometry.table("table2").center[:2] == (0.3, -1.2)
+    assert spec.start is not None and spec.start.cube_held
+    assert spec.replan is not None and spec.replan.to_json()["action"] == 2
+    assert spec.replan.columns == tuple(spec.task.layout.column_names)
+
+
+def test_replan_errors(tmp_path: Path) -> None:
+    run = _run_dir(tmp_path)
+    with pytest.raises(ConfigError, match="would change the plan"):
+        _replan(run, "task.goal.cube_on=table1")
+    with pytest.raises(ConfigError, match="replan.action = 7 is invalid"):
+        build_run_spec(_replan(run, action=7))
+    with pytest.raises(ConfigError, match="replan.state = .*no such file"):
+        build_run_spec(_replan(run, state=tmp_path / "none.json"))
+    with pytest.raises(ConfigError, match="needs the cube in hand"):
+        empty = save_state(SceneState(base=(0.0, 0.0, 0.0), cube_position=(0.0, 1.2, 0.7425)), tmp_path / "e.json")
+        build_run_spec(_replan(run, state=empty))
+    with pytest.raises(ConfigError, match="replan_from = .*not a directory"):
+        _replan(tmp_path / "missing")
+    with pytest.raises(ConfigError, match="replan_from is not"):
+        build_run_spec(compose_config("replan.action=2"))
