@@ -70,6 +70,8 @@ class FetchOmni(Fetch):
         Each build gets its own name and initial pose; the builder holds no per-robot state
         beyond those, so every robot is built exactly as from a fresh parse."""
         if self.build_separate:  # one build per sub-scene (GPU): ManiSkill's own way
+            if self.scene.__dict__.get(ROBOT_COLLISIONS_KEY, "all") != "all":
+                raise NotImplementedError(f"{self.uid}: robot collisions other than 'all' need one parsed builder")
             if self.dropped_links:
                 raise NotImplementedError(f"{self.uid} builds one articulation builder for all sub-scenes")
             return super()._load_articulation(initial_pose)
@@ -88,6 +90,7 @@ class FetchOmni(Fetch):
             builder = loader.parse(format_path(str(self.urdf_path)))["articulation_builders"][0]
             if self.dropped_links:
                 drop_links(builder, self.dropped_links)
+            set_robot_collisions(builder, self.scene.__dict__.get(ROBOT_COLLISIONS_KEY, "all"))
             builders[self.uid] = builder
         builder.initial_pose = initial_pose
         name = self.uid if self._agent_idx is None else f"{self.uid}-agent-{self._agent_idx}"
@@ -147,6 +150,38 @@ def drop_links(builder, names: tuple[str, ...]) -> None:
     for i, b in enumerate(keep):
         b.index = i
     builder.link_builders = keep
+
+
+# Which of the robot's links collide with what (``set_robot_collisions``; the task passes its
+# choice through the scene, where the parsed builder is kept, under this key).
+ROBOT_COLLISIONS_KEY = "_realize_robot_collisions"
+ROBOT_COLLISIONS = ("all", "no_self", "hand")
+HAND_LINKS = ("gripper_link", "l_gripper_finger_link", "r_gripper_finger_link")
+_NO_SELF_BIT = 29  # collision group 2 bit shared by every link: links of one robot never collide (ManiSkill's)
+
+
+def set_robot_collisions(builder, mode: str) -> None:
+    """Edit a parsed Fetch articulation builder's collision shapes in place.
+
+    ``all``: as parsed (the SRDF's disabled pairs, parent-child pairs off). ``no_self``: no link
+    collides with another link of the robot (tables, cubes and the floor as before). ``hand``:
+    only ``HAND_LINKS`` keep their collision shapes; every other link keeps its URDF mass and
+    inertia but touches nothing (contact logs: only the hand touches the cube or a table)."""
+    if mode not in ROBOT_COLLISIONS:
+        raise ValueError(f"robot collisions {mode!r}: must be one of {ROBOT_COLLISIONS}")
+    if mode == "no_self":
+        for b in builder.link_builders:
+            b.collision_groups[2] |= 1 << _NO_SELF_BIT
+    elif mode == "hand":
+        names = {b.name for b in builder.link_builders}
+        if not set(HAND_LINKS) <= names:
+            raise ValueError(f"links not in the robot: {sorted(set(HAND_LINKS) - names)}")
+        for b in builder.link_builders:
+            if b.name in HAND_LINKS or not b.collision_records:
+                continue
+            if b._auto_inertial:  # its mass would come from the shapes about to go
+                raise ValueError(f"link {b.name} has no URDF inertial: its collision shapes cannot go")
+            b.collision_records = []
 
 
 @register_agent()

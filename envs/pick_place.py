@@ -106,6 +106,8 @@ class RealizePickPlaceEnv(BaseEnv):
         robot_uids: str = "fetch_omni",
         lean_robot: bool = False,
         robot_solver_position_iterations: int | None = None,
+        physx_scene: Mapping[str, Any] | None = None,
+        robot_collisions: str = "all",
         **kwargs: Any,
     ):
         if isinstance(n_tiles, bool) or not isinstance(n_tiles, int) or n_tiles < 1:
@@ -125,12 +127,16 @@ class RealizePickPlaceEnv(BaseEnv):
                 cpu_workers=cpu_workers,
                 # far-apart copies must not influence each other's solver results
                 enable_enhanced_determinism=True,
+                **(physx_scene or {}),
             ),
         )
         if robot_uids != "fetch_omni":
             raise ValueError(f"robot_uids = {robot_uids!r}: this task supports only 'fetch_omni'")
         robot = "fetch_omni_lean" if lean_robot else "fetch_omni"  # lean: no links nothing touches
         self.robot_solver_position_iterations = robot_solver_position_iterations
+        if robot_collisions not in fetch_omni.ROBOT_COLLISIONS:
+            raise ConfigError(f"robot_collisions = {robot_collisions!r}: must be one of {fetch_omni.ROBOT_COLLISIONS}")
+        self.robot_collisions = robot_collisions
         uids = robot if n_tiles == 1 else tuple([robot] * n_tiles)
         if n_tiles > 1:  # the tiled copies' robots are supported as a whole (no warning listing N names)
             self.SUPPORTED_ROBOTS = [*type(self).SUPPORTED_ROBOTS, uids]
@@ -165,6 +171,7 @@ class RealizePickPlaceEnv(BaseEnv):
     def _load_agent(self, options: dict):
         sx, sy, _ = self.geometry.robot_start
         poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
+        self.scene.__dict__[fetch_omni.ROBOT_COLLISIONS_KEY] = self.robot_collisions  # read where the robot is parsed
         super()._load_agent(options, poses if self.n_tiles > 1 else poses[0])
         # The robot's joint controllers compensate gravity (as Fetch's own do); the cube keeps it.
         # Robots may run their own solver iteration count (PhysX solves a touching robot and

@@ -1,7 +1,8 @@
 """Interleaved A/B of the physics step under several ``sim`` settings, on a real rollout's commands.
 
 What it does: rolls out one batch of plans (``--history H.npz --key Z_005``: a saved CE
-iteration's samples, or ``--uniform``: the task's iteration-0 distribution) in a scene with the
+iteration's samples, ``--late``: ``scripts/bench_rollout.py``'s committed late-iteration batch,
+or ``--uniform``: the task's iteration-0 distribution) in a scene with the
 app's default settings, recording the drive targets of its first ``--steps`` control steps;
 then builds one scene per setting (each argument: comma-separated Hydra overrides, e.g.
 ``sim.lean_robot=true`` or ``sim.lean_robot=true,sim.solver_position_iterations_robot=4``; an
@@ -47,13 +48,17 @@ def main() -> int:
     ap.add_argument("--history", help="a run's history.npz")
     ap.add_argument("--key", default="Z_005", help="the samples' key in --history")
     ap.add_argument("--uniform", action="store_true", help="uniform samples instead of --history")
+    ap.add_argument("--late", action="store_true", help="bench_rollout.py's late-iteration batch (bench_data/late_batch.json)")
     ap.add_argument("--n", type=int, default=200)
     ap.add_argument("--steps", type=int, default=260, help="control steps recorded and replayed")
     ap.add_argument("--task-file", default="configs/task/pick_place.yaml")
     ap.add_argument("settings", nargs="+", help="comma-separated overrides per setting ('' = baseline)")
     a = ap.parse_args()
     spec = load_spec(a.task_file, 0, "cpu", ["experiment=seed_paper"])
-    if a.uniform or not a.history:
+    if a.late:
+        from bench_rollout import load_batch
+        Z = load_batch()[1][: a.n].to(spec.placement.dtype)
+    elif a.uniform or not a.history:
         g = torch.Generator()
         g.manual_seed(0)
         Z = spec.task.layout.sample_uniform(a.n, g, spec.placement.dtype)

@@ -123,3 +123,38 @@ def test_robot_solver_iterations_apply_to_robots_only() -> None:
     with BatchedScene(2, None, SimSettings(solver_position_iterations=12, solver_position_iterations_robot=3)) as s:
         assert [a.get_solver_position_iterations() for a in s._impl._arts] == [3, 3]
         assert [b.get_solver_position_iterations() for b in s._impl._cube_bodies] == [12, 12]
+
+
+def test_hand_collisions_keep_every_mass_and_leave_shapes_on_the_hand_only() -> None:
+    """``sim.robot_collisions=hand``: the gripper link and both fingers keep their collision
+    shapes, no other link has one, and every link keeps the mass it has with all its shapes (the
+    URDF's inertial, not one computed from shapes)."""
+    from envs.fetch_omni import HAND_LINKS
+    from realize.scene import BatchedScene, SimSettings
+
+    built = {}
+    for mode in ("all", "hand"):
+        with BatchedScene(2, None, SimSettings(robot_collisions=mode)) as s:
+            built[mode] = {_unprefixed(ln.name): (ln.mass, len(ln.get_collision_shapes()))
+                           for ln in s._impl._arts[1].get_links()}
+    full, hand = built["all"], built["hand"]
+    assert full.keys() == hand.keys()
+    assert sum(k for _, k in full.values()) == 15  # the lean robot's convex shapes
+    assert {n for n, (_, k) in hand.items() if k} == set(HAND_LINKS)
+    assert all(hand[n][1] == full[n][1] for n in HAND_LINKS)
+    assert all(hand[n][0] == full[n][0] for n in full)
+
+
+def test_physx_scene_settings_reach_every_shape_and_the_solver() -> None:
+    """``sim.contact_offset`` is every shape's (robot and cube), ``sim.solver`` the scene's."""
+    import sapien
+
+    from realize.scene import BatchedScene, SimSettings
+
+    with BatchedScene(1, None, SimSettings(contact_offset=0.007, solver="pgs")) as s:
+        shapes = [sh for ln in s._impl._arts[0].get_links() for sh in ln.get_collision_shapes()]
+        shapes += s._impl._cube_shapes()
+        assert len(shapes) == 16 and all(sh.contact_offset == pytest.approx(0.007) for sh in shapes)
+        assert sapien.physx.get_scene_config().enable_tgs is False
+    with pytest.raises(ConfigError, match="robot_collisions"):
+        gym.make(envs.ENV_ID, robot_collisions="arms")

@@ -54,6 +54,8 @@ def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, **ba
         solver_velocity_iterations=sim.solver_velocity_iterations,
         robot_solver_position_iterations=sim.solver_position_iterations_robot,
         lean_robot=sim.lean_robot,
+        physx_scene=sim.physx_scene(),
+        robot_collisions=sim.robot_collisions,
         render_mode="rgb_array",
     )
     cam = options.camera

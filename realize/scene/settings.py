@@ -20,6 +20,8 @@ from realize.config import ConfigError, Settings, setting
 __all__ = ["BACKENDS", "SimSettings", "Camera", "EnvOptions"]
 
 BACKENDS = ("auto", "cpu", "gpu")
+SOLVERS = ("tgs", "pgs")
+ROBOT_COLLISIONS = ("all", "no_self", "hand")  # envs.fetch_omni.ROBOT_COLLISIONS
 
 
 @dataclass
@@ -35,10 +37,26 @@ class SimSettings(Settings):
     solver_velocity_iterations: int = setting(1, ge=0)
     solver_position_iterations_robot: int | None = setting(None, ge=1)  # robots' own count (None: as above); breaks copy independence (a woken cube in one copy changes the others' robots), so off by default
     lean_robot: bool = True  # simulate Fetch without the links nothing touches (envs.fetch_omni)
+    robot_collisions: str = setting("all", choices=ROBOT_COLLISIONS)  # all | no_self (links never touch each other) | hand (only gripper and fingers have shapes)
     cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"
     torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
     shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.workers.blocks)
+    # PhysX scene settings (ManiSkill's SceneConfig; defaults are ManiSkill's)
+    contact_offset: float = setting(0.005, gt=0)  # m (ManiSkill: 0.02): shapes closer than the sum of their offsets get contacts
+    solver: str = setting("tgs", choices=SOLVERS)  # tgs: temporal Gauss-Seidel; pgs: projected Gauss-Seidel
+    friction_every_iteration: bool = True  # friction solved in every position iteration (False: the last ones only)
+    enable_pcm: bool = True  # persistent contact manifolds
+    sleep_threshold: float = setting(0.005, ge=0)  # mass-normalised kinetic energy below which a body may sleep
+    bounce_threshold: float = setting(2.0, ge=0)  # m/s: slower impacts do not bounce
+
+    def physx_scene(self) -> dict[str, object]:
+        """The PhysX scene settings as ManiSkill ``SceneConfig`` keys."""
+        return dict(
+            contact_offset=self.contact_offset, enable_tgs=self.solver == "tgs",
+            enable_friction_every_iteration=self.friction_every_iteration, enable_pcm=self.enable_pcm,
+            sleep_threshold=self.sleep_threshold, bounce_threshold=self.bounce_threshold,
+        )
 
     def check(self, where: str) -> None:
         if self.sim_freq % self.control_freq:
