@@ -91,7 +91,7 @@ def summary(path: Path) -> None:
         wall_ratio = float(w["realize_wall_s"]) / float(c["realize_wall_s"])
         feasible += wf
         close += cost_ratio <= 1.05
-        fast += wall_ratio <= 0.25
+        fast += wf and wall_ratio <= 0.25  # an infeasible warm run is not a fast one
         print(f"| {world} | {c['best_cost']}, {float(c['realize_wall_s']):.0f} | {w['best_cost']}, "
               f"{float(w['realize_wall_s']):.0f} | {float(w['success_iter0']):.0%} | {cost_ratio:.3f} | {wall_ratio:.2f} |")
     print(f"\nworlds: {n}; warm feasible {feasible}/{n}; warm cost within 5 % of cold {close}/{n}; "
