@@ -64,7 +64,6 @@ def bench_naive(plans: int, seconds: float, sim: SimSettings) -> float:
         control_freq=sim.control_freq, solver_position_iterations=sim.solver_position_iterations,
         solver_velocity_iterations=sim.solver_velocity_iterations, lean_robot=sim.lean_robot,
         robot_solver_position_iterations=sim.solver_position_iterations_robot,
-        physx_scene=sim.physx_scene(), robot_collisions=sim.robot_collisions,
     )  # the same robot model and solver settings as the batched scene
     rest_arm = torch.tensor(REST_QPOS)[[3, 5, 7, 8, 9, 10, 11, 12]]
     steps = int(seconds * sim.control_freq)

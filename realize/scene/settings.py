@@ -43,7 +43,7 @@ class SimSettings(Settings):
     torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
     shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.workers.blocks)
     # PhysX scene settings (ManiSkill's SceneConfig; defaults are ManiSkill's)
-    contact_offset: float = setting(0.005, gt=0)  # m (ManiSkill: 0.02): shapes closer than the sum of their offsets get contacts
+    contact_offset: float = setting(0.02, gt=0)  # m: shapes closer than the sum of their offsets get contacts
     solver: str = setting("tgs", choices=SOLVERS)  # tgs: temporal Gauss-Seidel; pgs: projected Gauss-Seidel
     friction_every_iteration: bool = True  # friction solved in every position iteration (False: the last ones only)
     enable_pcm: bool = True  # persistent contact manifolds
