@@ -244,6 +244,7 @@ def _far_grasp(spec: RunSpec, seed_task: dict[str, Any], offset: tuple[float, fl
     cube = spec.geometry.cube_pos
     centre = [cube[0] + offset[0], cube[1] + offset[1], cube[2]]
     params["Cube_g"]["center"] = centre
+    params["Cube_g"]["frame"] = "world"  # the seed task writes it relative to the cube
     task = task_variant(spec, seed_task, "far_grasp.yaml", params=params)
     return task, centre
 
