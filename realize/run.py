@@ -164,6 +164,7 @@ class _Assembly:
         warm_from = spec.warm_start
         if warm_from is None and spec.replan is not None and spec.replan.warm:
             warm_from = spec.replan.run_dir  # a replan starts from that run's distribution of the remaining actions
+        self.warm_from = warm_from
         if warm_from is not None and ckpt is None:  # a resumed run goes on from its checkpoint
             self.warm = load_warm_start(warm_from, spec.task, spec.geometry, spec.ce)
         self.searcher = self._searcher()
@@ -190,9 +191,9 @@ class _Assembly:
         """What result.json says of the warm start (a resumed run keeps its earlier record)."""
         if self.warm is not None:
             return self.warm.to_dict()
-        if ckpt is not None and self.spec.warm_start is not None:
+        if ckpt is not None and self.warm_from is not None:  # a resumed warm run or replan
             earlier = (self.rd.result_json() or {}).get("warm_start")
-            return earlier if isinstance(earlier, dict) else {"run_dir": self.spec.warm_start}
+            return earlier if isinstance(earlier, dict) else {"run_dir": self.warm_from}
         return None
 
     def _restore(self, ckpt: Checkpoint | None) -> tuple[dict[int | None, History], list[IterationSummary]]:
