@@ -34,7 +34,7 @@ from typing import Any
 from realize.config import ConfigError, Settings, as_mapping, setting
 from realize.scene_state import SceneState, load_state
 from realize.task import TaskSpec
-from realize.task_suffix import check_suffix_start, suffix_columns, task_suffix
+from realize.task_suffix import check_suffix_start, task_suffix
 
 __all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "read_replan", "check_no_replan", "REFUSED_OVERRIDES"]
 
@@ -67,7 +67,6 @@ class ReplanSpec:
     plan: str
     remaining: str
     columns: tuple[str, ...]
-    column_index: tuple[int, ...]  # their indices among the earlier run's columns
     warm: bool = True  # the search starts from the earlier run's distribution (realize.warm_start)
 
     def to_json(self, warm_start: Any = None) -> dict[str, Any]:
@@ -142,10 +141,9 @@ def read_replan(replan_from: str, d: Any, task: TaskSpec, top_k: int) -> tuple[T
     suffix = task_suffix(task, settings.action)
     state = load_state(settings.state, "replan.state")
     check_suffix_start(suffix, state, f"replan (replan.action = {settings.action})")
-    cols = suffix_columns(task, settings.action)
     spec = ReplanSpec(run_dir=replan_from, action=settings.action, state_file=settings.state, state=state,
                       plan=task.describe(), remaining=suffix.describe(),
-                      columns=tuple(suffix.layout.column_names), column_index=tuple(cols), warm=settings.warm)
+                      columns=tuple(suffix.layout.column_names), warm=settings.warm)
     return suffix, spec
 
 
