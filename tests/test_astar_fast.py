@@ -250,10 +250,31 @@ def test_field_cache_is_bounded(monkeypatch):
     assert len(fields.dist) == 5
 
 
-def test_field_planner_rejects_per_plan_grids_and_unknown_names():
-    occ = torch.zeros(2, 5, 5, dtype=torch.bool)
+def test_field_planner_on_per_plan_grids_matches_the_shared_grid_and_astar():
+    # plan i on its own grid (the wall world, plus a random block of cells for odd i): the same
+    # cost as A* on that grid, and the same path as the field on that grid alone (no batch effect)
+    spec, occ = scene_grid("wall")
+    s, g = random_world_pairs(spec, 12, 7)
+    grids = occ.expand(12, -1, -1).clone()
+    gen = torch.Generator().manual_seed(3)
+    for i in range(1, 12, 2):
+        r, c = (int(torch.randint(10, spec.height - 20, (1,), generator=gen)),
+                int(torch.randint(10, spec.width - 20, (1,), generator=gen)))
+        grids[i, r:r + 12, c:c + 4] = True
+    got = astar_world(grids, spec, s, g, planner="field")
+    ref = astar_world(grids, spec, s, g)
+    assert torch.equal(got.found, ref.found) and torch.equal(got.status, ref.status)
+    assert torch.allclose(got.cost, ref.cost, rtol=0, atol=1e-9, equal_nan=True)
+    for i in range(12):
+        one = astar_world(grids[i], spec, s[i:i + 1], g[i:i + 1], planner="field")
+        ln = int(one.lengths[0])
+        assert ln == int(got.lengths[i]) and torch.equal(one.path[0, :ln], got.path[i, :ln])
+        if ln:
+            assert_path_valid(grids[i], got.path[i], ln, got.start[i], got.goal[i], float(got.cost[i]))
+
+
+def test_unknown_planner_is_refused():
+    occ = torch.zeros(5, 5, dtype=torch.bool)
     cells = torch.zeros(2, 2, dtype=torch.int64)
-    with pytest.raises(ValueError, match="shared"):
-        astar(occ, cells, cells, planner="field")
     with pytest.raises(ValueError, match="planner"):
-        astar(occ[0], cells, cells, planner="dijkstra")
+        astar(occ, cells, cells, planner="dijkstra")

@@ -143,8 +143,8 @@ def astar(
         off get ITERATION_LIMIT.
     dtype: float dtype of g / f (float64 keeps sums of many sqrt(2) steps exact enough to compare).
     planner: "astar" (the batched search loop) or "field" (cached Dijkstra fields per start cell,
-        ``realize.controllers.astar_field``; shared grid only, ignores expansions_per_step and
-        max_iterations). Both return optimal costs; among equal-cost paths they pick differently.
+        ``realize.controllers.astar_field``; per-plan grids get one uncached field each; ignores
+        expansions_per_step and max_iterations). Both return optimal costs; among equal-cost paths they pick differently.
 
     Runs on the device of ``occupied``; start / goal are moved there.
     """
@@ -156,8 +156,6 @@ def astar(
         raise ValueError(f"expansions_per_step must be None or an int >= 1, got {expansions_per_step!r}")
     if planner not in PLANNERS:
         raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
-    if planner == "field" and occupied.ndim != 2:
-        raise ValueError("planner='field' needs one (H, W) grid shared by all plans")
     if max_iterations is not None and max_iterations < 0:
         raise ValueError(f"max_iterations must be >= 0 or None, got {max_iterations}")
     device = occupied.device

@@ -1,5 +1,5 @@
 """Shortest paths from cached distance fields: the ``planner="field"`` alternative to the batched
-A* loop of ``realize.controllers.astar_search``, on one shared static grid.
+A* loop of ``realize.controllers.astar_search``, on one shared static grid (or one grid per plan).
 
 What it does
 ------------
@@ -18,8 +18,13 @@ ones is the one in the start cell's Dijkstra tree: it depends only on the grid, 
 goal, not on the batch (A*'s choice may depend on the batch), but it is in general NOT the cell
 path A* picks, so waypoints and rollouts differ from ``planner="astar"``.
 
-What it doesn't: per-plan grids (A* only), iteration limits (a field is computed whole), or run on
-an accelerator: the fields are computed on the CPU and the parent rows moved to the grid's device.
+Per-plan grids (``free`` (N, H, W), e.g. a base path that must keep a held arm off a wall,
+``realize.controllers.carry_footprint``): one field per searching plan on its own graph, not
+cached (such a grid is met once); a plan's path still depends only on its grid, start and goal.
+The loop is over those plans, each a compiled Dijkstra call.
+
+What it doesn't: iteration limits (a field is computed whole), or run on an accelerator: the
+fields are computed on the CPU and the parent rows moved to the grid's device.
 """
 
 from __future__ import annotations
@@ -82,7 +87,7 @@ def field_search(free: Tensor, searching: Tensor, s_idx: Tensor, g_idx: Tensor, 
                  dtype: torch.dtype) -> SearchOutcome:
     """Shortest paths for the plans with ``searching[i]``, from flat cell ``s_idx[i]`` to ``g_idx[i]``.
 
-    free: (1, H, W) bool grid shared by all plans. Returns the ``SearchOutcome`` of
+    free: (1, H, W) bool grid shared by all plans, or (N, H, W) one grid per plan. Returns the ``SearchOutcome`` of
     ``realize.controllers.astar_search.run_search``; ``expansions`` counts the cells reached by
     each field computed in this call, on the first plan using it (0 elsewhere, and where the field
     was cached); ``iterations`` is 0.
@@ -96,10 +101,16 @@ def field_search(free: Tensor, searching: Tensor, s_idx: Tensor, g_idx: Tensor, 
     rows = searching.nonzero().squeeze(1)
     if rows.numel() == 0:
         return SearchOutcome(cost, reached, limited, expansions, 0, None)
-    fields = grid_cached("astar_fields", free, _Fields)
     sw = s_idx[rows].cpu()
-    uniq, inv = torch.unique(sw, return_inverse=True)
-    dist, parent, settled = fields.get(uniq.tolist())
+    if free.shape[0] > 1:  # one grid per plan: one uncached field each
+        per = [_Fields(free[r : r + 1]).get([s]) for r, s in zip(rows.tolist(), sw.tolist())]
+        dist, parent, settled = (np.concatenate(parts) for parts in zip(*per))
+        inv = torch.arange(rows.numel())
+        uniq = inv
+    else:
+        fields = grid_cached("astar_fields", free, _Fields)
+        uniq, inv = torch.unique(sw, return_inverse=True)
+        dist, parent, settled = fields.get(uniq.tolist())
     dist_t = torch.from_numpy(dist)
     c = dist_t[inv, g_idx[rows].cpu()].to(device=device, dtype=dtype)
     cost[rows] = c

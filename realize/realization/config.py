@@ -27,6 +27,9 @@ class AStarConfig(Settings):
     resolution: float = setting(0.05, gt=0)  # m per grid cell
     padding: float = setting(0.2, ge=0)  # m around every obstacle (paper: 20 cm), on top of the robot radius
     planner: str = setting("field", choices=PLANNERS)  # field (cached Dijkstra fields per start cell; a path does not depend on its batch) or astar (batched A*, same costs, other equal-cost paths)
+    fallback_padding: float | None = setting(0.05, ge=0)  # m; a plan with no path on the padded grid retries with this padding (the gap between a table and a wall); null: no retry
+    carry_footprint: bool = True  # plan around tall obstacles with the held arm's spheres too (realize/controllers/carry_footprint.py)
+    carry_margin: float = setting(0.1, ge=0)  # m, how far the held arm's spheres stay from an obstacle sideways
 
 
 @dataclass

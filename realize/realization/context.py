@@ -28,7 +28,8 @@ class StepContext:
     """Per-step view shared by the templates: measured state and the command buffers.
 
     Constant for a rollout: ``scene``, ``cfg``, ``fabric``, ``grid``, ``occupancy`` (A*'s
-    padded (H, W) grid), ``n_envs``, ``device``, ``dt`` (control period, s).
+    padded (H, W) grid), ``occupancy_tight`` (the grid padded by ``astar.fallback_padding``, for
+    plans with no path on the padded one; None: no retry), ``n_envs``, ``device``, ``dt`` (control period, s).
     Measured by ``read()`` after every physics step, (N, ...) float32: ``q`` / ``qd`` (N, DOF)
     whole-body joints (``realize.controllers.body``), ``base`` (N, 3) x, y, yaw, ``tcp`` (N, 3),
     ``approach`` / ``closing`` (N, 3) gripper axes, ``cube`` (N, 7) pose, ``cube_speed`` (N,);
@@ -43,6 +44,7 @@ class StepContext:
     fabric: WholeBodyFabric
     grid: GridSpec
     occupancy: Tensor
+    occupancy_tight: Tensor | None
     n_envs: int
     device: torch.device
     dt: float
@@ -63,9 +65,9 @@ class StepContext:
     fab_invalid: Tensor  # (N,) the fabric flagged the copy's step invalid
 
     def __init__(self, scene: BatchedScene, cfg: RolloutConfig, fabric: WholeBodyFabric, grid: GridSpec,
-                 occupancy: Tensor):
+                 occupancy: Tensor, occupancy_tight: Tensor | None = None):
         self.scene, self.cfg, self.fabric = scene, cfg, fabric
-        self.grid, self.occupancy = grid, occupancy
+        self.grid, self.occupancy, self.occupancy_tight = grid, occupancy, occupancy_tight
         self.n_envs, self.device = scene.n_envs, scene.device
         self.dt = scene.control_dt
         n, dev = self.n_envs, self.device

@@ -62,7 +62,8 @@ class Rollout:
         n, dev = scene.n_envs, realizer.device
         self.n_envs, self.device, self.m = n, dev, Z.shape[0]
         scene.reset(seed=realizer.seed, state=realizer.start)
-        self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy)
+        self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy,
+                               realizer.occupancy_tight)
         self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
         self.n_actions = task.n_actions
         self.action = torch.zeros(n, dtype=torch.long, device=dev)  # the action each plan is in
@@ -301,6 +302,9 @@ class PlanRealizer:
         yaws = torch.tensor([b.yaw for b in obs], dtype=torch.float32)
         self.occupancy = occupancy_from_boxes(self.grid, centers, halves, yaws,
                                               padding=self.cfg.astar.padding + g.robot_radius).to(self.device)
+        tight = self.cfg.astar.fallback_padding
+        self.occupancy_tight = None if tight is None else occupancy_from_boxes(
+            self.grid, centers, halves, yaws, padding=tight + g.robot_radius).to(self.device)
         self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
                                       dtype=fabric_dtype)
         self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}

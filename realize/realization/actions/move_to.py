@@ -2,7 +2,9 @@
 
 What it does: A* on the padded occupancy grid from where the base is to the parameter, then
 PID waypoint tracking (``realize.controllers.astar``, ``realize.controllers.pid``), for every
-plan of its rows at once.
+plan of its rows at once. A plan whose held arm reaches past the padded base beside an obstacle
+it is not above (a wall) plans on its own grid that keeps the arm off it
+(``realize.controllers.carry_footprint``, ``controller.astar.carry_footprint``).
 What it doesn't: move the arm (it holds still) or avoid obstacles A* did not plan around.
 """
 
@@ -15,6 +17,8 @@ from torch import Tensor
 
 from realize.controllers.astar import astar_world
 from realize.controllers.body import BASE_XY, YAW
+from realize.controllers.carry_footprint import carry_blocked
+from realize.controllers.obstacles import boxes_tensor
 from realize.controllers.pid import PIDState, pid_init, pid_step
 from realize.controllers.waypoints import path_to_waypoints
 from realize.realization.actions.base import Outcome, Template
@@ -44,6 +48,7 @@ class MoveTo(Template):
     def __init__(self, n_envs: int, device: torch.device):
         super().__init__(n_envs, device)
         n = n_envs
+        self._boxes: Tensor | None = None  # the scene's static obstacle boxes, built at the first begin
         self.goal = torch.zeros(n, 2, device=device)
         self.wp = torch.zeros(n, 1, 2, device=device)
         self.wp_len = torch.ones(n, dtype=torch.long, device=device)
@@ -64,12 +69,64 @@ class MoveTo(Template):
     def _rows(self, rows: Tensor) -> PIDState:
         return PIDState(**{f.name: getattr(self.pid, f.name)[rows] for f in fields(PIDState)})
 
+    def _carry_grids(self, ctx: StepContext, rows: Tensor) -> Tensor | None:
+        """(len(rows), H, W) extra blocked cells where the held arm would hit a tall obstacle
+        (``realize.controllers.carry_footprint``); None when it is off or the scene has none."""
+        cfg = ctx.cfg.astar
+        if not cfg.carry_footprint:
+            return None
+        if self._boxes is None:
+            self._boxes = boxes_tensor(ctx.scene.geometry, floor=False)
+        if self._boxes.shape[0] == 0:
+            return None
+        kin = ctx.fabric.kin
+        centres, radii = kin.collision_spheres(ctx.q[rows].to(ctx.fabric.dtype))
+        offsets = centres[..., :2].float() - ctx.base[rows, None, :2]
+        reach = cfg.padding + ctx.scene.geometry.robot_radius
+        return carry_blocked(ctx.grid, self._boxes, offsets, centres[..., 2].float(), radii.float(), reach,
+                             cfg.carry_margin)
+
+    def _paths(self, ctx: StepContext, start: Tensor, goal: Tensor, extra: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+        """(points (n, L, 2), lengths (n,), found (n,)) of the waypoints from start to goal on the
+        padded grid (OR ``extra`` (n, H, W), the carried arm's cells); plans with no path there
+        retry on the grid padded by ``astar.fallback_padding``."""
+        planner = ctx.cfg.astar.planner
+
+        def on(occ: Tensor, m: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+            s, g = (start, goal) if m is None else (start[m], goal[m])
+            if extra is not None:
+                occ = occ | (extra if m is None else extra[m])
+            res = astar_world(occ, ctx.grid, s, g, planner=planner)
+            wps = path_to_waypoints(res, ctx.grid, occupied=occ, start_xy=s, goal_xy=g)
+            return wps.points.to(start), wps.lengths, res.found.to(self.device)
+
+        pts, lens, found = on(ctx.occupancy, None)
+        if ctx.occupancy_tight is None or bool(found.all()):
+            return pts, lens, found
+        m = ~found
+        p2, n2, f2 = on(ctx.occupancy_tight, m)
+        length = max(pts.shape[1], p2.shape[1])
+        pts, p2 = (torch.cat([p, p[:, -1:].expand(-1, length - p.shape[1], -1)], 1) for p in (pts, p2))
+        pts[m], lens[m], found[m] = p2, n2.to(lens), f2
+        return pts, lens, found
+
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
         start = ctx.base[rows, BASE_XY]
         goal = params[:, :2].to(start)
-        res = astar_world(ctx.occupancy, ctx.grid, start, goal, planner=ctx.cfg.astar.planner)
-        wps = path_to_waypoints(res, ctx.grid, occupied=ctx.occupancy, start_xy=start, goal_xy=goal)
-        pts, lens = wps.points.to(start), wps.lengths
+        extra = self._carry_grids(ctx, rows)
+        if extra is None or not bool(extra.any()):
+            pts, lens, found = self._paths(ctx, start, goal, None)
+        else:  # plans whose arm reaches past the padded base beside a tall obstacle: their own grids
+            carried = extra.flatten(1).any(1)
+            parts = [(m, self._paths(ctx, start[m], goal[m], e)) for m, e in
+                     ((~carried, None), (carried, extra[carried])) if bool(m.any())]
+            length = max(p[0].shape[1] for _, p in parts)
+            pts = start.new_zeros(len(rows), length, 2)
+            lens = torch.zeros(len(rows), dtype=torch.long, device=self.device)
+            found = torch.zeros(len(rows), dtype=torch.bool, device=self.device)
+            for m, (p, n, f) in parts:
+                pts[m] = torch.cat([p, p[:, -1:].expand(-1, length - p.shape[1], -1)], 1)
+                lens[m], found[m] = n.to(lens), f
         # append the parameter itself as the final waypoint
         full = torch.cat([pts, goal[:, None, :]], dim=1)
         idx = torch.arange(full.shape[1], device=self.device)[None]
@@ -86,7 +143,7 @@ class MoveTo(Template):
         self._store(rows, pid_init(ctx.cfg.pid, ctx.base[rows], self.wp[rows], lens))
         self.t[rows] = 0
         ctx.hold_arm(rows)
-        return torch.where(res.found.to(self.device), 0, Failure.NO_PATH)
+        return torch.where(found, 0, Failure.NO_PATH)
 
     def act(self, ctx: StepContext, rows: Tensor) -> None:
         out = pid_step(ctx.cfg.pid, self._rows(rows), ctx.base[rows], self.wp[rows], self.wp_len[rows], ctx.dt)
