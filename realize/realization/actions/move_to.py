@@ -27,6 +27,11 @@ from realize.realization.failures import Failure
 from realize.regions import Annulus, Box, Fixed, Region
 
 
+def _pad_to(points: Tensor, length: int) -> Tensor:
+    """(n, L, 2) waypoints -> (n, length, 2), the last point repeated."""
+    return torch.cat([points, points[:, -1:].expand(-1, length - points.shape[1], -1)], 1)
+
+
 def robot_to_world(cmd: Tensor, yaw: Tensor) -> Tensor:
     """(n, 3) robot-frame (forward, left, yaw rate) -> world-frame (vx, vy, yaw rate)."""
     c, s = torch.cos(yaw), torch.sin(yaw)
@@ -106,8 +111,8 @@ class MoveTo(Template):
         m = ~found
         p2, n2, f2 = on(ctx.occupancy_tight, m)
         length = max(pts.shape[1], p2.shape[1])
-        pts, p2 = (torch.cat([p, p[:, -1:].expand(-1, length - p.shape[1], -1)], 1) for p in (pts, p2))
-        pts[m], lens[m], found[m] = p2, n2.to(lens), f2
+        pts = _pad_to(pts, length)
+        pts[m], lens[m], found[m] = _pad_to(p2, length), n2.to(lens), f2
         return pts, lens, found
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
@@ -125,7 +130,7 @@ class MoveTo(Template):
             lens = torch.zeros(len(rows), dtype=torch.long, device=self.device)
             found = torch.zeros(len(rows), dtype=torch.bool, device=self.device)
             for m, (p, n, f) in parts:
-                pts[m] = torch.cat([p, p[:, -1:].expand(-1, length - p.shape[1], -1)], 1)
+                pts[m] = _pad_to(p, length)
                 lens[m], found[m] = n.to(lens), f
         # append the parameter itself as the final waypoint
         full = torch.cat([pts, goal[:, None, :]], dim=1)
