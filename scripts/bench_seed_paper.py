@@ -11,10 +11,10 @@ throughput issue (feasible in every run, iteration-0 success 3-30 %, last-iterat
 What it doesn't: run seeds in parallel (timings would interfere) or judge timing across
 machines: compare only rows measured on the same machine.
 
-    python scripts/bench_seed_paper.py --seeds 0-9 --out bench/seed_paper.csv
+    python scripts/bench_seed_paper.py --seeds 0-9 --out seed_paper.csv
     python scripts/bench_seed_paper.py --seeds 0-9 --out new.csv \
-        --reference benchmarks/seed_paper_reference.csv
-    python scripts/bench_seed_paper.py --summary benchmarks/seed_paper_reference.csv
+        --reference scripts/bench_data/seed_paper_1fc1637.csv
+    python scripts/bench_seed_paper.py --summary scripts/bench_data/seed_paper_1fc1637.csv
 """
 
 from __future__ import annotations
