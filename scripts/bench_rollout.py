@@ -18,7 +18,14 @@ rollout split into phases, measured by wrapping the functions that do each job w
 * reset: the history-free scene reset before the rollout;
 * other: the rest (templates' checks, bookkeeping, goal reads).
 
-A wrapped call inside another wrapped call counts for the outer one only. ``robot_steps_per_s``
+A wrapped call inside another wrapped call counts for the outer one only. ``--n N`` rolls out
+the batch's first N plans in a scene of N copies (``--n 100``: what one of the two default
+worker processes holds, ``sim.shard_rows``); ``--uniform`` rolls out N plans drawn from the
+task's uniform iteration-0 distribution instead (seed 0, as the search draws them), whose
+rollouts are longer and end in a tail of few running plans. After the phases, the control
+steps are split by how many plans were still running, with the wall time per step in that
+band: the per-step cost that does not shrink with the running plans shows there.
+``robot_steps_per_s``
 is the robots simulated per wall second (copies x control steps / rollout wall time). The last
 line is ``non_physics_share: X`` = 1 - physics / rollout wall time. ``--reps R`` rolls out the
 batch R times in the same scene (the results must repeat bit for bit) and reports the fastest.
@@ -26,7 +33,7 @@ batch R times in the same scene (the results must repeat bit for bit) and report
 What it doesn't: include the scene build (printed apart) or the search; compare with a
 baseline (run it on two checkouts on the same machine for that).
 
-Usage: python scripts/bench_rollout.py [--quick] [--reps R] [override ...]
+Usage: python scripts/bench_rollout.py [--quick] [--reps R] [--n N] [--uniform] [override ...]
 """
 
 from __future__ import annotations
@@ -99,6 +106,72 @@ class PhaseTimers:
         self._undo.clear()
 
 
+class RunningBands:
+    """Wall time of each counted control step (act, physics, checks) and of its physics, grouped
+    by the share of plans still running when the step began."""
+
+    EDGES = (0.75, 0.5, 0.25, 0.1, 0.0)
+
+    def __init__(self, n: int, timers: PhaseTimers):
+        self.n, self.timers = n, timers
+        self.rows: list[tuple[int, float, float]] = []
+        self._undo: Callable[[], None] | None = None
+
+    def install(self) -> None:
+        rollout = importlib.import_module("realize.realization.rollout")
+        cls = rollout.Rollout
+        act, physics = cls.act, cls.physics
+        state: dict[str, float] = {}
+
+        def timed_act(r: Any) -> None:
+            state["t0"], state["running"] = time.perf_counter(), float(r.running.sum())
+            state["phys0"] = self.timers.total["physics"]
+            act(r)
+
+        def timed_physics(r: Any, counted: bool) -> None:
+            physics(r, counted)
+            if counted and "t0" in state:
+                state["phys"] = self.timers.total["physics"] - state["phys0"]
+                state["pending"] = 1.0
+
+        def close_step() -> None:
+            if state.pop("pending", 0.0):
+                self.rows.append((int(state["running"]), time.perf_counter() - state["t0"], state["phys"]))
+
+        check = cls.read_due_goals
+
+        def timed_goals(r: Any) -> None:
+            check(r)
+            close_step()
+
+        cls.act, cls.physics, cls.read_due_goals = timed_act, timed_physics, timed_goals
+
+        def undo() -> None:
+            cls.act, cls.physics, cls.read_due_goals = act, physics, check
+
+        self._undo = undo
+
+    def reset(self) -> None:
+        self.rows.clear()
+
+    def undo(self) -> None:
+        if self._undo is not None:
+            self._undo()
+            self._undo = None
+
+    def summary(self) -> list[str]:
+        lines, hi = [], 1.01
+        for lo in self.EDGES:
+            sel = [(w, p) for k, w, p in self.rows if lo * self.n < k <= hi * self.n]
+            if sel:
+                wall = sum(w for w, _ in sel)
+                phys = sum(p for _, p in sel)
+                lines.append(f"  running {100 * lo:3.0f}-{min(100, 100 * hi):3.0f} %: {len(sel):4d} steps, {wall:6.2f} s, "
+                             f"{wall / len(sel) * 1e3:6.2f} ms/step, physics {phys / len(sel) * 1e3:6.2f} ms/step")
+            hi = lo
+        return lines
+
+
 def instrument(timers: PhaseTimers, scene: Any, realizer: Any) -> list[str]:
     """Wrap the functions of every phase; returns the hooks that were found."""
     impl = scene._impl
@@ -131,6 +204,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one rollout (default: --reps 2)")
     ap.add_argument("--reps", type=int, default=None, help="rollouts of the batch (fastest reported)")
+    ap.add_argument("--n", type=int, default=None, help="plans (and copies): the batch's first N (default: all 200)")
+    ap.add_argument("--uniform", action="store_true", help="N plans from the uniform iteration-0 distribution (seed 0)")
     ap.add_argument("overrides", nargs="*", help="config overrides, e.g. sim.solver_position_iterations=4")
     args = ap.parse_args()
     reps = args.reps or (1 if args.quick else 2)
@@ -139,18 +214,29 @@ def main() -> None:
     spec = build_run_spec(cfg)
     if list(spec.task.layout.column_names) != columns:
         raise SystemExit(f"{BATCH_FILE.name} holds columns {columns}, the task has {list(spec.task.layout.column_names)}")
-    n = Z.shape[0]
+    n = args.n or Z.shape[0]
+    if not 1 <= n <= (Z.shape[0] if not args.uniform else 10_000):
+        raise SystemExit(f"--n {n}: must be 1..{Z.shape[0]} for the committed batch")
+    if args.uniform:
+        g = torch.Generator()
+        g.manual_seed(0)
+        Z, source = spec.task.layout.sample_uniform(n, g, spec.placement.dtype), "uniform iteration-0 samples (seed 0)"
+    else:
+        Z, source = Z[:n], f"{BATCH_FILE.name}"
     t0 = time.perf_counter()
     scene, (realizer,) = open_realization(spec, n_envs=n)
     build = time.perf_counter() - t0
     timers = PhaseTimers()
+    bands = RunningBands(n, timers)
     best: dict[str, float] | None = None
     first = None
     with scene:
         found = instrument(timers, scene, realizer)
+        bands.install()
         try:
             for rep in range(reps):
                 timers.reset()
+                bands.reset()
                 res = realizer.rollout(Z)
                 key = (res.cost.tolist(), res.feasible.tolist())
                 if first is None:
@@ -162,8 +248,10 @@ def main() -> None:
                 t["steps"] = float(res.sim_steps)
                 if best is None or t["wall"] < best["wall"]:
                     best = t
+                    best_bands = bands.summary()
         finally:
             timers.undo()
+            bands.undo()
     assert best is not None and res is not None
     wall, steps = best["wall"], max(best["steps"], 1.0)
     feas = res.feasible.float().mean().item()
@@ -171,7 +259,7 @@ def main() -> None:
     print(f"torch threads {torch.get_num_threads()}, physics threads (sim.cpu_workers) {spec.sim.cpu_workers}; "
           f"overrides: {' '.join(args.overrides) or '(none)'}")
     print(f"hooks: {', '.join(found)}")
-    print(f"batch: {n} plans of {BATCH_FILE.name}, {steps:.0f} control steps; feasible {feas:.3f}, "
+    print(f"batch: {n} plans, {source}, {steps:.0f} control steps; feasible {feas:.3f}, "
           f"mean feasible cost {cost:.1f}, best {res.cost[res.feasible].min().item() if bool(res.feasible.any()) else float('nan'):.0f}")
     print(f"scene build {build:.1f} s; rollout wall {wall:.2f} s (fastest of {reps})")
     accounted = 0.0
@@ -181,6 +269,9 @@ def main() -> None:
         print(f"  {phase:15s} {v:8.2f} s  {v / wall * 100:5.1f} %  {v / steps * 1e3:7.2f} ms/step")
     other = wall - accounted
     print(f"  {'other':15s} {other:8.2f} s  {other / wall * 100:5.1f} %  {other / steps * 1e3:7.2f} ms/step")
+    print("control steps by plans still running (wall per step; physics per step):")
+    for line in best_bands:
+        print(line)
     print(f"robot_steps_per_s: {n * steps / wall:.0f}")
     print(f"non_physics_share: {1.0 - best.get('physics', 0.0) / wall:.3f}")
 
