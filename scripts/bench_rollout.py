@@ -214,9 +214,11 @@ def main() -> None:
     spec = build_run_spec(cfg)
     if list(spec.task.layout.column_names) != columns:
         raise SystemExit(f"{BATCH_FILE.name} holds columns {columns}, the task has {list(spec.task.layout.column_names)}")
-    n = args.n or Z.shape[0]
-    if not 1 <= n <= (Z.shape[0] if not args.uniform else 10_000):
-        raise SystemExit(f"--n {n}: must be 1..{Z.shape[0]} for the committed batch")
+    n = Z.shape[0] if args.n is None else args.n
+    most = 10_000 if args.uniform else Z.shape[0]
+    if not 1 <= n <= most:
+        where = "with --uniform" if args.uniform else f"for {BATCH_FILE.name}"
+        raise SystemExit(f"--n {n}: must be 1..{most} {where}")
     if args.uniform:
         g = torch.Generator()
         g.manual_seed(0)
