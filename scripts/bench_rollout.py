@@ -25,10 +25,10 @@ task's uniform iteration-0 distribution instead (seed 0, as the search draws the
 rollouts are longer and end in a tail of few running plans. After the phases, the control
 steps are split by how many plans were still running, with the wall time per step in that
 band: the per-step cost that does not shrink with the running plans shows there.
-``robot_steps_per_s``
-is the robots simulated per wall second (copies x control steps / rollout wall time). The last
-line is ``non_physics_share: X`` = 1 - physics / rollout wall time. ``--reps R`` rolls out the
-batch R times in the same scene (the results must repeat bit for bit) and reports the fastest.
+``robot_steps_per_s`` is the robots simulated per wall second (copies x control steps / rollout
+wall time). The last line is ``non_physics_share: X`` = 1 - physics / rollout wall time.
+``--reps R`` rolls out the batch R times in the same scene (the results must repeat bit for
+bit) and reports the fastest.
 
 What it doesn't: include the scene build (printed apart) or the search; compare with a
 baseline (run it on two checkouts on the same machine for that).
@@ -107,57 +107,40 @@ class PhaseTimers:
 
 
 class RunningBands:
-    """Wall time of each counted control step (act, physics, checks) and of its physics, grouped
-    by the share of plans still running when the step began."""
+    """Wall time and physics time of each counted control step, grouped by the share of plans
+    still running when the step began. A step runs from one ``Rollout.act`` to the next; the
+    last counted step (followed by the uncounted settling steps) is left out."""
 
     EDGES = (0.75, 0.5, 0.25, 0.1, 0.0)
 
     def __init__(self, n: int, timers: PhaseTimers):
         self.n, self.timers = n, timers
-        self.rows: list[tuple[int, float, float]] = []
-        self._undo: Callable[[], None] | None = None
+        self.rows: list[tuple[int, float, float]] = []  # (running, wall s, physics s) per step
+        self._last: tuple[int, float, float] | None = None  # the step in progress: running, t0, physics0
+        self._act: Callable[..., None] | None = None
 
     def install(self) -> None:
-        rollout = importlib.import_module("realize.realization.rollout")
-        cls = rollout.Rollout
-        act, physics = cls.act, cls.physics
-        state: dict[str, float] = {}
+        cls = importlib.import_module("realize.realization.rollout").Rollout
+        act = self._act = cls.act
 
         def timed_act(r: Any) -> None:
-            state["t0"], state["running"] = time.perf_counter(), float(r.running.sum())
-            state["phys0"] = self.timers.total["physics"]
+            now, phys = time.perf_counter(), self.timers.total["physics"]
+            if self._last is not None:
+                running, t0, phys0 = self._last
+                self.rows.append((running, now - t0, phys - phys0))
+            self._last = (int(r.running.sum()), now, phys)
             act(r)
 
-        def timed_physics(r: Any, counted: bool) -> None:
-            physics(r, counted)
-            if counted and "t0" in state:
-                state["phys"] = self.timers.total["physics"] - state["phys0"]
-                state["pending"] = 1.0
-
-        def close_step() -> None:
-            if state.pop("pending", 0.0):
-                self.rows.append((int(state["running"]), time.perf_counter() - state["t0"], state["phys"]))
-
-        check = cls.read_due_goals
-
-        def timed_goals(r: Any) -> None:
-            check(r)
-            close_step()
-
-        cls.act, cls.physics, cls.read_due_goals = timed_act, timed_physics, timed_goals
-
-        def undo() -> None:
-            cls.act, cls.physics, cls.read_due_goals = act, physics, check
-
-        self._undo = undo
+        cls.act = timed_act
 
     def reset(self) -> None:
         self.rows.clear()
+        self._last = None
 
     def undo(self) -> None:
-        if self._undo is not None:
-            self._undo()
-            self._undo = None
+        if self._act is not None:
+            importlib.import_module("realize.realization.rollout").Rollout.act = self._act
+            self._act = None
 
     def summary(self) -> list[str]:
         lines, hi = [], 1.01
@@ -215,10 +198,8 @@ def main() -> None:
     if list(spec.task.layout.column_names) != columns:
         raise SystemExit(f"{BATCH_FILE.name} holds columns {columns}, the task has {list(spec.task.layout.column_names)}")
     n = Z.shape[0] if args.n is None else args.n
-    most = 10_000 if args.uniform else Z.shape[0]
-    if not 1 <= n <= most:
-        where = "with --uniform" if args.uniform else f"for {BATCH_FILE.name}"
-        raise SystemExit(f"--n {n}: must be 1..{most} {where}")
+    if n < 1 or (n > Z.shape[0] and not args.uniform):
+        raise SystemExit(f"--n {n}: must be 1..{Z.shape[0]} for {BATCH_FILE.name} (any N >= 1 with --uniform)")
     if args.uniform:
         g = torch.Generator()
         g.manual_seed(0)
