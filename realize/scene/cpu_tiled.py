@@ -161,27 +161,30 @@ class CpuTiledBackend(PhysicsBackend):
 
     def finger_cube_forces(self) -> torch.Tensor:
         """Contacts of anything but a finger and its own copy's cube (cubes on tables, the arm on
-        the head, ...) are dropped after two dict look-ups, before any contact point is read."""
-        impulse = np.zeros((self.n_envs, 2), dtype=np.float64)
-        role = self._contact_role
+        the head, ...) are dropped after two dict look-ups, before any contact point is read.
+        A contact's impulse is summed and its norm taken in Python floats: the same float64
+        operations as numpy's ``zeros(3) + p0 + p1 ...`` and ``linalg.norm`` (sqrt of the dot
+        product), bit for bit, without an array per contact."""
+        impulse = [0.0] * (2 * self.n_envs)  # (copy, finger) flattened
+        role = self._contact_role.get
         for contact in self._px.get_contacts():
             b0, b1 = contact.bodies
-            r0 = role.get(id(b0))
+            r0 = role(id(b0))
             if r0 is None:
                 continue
-            r1 = role.get(id(b1))
+            r1 = role(id(b1))
             if r1 is None or r0[0] != r1[0] or (r0[1] == 2) == (r1[1] == 2):
                 continue  # other bodies, another copy's, or finger-finger
             finger = r1[1] if r0[1] == 2 else r0[1]
-            points = contact.points
-            if not points:
-                continue
-            total = points[0].impulse.astype(np.float64)  # the same float64 sum as 0 + p0 + p1 + ...
-            for pt in points[1:]:
-                total += pt.impulse
-            impulse[r0[0], finger] += sqrt(total.dot(total))  # np.linalg.norm's own formula, without its overhead
+            x = y = z = 0.0
+            for pt in contact.points:
+                px, py, pz = pt.impulse.tolist()
+                x += px
+                y += py
+                z += pz
+            impulse[2 * r0[0] + finger] += sqrt(x * x + y * y + z * z)
         dt = 1.0 / self.sim.sim_freq
-        return torch.from_numpy(impulse / dt).to(torch.float32)
+        return torch.from_numpy(np.array(impulse).reshape(self.n_envs, 2) / dt).to(torch.float32)
 
     # ------------------------------------------------------------------ writes
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
