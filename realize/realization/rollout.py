@@ -326,11 +326,7 @@ class PlanRealizer:
             raise ValueError(f"Z must be (M, {self.layout.dim}), got {tuple(Z.shape)}")
         if m > n:
             raise ValueError(f"{m} samples but the scene has only {n} copies (ce.n_envs)")
-        # inference mode: no version counters or autograd bookkeeping on the ~1,700 small ops of
-        # a control step; the result is copied out as ordinary tensors (callers may edit them)
-        with torch.inference_mode():
-            res = Rollout(self, Z, record).run(t0)
-        res = res.ordinary()
+        res = Rollout(self, Z, record).run(t0)
         self.last = res
         return res
 
