@@ -5,4 +5,8 @@ batched ManiSkill/SAPIEN scene with the robot's own controllers, and refines the
 distribution by cross-entropy optimization.
 """
 
+from realize.reproducible import pin_cpu_math
+
+pin_cpu_math()  # before any torch op: the same CPU numbers on every x86-64 machine with AVX2
+
 __version__ = "0.1.0"

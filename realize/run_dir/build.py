@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+from realize.reproducible import PINNED
 from realize.run_dir.jsonio import json_safe
 from realize.run_dir.result_doc import EliteStats, FailureDoc, HalvingDoc, PlanRef, ResultDoc
 from realize.run_dir.summaries import IterationSummary, best_params
@@ -68,13 +70,16 @@ class RunInfo:
 
 
 def package_versions() -> dict[str, str | None]:
-    """Versions of the packages that decide a run's numbers."""
+    """Versions of the packages that decide a run's numbers, and the CPU math paths pinned by
+    ``realize.reproducible`` (they decide its last bits)."""
     out: dict[str, str | None] = {}
     for name in ("realize", "torch", "mani_skill", "sapien", "numpy", "hydra-core", "rerun-sdk"):
         try:
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             out[name] = None
+    for key in PINNED:  # the CPU math paths (realize.reproducible): they decide the last bits
+        out[key] = os.environ.get(key)
     return out
 
 
