@@ -19,6 +19,7 @@ with torch's default pool the same small rollouts ran 3-4x slower on 2 busy core
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any, Iterator
@@ -182,6 +183,23 @@ def test_final_cost_is_added(spec: RunSpec, seed_task_dict: dict[str, Any], scen
     assert res.feasible.tolist() == [True]
     assert res.cost.tolist() == [float(res.steps[0]) + 12.5]
     assert int(res.steps[0]) == counter.calls
+
+
+def test_a_rollout_leaves_ordinary_tensors_behind(spec: RunSpec, seed_task_dict: dict[str, Any],
+                                                  scene3: BatchedScene) -> None:
+    # rollouts run in inference mode; neither their result nor the scene they used may be left
+    # with tensors that refuse in-place changes outside it
+    task = task_variant(spec, seed_task_dict, "move_only.yaml", plan=["move_to(Table1)"], goal={})
+    realizer = PlanRealizer(task, scene3, spec.rollout)
+    res = realizer.rollout(torch.tensor([GOOD]))
+    tensors = [getattr(res, f.name) for f in dataclasses.fields(res) if isinstance(getattr(res, f.name), torch.Tensor)]
+    assert tensors and not any(t.is_inference() for t in tensors)
+    res.cost += 1.0  # a caller may edit a result in place
+    scene3.reset()
+    scene3.freeze(torch.ones(scene3.n_envs, dtype=torch.bool))
+    scene3.reset()
+    again = realizer.rollout(torch.tensor([GOOD]))
+    assert bool(again.feasible[0]) and torch.equal(again.cost, res.cost - 1.0)
 
 
 def test_batched_equals_per_sample(alone: list[dict[str, Any]], batch: dict[str, Any]) -> None:

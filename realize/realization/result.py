@@ -9,6 +9,7 @@ sinks do).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -39,6 +40,12 @@ class RolloutResult:
     wall_time_s: float = 0.0
     sim_steps: int = 0
     horizon_cost: float = math.nan  # cost of a plan cut by the horizon: max steps + final cost
+
+    def ordinary(self) -> RolloutResult:
+        """A copy whose tensors are ordinary ones (a rollout runs in inference mode, whose tensors
+        cannot be changed in place outside it)."""
+        return dataclasses.replace(self, **{f.name: getattr(self, f.name).clone() for f in dataclasses.fields(self)
+                                            if isinstance(getattr(self, f.name), Tensor)})
 
     def to_eval(self) -> EvalResult:
         return EvalResult(cost=self.cost.double(), feasible=self.feasible, progress=self.progress.double(),

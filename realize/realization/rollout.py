@@ -326,7 +326,11 @@ class PlanRealizer:
             raise ValueError(f"Z must be (M, {self.layout.dim}), got {tuple(Z.shape)}")
         if m > n:
             raise ValueError(f"{m} samples but the scene has only {n} copies (ce.n_envs)")
-        res = Rollout(self, Z, record).run(t0)
+        # inference mode: no version counters or autograd bookkeeping on the ~1,700 small ops of
+        # a control step; the result is copied out as ordinary tensors (callers may edit them)
+        with torch.inference_mode():
+            res = Rollout(self, Z, record).run(t0)
+        res = res.ordinary()
         self.last = res
         return res
 

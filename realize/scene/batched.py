@@ -117,6 +117,9 @@ class BatchedScene:
             raise ConfigError(f"every = {every!r} is invalid: must be an integer >= 1")
         self._hooks.append((hook, every))
 
+    # reset and freeze change tensors in place that a rollout (run in inference mode) may have
+    # made: only inference mode may do that, so they run in it too
+    @torch.inference_mode()
     def reset(self, seed: int = 0, randomize: bool = False, state: SceneState | None = None) -> None:
         """Put every copy back in the task's initial state (same state for all unless randomize,
         or ``env.randomize_resets``), or, with ``state``, every copy in that state (robot joints,
@@ -282,6 +285,7 @@ class BatchedScene:
         self._arm_target = torch.where(m[:, None], q[:, UPPER], self._arm_target)
         self._arm_vel_target = torch.where(m[:, None], torch.zeros_like(self._arm_vel_target), self._arm_vel_target)
 
+    @torch.inference_mode()
     def freeze(self, mask: torch.Tensor) -> None:
         """Stop simulating the robots of the masked copies (finished or failed plans): zero their
         velocities and put them to sleep until the next reset where the backend can (CPU: a
