@@ -7,6 +7,6 @@ distribution by cross-entropy optimization.
 
 from realize.reproducible import pin_cpu_math
 
-pin_cpu_math()  # before any torch op: the same CPU numbers on every x86-64 machine with AVX2
+pin_cpu_math()  # before any torch op: the same torch/MKL kernel paths on every x86-64 CPU with AVX2
 
 __version__ = "0.1.0"

@@ -1,4 +1,4 @@
-"""Same CPU numbers on every x86-64 machine: pins the math kernels that torch picks by CPU.
+"""Pins the CPU math kernels that torch and MKL would otherwise pick by CPU (x86-64 with AVX2).
 
 torch's CPU wheels pick their kernels at run time by what the CPU offers: MKL (matrix products,
 linear algebra) takes another code path on an AVX-512 Intel CPU than on an AVX2 AMD one, and
@@ -6,7 +6,9 @@ torch's own vectorized kernels (reductions, elementwise math) do too. The paths 
 differently: the golden seed-task run (``tests/test_golden.py``) ended 1 ulp apart in its best
 parameters on an AVX-512 Xeon against the fixture recorded on an AVX2 EPYC. ``pin_cpu_math``
 sets ``MKL_CBWR=AVX2`` and ``ATEN_CPU_CAPABILITY=avx2`` when the CPU has AVX2, so every such
-machine takes the same paths; both libraries read them once, at their first call, so this runs
+machine takes the same torch and MKL paths (the golden runs then match across those two CPUs;
+full seed-paper runs still differ a little between them, see the README's "Layout"); both
+libraries read them once, at their first call, so this runs
 when ``realize`` is imported (before any torch op of the run, and inherited by worker
 processes). A value already set in the environment is kept (``ATEN_CPU_CAPABILITY=default``, say).
 

@@ -78,7 +78,7 @@ def package_versions() -> dict[str, str | None]:
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             out[name] = None
-    for key in PINNED:  # the CPU math paths (realize.reproducible): they decide the last bits
+    for key in PINNED:
         out[key] = os.environ.get(key)
     return out
 
