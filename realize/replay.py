@@ -16,11 +16,15 @@ decided): ``best_z`` belongs to that candidate's plan and parameters.
 What it doesn't: search (``realize.run``), perturb anything (``realize.validation``), or write
 to the run directory.
 
+The task, scene and every setting come from the run's own config (``result.json``), never from
+the live files: a run started with ``task_file`` keeps the file's content (``realize.run_config``),
+and ``notes`` says when that file has changed since.
+
 A replay on CPU of a run made on CPU uses the same seed and initial state, but the run
-simulated its winning sample in one of N tiled copies (world xy offset by metres): float32
-rounding then differs from copy 0 at the origin and the cost can differ by a step or two (a
-16-copy run replayed identically, an 8-copy run 1 step lower). ``cost_diff`` reports it rather
-than asserting equality.
+simulated its winning sample beside other samples in one PhysX scene (a shard of its copies),
+which does not keep copies apart bit for bit: replayed alone, the cost can differ by a step or
+two. ``exact=True`` re-runs that shard with that iteration's samples (``realize.replay_shard``)
+and gets the run's cost bit for bit; ``cost_diff`` reports either.
 """
 
 from __future__ import annotations
@@ -39,7 +43,9 @@ import torch
 from realize.geometry import SceneGeometry
 from realize.run_dir.directory import BestPlan, RunDir, RunDirError
 from realize.run_dir.names import RESULT_FILE
+from realize.replay_shard import ShardReplay, ShardReplayError, replay_shard
 from realize.run_config import RunSpec, build_run_spec
+from realize.task_plans import TaskOrigin
 from realize.scene import BatchedScene, Camera, EnvOptions
 from realize.scene_state import SceneState, save_state
 
@@ -203,7 +209,8 @@ class ReplayReport:
     video: VideoReport | None = None
     state_at: int | None = None  # the action whose starting state was captured (0-based)
     state_out: str | None = None  # where that state was written
-
+    exact: ShardReplay | None = None  # the best sample re-run in its shard (cost, feasible, failure are its)
+    notes: list[str] | None = None  # e.g. the run's task file has changed since (its own copy was used)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -212,7 +219,8 @@ class ReplayReport:
 def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float = 20.0, every: int = 2,
            width: int | None = 640, height: int | None = 480, eye: Sequence[float] | None = None,
            target: Sequence[float] | None = None, task_camera: bool = False, backend: str = "cpu",
-           hold_s: float = 1.0, state_at: int | None = None, state_out: str | Path | None = None) -> ReplayReport:
+           hold_s: float = 1.0, state_at: int | None = None, state_out: str | Path | None = None,
+           exact: bool = False) -> ReplayReport:
     """Re-simulate the run's best plan in one copy; with ``video`` write an MP4 of it.
 
     The video shows every ``every``-th control step at ``fps`` frames per second (the control
@@ -224,6 +232,10 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
     With ``state_at=K`` and ``state_out``, the scene's state at the moment action K (0-based)
     begins, right after action K-1 succeeded, is written there as a
     ``realize.scene_state.SceneState`` JSON (``ReplayError`` if the replay never gets there).
+
+    With ``exact`` the best sample is also re-run in the shard the run simulated it in (module
+    docstring); the report's cost, feasibility and failure are then that rollout's. Without a
+    video or a state to capture, that is the only rollout.
     """
     from realize.realizers import open_realization
 
@@ -237,6 +249,17 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
                                  or not 0 <= state_at < n_actions):
         raise ReplayError(f"state_at = {state_at!r} is invalid: the plan {spec.task.describe()} has {n_actions} "
                           "actions, numbered from 0")
+    origin = TaskOrigin.from_json(spec.config.get("task_origin"))
+    notes = [n for n in [None if origin is None else origin.note()] if n is not None]
+    shard = None
+    if exact:
+        try:
+            shard = replay_shard(run, spec)
+        except ShardReplayError as e:
+            raise ReplayError(str(e)) from None
+        if video is None and state_at is None:
+            return _report(run, spec, shard.cost, shard.feasible, shard.failure, shard.steps, spec.placement.backend,
+                           t0, shard=shard, notes=notes)
     captured: list[SceneState] = []
     options = EnvOptions()
     if video is not None:
@@ -271,13 +294,23 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
                               f"{res.failure[0]}); no state written")
         assert state_out is not None
         save_state(captured[0], state_out)
-    cost = float(res.cost[0])
+    if shard is not None:
+        return _report(run, spec, shard.cost, shard.feasible, shard.failure, shard.steps, scene.backend, t0,
+                       video=vid, state_at=state_at, state_out=state_out, shard=shard, notes=notes)
+    return _report(run, spec, float(res.cost[0]), bool(res.feasible[0]), res.failure[0], int(res.steps[0]),
+                   scene.backend, t0, video=vid, state_at=state_at, state_out=state_out, notes=notes)
+
+
+def _report(run: BestPlan, spec: RunSpec, cost: float, feasible: bool, failure: str, steps: int, backend: str,
+            t0: float, *, video: VideoReport | None = None, state_at: int | None = None,
+            state_out: str | Path | None = None, shard: ShardReplay | None = None,
+            notes: list[str] | None = None) -> ReplayReport:
     saved = run.best_cost if math.isfinite(run.best_cost) else None
     diff = None if saved is None else cost - saved
     return ReplayReport(
-        run_dir=str(run.run_dir), feasible=bool(res.feasible[0]), cost=cost, saved_cost=saved,
-        cost_diff=diff, matches=None if diff is None else diff == 0.0, failure=res.failure[0],
-        steps=int(res.steps[0]), n_envs_run=run.n_envs, backend=scene.backend,
-        wall_time_s=time.perf_counter() - t0, video=vid, state_at=state_at,
-        state_out=None if state_out is None else str(state_out),
+        run_dir=str(run.run_dir), feasible=feasible, cost=cost, saved_cost=saved,
+        cost_diff=diff, matches=None if diff is None else diff == 0.0, failure=failure,
+        steps=steps, n_envs_run=run.n_envs, backend=backend,
+        wall_time_s=time.perf_counter() - t0, video=video, state_at=state_at,
+        state_out=None if state_out is None else str(state_out), exact=shard, notes=notes or None,
     )

@@ -2,7 +2,7 @@
 
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
 the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers`` and the top-level keys
-``seed``, ``device``, ``resume``, ``task_file``, ``replan_from``, ``replan``) and returns a
+``seed``, ``device``, ``resume``, ``task_file``, ``task_origin``, ``replan_from``, ``replan``) and returns a
 ``RunSpec`` of validated objects (``TaskSpec`` (a replan's: the remaining actions, ``realize.replan``), ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
 tensors live and the search's dtype). Every problem raises ``realize.config.ConfigError`` with
@@ -15,6 +15,12 @@ What it doesn't: read Hydra objects (``realize.run`` converts them to plain data
 
 ``CEConfig.seed`` is the top-level ``seed``. ``device`` (auto|cpu|cuda) picks the simulator
 backend unless ``sim.backend`` says otherwise; ``auto`` is resolved here (CUDA if torch sees it).
+
+A run keeps the task it ran: with ``task_file`` set, ``RunSpec.config`` (what result.json and
+the checkpoint save) holds the file's content as ``task``, ``task_file: null`` and
+``task_origin: {path, sha256}`` (``realize.task_plans.TaskOrigin``). Built again from that
+config (replay, validation, resume, warm start, replan), the run's copy is used and the file
+is never read again; ``task_origin.path`` stays the task's ``source`` in messages.
 """
 
 from __future__ import annotations
@@ -29,7 +35,8 @@ import torch
 from realize.budget import HalvingBudget, plan_budget
 from realize.ce.config import CEConfig
 from realize.config import ConfigError, Settings, as_mapping, check_unknown, setting
-from realize.task_plans import PlannerSettings, build_task_candidates, check_halving_budget, load_task_file
+from realize.task_plans import (PlannerSettings, TaskOrigin, build_task_candidates, check_halving_budget,
+                                load_task_file)
 from realize.workers.settings import WorkersSettings, worker_count
 
 if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` starts fast
@@ -42,7 +49,8 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers")
-TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "warm_start", "replan_from", "replan")
+TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",
+                            "replan")
 DEVICES = ("auto", "cpu", "cuda")
 _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
 _BACKEND_DEVICE = {"cpu": "cpu", "gpu": "cuda"}
@@ -189,7 +197,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
     check_unknown(d, list(TOP_LEVEL_KEYS), "config")
-    top = {k: v for k, v in d.items() if k not in GROUPS and k != "replan"}
+    top = {k: v for k, v in d.items() if k not in GROUPS and k not in ("replan", "task_origin")}
     for k in ("resume", "task_file", "warm_start", "replan_from"):
         if top.get(k) is not None:
             top[k] = str(top[k])
@@ -200,10 +208,15 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     placement = resolve_placement(keys.device, sim, ce)
     geometry_cfg, geometry = _read_geometry(d.get("scene"))
 
-    if keys.task_file is not None:
+    config = dict(d)
+    origin = TaskOrigin.from_json(d.get("task_origin"))
+    if keys.task_file is not None:  # the run keeps the file's content: its config is the task it ran
         task_d, source = load_task_file(keys.task_file)
+        origin = TaskOrigin.of_file(source)
+        config.update(task=task_d, task_file=None, task_origin=origin.to_json())
     else:
-        task_d, source = as_mapping(d.get("task"), "task"), "task"
+        task_d = as_mapping(d.get("task"), "task")
+        source = "task" if origin is None else origin.path
         if not task_d:
             raise ConfigError("task: no task given (choose task=<name> or task_file=<path.yaml>)")
     planner = PlannerSettings.from_mapping(task_d.get("planner"), f"{source}:planner")
@@ -242,7 +255,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         ce=ce,
         logging=LoggingSettings.from_mapping(d.get("logging")),
         workers=workers,
-        config=dict(d),
+        config=config,
         placement=placement,
         planner=planner,
         candidates=candidates,

@@ -4,6 +4,9 @@ written in the task or planned by PDDL (the planner's k best with ``planner.top_
 What it does:
   * ``PlannerSettings``: the task's ``planner`` mapping (``realize.config.Settings``);
   * ``load_task_file``: read a YAML task file, errors naming the file;
+  * ``TaskOrigin``: which file a run's task came from and its SHA-256 when the run started
+    (a run keeps the file's content in its config; ``TaskOrigin.note()`` says if the file has
+    changed since);
   * ``check_halving_budget``: with ``top_k > 1`` the CE settings must cover the halving rounds
     (``realize.budget``), checked before the planner runs;
   * ``build_task`` / ``build_task_candidates``: task mapping -> checked ``TaskSpec`` (and the
@@ -16,6 +19,7 @@ simulate.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +36,7 @@ if TYPE_CHECKING:
     from realize.ce.config import CEConfig
     from realize.task import TaskSpec
 
-__all__ = ["PlannerSettings", "load_task_file", "check_halving_budget", "build_task", "build_task_candidates"]
+__all__ = ["PlannerSettings", "TaskOrigin", "load_task_file", "check_halving_budget", "build_task", "build_task_candidates"]
 
 
 @dataclass
@@ -93,6 +97,42 @@ def load_task_file(path_value: Any, key: str = "task_file") -> tuple[dict[str, A
     if not isinstance(d, Mapping):
         raise ConfigError(f"{key}: {path} must hold a mapping (params, plan, goal, ...), got {type(d).__name__}")
     return dict(d), str(path)
+
+
+@dataclass(frozen=True)
+class TaskOrigin:
+    """The task file a run's task was read from: its ``path`` as resolved when the run started
+    and the ``sha256`` of its bytes then. The run itself uses the copy of the file's content in
+    its config (``task``), never the file again."""
+
+    path: str
+    sha256: str
+
+    @classmethod
+    def of_file(cls, path: str | Path) -> TaskOrigin:
+        return cls(str(path), hashlib.sha256(Path(path).read_bytes()).hexdigest())
+
+    def to_json(self) -> dict[str, str]:
+        return {"path": self.path, "sha256": self.sha256}
+
+    @classmethod
+    def from_json(cls, d: Any, where: str = "task_origin") -> TaskOrigin | None:
+        """``None`` for ``None``; ``ConfigError`` for anything but ``{path, sha256}`` strings."""
+        if d is None:
+            return None
+        if not (isinstance(d, Mapping) and set(d) == {"path", "sha256"}
+                and all(isinstance(v, str) and v for v in d.values())):
+            raise ConfigError(f"{where} = {d!r} is invalid: must be a mapping {{path: str, sha256: str}}")
+        return cls(str(d["path"]), str(d["sha256"]))
+
+    def note(self) -> str | None:
+        """A line saying the file has changed or gone since the run started (``None``: unchanged)."""
+        p = Path(self.path)
+        if not p.is_file():
+            return f"the task file {self.path} is gone; the run's own copy of the task was used"
+        if hashlib.sha256(p.read_bytes()).hexdigest() != self.sha256:
+            return f"the task file {self.path} has changed since the run; the run's own copy of the task was used"
+        return None
 
 
 def check_halving_budget(planner: PlannerSettings, ce: CEConfig, source: str = "task") -> None:

@@ -2,14 +2,19 @@
 
 Usage: python scripts/replay.py RUN_DIR [--video out.mp4] [--fps 20] [--every 2]
                                 [--width 640 --height 480] [--eye X Y Z --target X Y Z | --task-camera]
-                                [--backend cpu|gpu|auto] [--json] [--state-at K --state-out FILE]
+                                [--backend cpu|gpu|auto] [--json] [--state-at K --state-out FILE] [--exact]
 
 Reads RUN_DIR/result.json (the resolved config and best_z), rebuilds the task, scene and
 controllers from that config, re-simulates the plan and prints its cost next to the saved
 best_cost. With --video it renders every --every-th control step of copy 0 into an MP4 (on CPU
 through lavapipe). With --state-at K --state-out FILE it writes the scene state at the moment
 action K (0-based) begins, right after action K-1 succeeded (realize/scene_state.py), the state
-`realize replan_from=RUN_DIR replan.action=K replan.state=FILE` starts from. Exit status: 0 if the replay reaches the goal, 1 if not, 2 on a bad run dir.
+`realize replan_from=RUN_DIR replan.action=K replan.state=FILE` starts from. With --exact it
+re-runs the shard of copies the run simulated its best sample in (that iteration's samples from
+history.npz), which gives the run's cost bit for bit on CPU; alone in one copy the cost may be a
+step or two off (PhysX does not keep the copies of one scene apart bit for bit). The task is the
+run's own copy (result.json's config), even if its task file has changed since.
+Exit status: 0 if the replay reaches the goal, 1 if not, 2 on a bad run dir.
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--state-at", type=int, default=None, metavar="K",
                     help="capture the scene state when action K (0-based) begins")
     ap.add_argument("--state-out", type=Path, default=None, metavar="FILE", help="write that state here (JSON)")
+    ap.add_argument("--exact", action="store_true",
+                    help="re-run the best sample's shard (that iteration's samples): the run's cost bit for bit")
     args = ap.parse_args(argv)
     if args.every < 1 or args.fps <= 0 or args.width < 16 or args.height < 16:
         ap.error("--every >= 1, --fps > 0, --width/--height >= 16")
@@ -52,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         rep = replay(args.run_dir, args.video, fps=args.fps, every=args.every, width=args.width,
                      height=args.height, eye=args.eye, target=args.target,
                      task_camera=args.task_camera, backend=args.backend, hold_s=args.hold,
-                     state_at=args.state_at, state_out=args.state_out)
+                     state_at=args.state_at, state_out=args.state_out, exact=args.exact)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -65,8 +72,14 @@ def main(argv: list[str] | None = None) -> int:
         elif rep.cost_diff is None:
             same = "no saved cost"
         else:
-            same = f"differs by {rep.cost_diff:+.0f} (run scene had {rep.n_envs_run} copies: other tile offset)"
-        print(f"replay ({rep.backend}, 1 copy): {'reaches the goal' if rep.feasible else 'FAILS: ' + rep.failure}")
+            same = (f"differs by {rep.cost_diff:+.0f}" + ("" if rep.exact is not None else
+                    " (the run simulated it beside other samples in one PhysX scene; --exact re-runs that scene)"))
+        for note in rep.notes or []:
+            print(f"note: {note}")
+        x = rep.exact
+        how = "1 copy" if x is None else (f"exact: iteration {x.iteration} row {x.row}, shard of copies "
+                                          f"{x.shard_first}-{x.shard_stop - 1} with {x.rows_in_shard} samples")
+        print(f"replay ({rep.backend}, {how}): {'reaches the goal' if rep.feasible else 'FAILS: ' + rep.failure}")
         print(f"cost {rep.cost:.0f}  result.json best_cost {saved}  -> {same}")
         if rep.video is not None:
             v = rep.video

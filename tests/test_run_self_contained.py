@@ -1,0 +1,88 @@
+"""A run directory keeps the task it ran: a run from a task file, the file edited afterwards,
+and the replay of the run still realizes the run's task and gets its cost bit for bit.
+
+The task drives the base to a table and out through Exit (no contact: a 3-plan, 1-iteration
+run takes seconds). The edit moves Exit and renames the task: a replay that read the live file
+would judge the saved plan against the moved Exit and fail its goal.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from hydra import compose, initialize_config_dir
+
+from realize.paths import CONFIG_DIR
+from realize.run import run
+from realize.run_config import build_run_spec
+from realize.run_dir.names import RESULT_FILE
+
+TASK = {
+    "name": "drive_out",
+    "params": {
+        "Table1": {"type": "annulus", "frame": "table1", "center": [0.0, 0.0], "r_min": 0.75, "r_max": 1.25},
+        "Exit": {"type": "box", "low": [1.8, -0.4], "high": [2.6, 0.4]},
+    },
+    "plan": ["move_to(Table1)", "move_to(Exit)"],
+    "goal": {"base_in": "Exit"},
+}
+TINY = ["ce.n_envs=3", "ce.n_elite=1", "ce.iterations=1", "logging.progress=false", "logging.rerun=false"]
+
+
+def _compose(overrides: list[str]):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test_self_contained"):
+        return compose(config_name="config", overrides=overrides)
+
+
+def _replay_script():
+    path = CONFIG_DIR.parent / "scripts" / "replay.py"
+    spec = importlib.util.spec_from_file_location("_replay_script", path)
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def edited_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A run of TASK from a file, and the file then edited (Exit moved, another name)."""
+    tmp = tmp_path_factory.mktemp("self_contained")
+    task_file = tmp / "my_task.yaml"
+    task_file.write_text(yaml.safe_dump(TASK))
+    outcome = run(_compose(TINY + [f"task_file={task_file}"]), tmp / "run")
+    assert outcome.feasible, "the test needs a feasible run to replay"
+    edited = dict(TASK, name="edited", params=dict(TASK["params"], Exit={"type": "box", "low": [-2.6, -0.4],
+                                                                         "high": [-1.8, 0.4]}))
+    task_file.write_text(yaml.safe_dump(edited))
+    return outcome.run_dir, task_file
+
+
+def test_result_config_holds_the_task_that_ran(edited_run: tuple[Path, Path]) -> None:
+    run_dir, task_file = edited_run
+    d = json.loads((run_dir / RESULT_FILE).read_text())
+    cfg = d["config"]
+    assert cfg["task"]["name"] == "drive_out" and cfg["task"]["params"] == TASK["params"]
+    assert cfg["task"]["plan"] == TASK["plan"] and cfg["task"]["goal"] == TASK["goal"]
+    assert cfg["task_file"] is None and cfg["task_origin"]["path"] == str(task_file)
+    assert d["task"] == {"name": "drive_out", "source": str(task_file)}
+    # the saved config alone rebuilds the task that ran, whatever the file now says
+    spec = build_run_spec(cfg)
+    assert spec.task.name == "drive_out" and tuple(spec.task.layout.regions["Exit"].low) == (1.8, -0.4)
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_replay_after_the_file_changed_gets_the_runs_cost(edited_run: tuple[Path, Path], exact: bool,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    run_dir, task_file = edited_run
+    saved = json.loads((run_dir / RESULT_FILE).read_text())["best_cost"]
+    code = _replay_script().main([str(run_dir), "--json"] + (["--exact"] if exact else []))
+    rep = json.loads(capsys.readouterr().out)
+    assert code == 0 and rep["feasible"]
+    assert rep["cost"] == saved and rep["matches"] is True  # bit for bit, as the run had it
+    assert any(str(task_file) in n and "changed" in n for n in rep["notes"])
+    if exact:
+        assert rep["exact"]["iteration"] == 0 and rep["exact"]["shard_stop"] == 3
