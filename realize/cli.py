@@ -22,6 +22,7 @@ from typing import Any
 from hydra.errors import CompactHydraException
 from omegaconf import DictConfig
 
+from realize.cli_keys import check_override_keys
 from realize.config import ConfigError
 from realize.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
@@ -50,7 +51,8 @@ def _group_options(group: str) -> list[str]:
 def preflight(args: list[str]) -> list[str]:
     """Check the command line before Hydra runs; returns the (possibly extended) arguments.
 
-    Checks config group choices (``experiment=foo`` -> one-line error listing the presets) and
+    Checks config group choices (``experiment=foo`` -> one-line error listing the presets), that
+    every key exists (``secne=wall`` -> "did you mean 'scene'", ``realize.cli_keys``) and
     ``resume=`` (must be a run directory); a resumed single run writes its Hydra files into
     the resumed directory. For a single run without Hydra flags it also composes the config
     once, so composition errors become one line too.
@@ -101,6 +103,8 @@ def preflight(args: list[str]) -> list[str]:
             for v in values:
                 if v not in ("null", "None") and not (Path(v) / RESULT_FILE).is_file():
                     raise ConfigError(f"replan_from: {v} is not a realize run directory (no {RESULT_FILE})")
+    if check_groups:  # secne=wall, ce.n_envz=3: one line with the closest known names
+        check_override_keys(parsed, CONFIG_GROUPS)
     if resume_dir is not None and not multirun and not has_run_dir:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         args = args + [f"hydra.run.dir={resume_dir}", f"hydra.output_subdir=.hydra/resume-{stamp}"]
