@@ -75,12 +75,12 @@ class _PoseMap:
         self.body_radii = radii
         ee = kin.ee_link
         self._ee = ee
-        L, dt = axis_length, kin.tcp_offset.dtype
+        L, kw = axis_length, dict(dtype=kin.tcp_offset.dtype, device=kin.device)
         self._offsets = torch.stack([
             kin.tcp_offset,
-            kin.tcp_offset - torch.tensor([L, 0.0, 0.0], dtype=dt),  # behind the TCP on the approach axis
-            kin.tcp_offset + torch.tensor([0.0, L, 0.0], dtype=dt),  # beside it on the closing axis
-        ]).to(kin.device)
+            kin.tcp_offset - torch.tensor([L, 0.0, 0.0], **kw),  # behind the TCP on the approach axis
+            kin.tcp_offset + torch.tensor([0.0, L, 0.0], **kw),  # beside it on the closing axis
+        ])
         self._mask = torch.cat([kin._ee_dof_mask.unsqueeze(0).expand(3, -1), kin.sphere_dof_mask], dim=0)
         self._ends = prefix_ends(self._mask)
 

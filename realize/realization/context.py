@@ -76,7 +76,8 @@ class StepContext:
         self.arm_vel_cmd = torch.zeros(n, N_UPPER, device=dev)
         self.grip_cmd = torch.zeros(n, dtype=torch.bool, device=dev)
         self.arm_hold = torch.zeros(n, N_UPPER, device=dev)
-        self.fab_state = FabricState(torch.zeros(n, DOF, dtype=fabric.dtype), torch.zeros(n, DOF, dtype=fabric.dtype))
+        fab = dict(dtype=fabric.dtype, device=fabric.device)
+        self.fab_state = FabricState(torch.zeros(n, DOF, **fab), torch.zeros(n, DOF, **fab))
         self._fab_rows: list[Tensor] = []
         self._fab_goals: list[Tensor] = []
         self._fab_approach: list[Tensor] = []
