@@ -9,8 +9,11 @@ and complete even when Hydra stops the sweep after a failed job (its basic sweep
 first failure after the batch and never reaches ``on_multirun_end``). ``on_multirun_end``
 rebuilds it once more.
 
-Columns: ``job, overrides, status, error, feasible, best_cost, wall_time_s,
-iterations_done, interrupted, run_dir``. ``status`` is ``done``, ``failed`` or ``interrupted``.
+Columns: ``job``, then one column per key the jobs override (``ce.n_envs``, ``seed``: the swept
+keys and any fixed override, each job's value; empty where a job lacks it), then ``overrides,
+status, error, feasible, best_cost, final_success, wall_time_s, iterations_done, interrupted,
+run_dir``. ``status`` is ``done``, ``failed`` or ``interrupted``; ``final_success`` is the share
+of successful samples in the job's last iteration. Each update prints where it wrote the table.
 Both files are read and written through ``realize.run_dir.directory.RunDir`` (``JobStatusDoc``,
 ``ResultDoc``/``FailureDoc``).
 What it doesn't: run or retry jobs, or read anything but JSON files (no unpickling).
@@ -44,6 +47,7 @@ COLUMNS = (
     "error",
     "feasible",
     "best_cost",
+    "final_success",
     "wall_time_s",
     "iterations_done",
     "interrupted",
@@ -78,7 +82,7 @@ def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
         "overrides": " ".join(st.overrides),
         "status": status,
         "error": _one_line(error) if error else "",
-        "feasible": "", "best_cost": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
+        "feasible": "", "best_cost": "", "final_success": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
         "run_dir": rel,
     }
     if res is not None:
@@ -89,7 +93,22 @@ def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
             iterations_done=res.iterations_done,
             interrupted=res.interrupted,
         )
+        last = getattr(res, "success_per_iter", None)
+        if last and math.isfinite(last[-1]):
+            row["final_success"] = last[-1]
+    row.update(_override_values(st.overrides))
     return row
+
+
+def _override_values(overrides: list[str]) -> dict[str, str]:
+    """``["ce.n_envs=100", "+x=1"]`` -> ``{"ce.n_envs": "100", "x": "1"}``."""
+    out = {}
+    for o in overrides:
+        key, sep, value = str(o).partition("=")
+        key = key.lstrip("+~")
+        if sep and key not in COLUMNS:
+            out[key] = value
+    return out
 
 
 def write_summary(sweep_dir: Path | str, filename: str = "summary.csv") -> Path:
@@ -102,8 +121,9 @@ def write_summary(sweep_dir: Path | str, filename: str = "summary.csv") -> Path:
         return (int(j) if isinstance(j, int) or str(j).isdigit() else 1 << 30, str(r["run_dir"]))
 
     rows.sort(key=order)
+    keys = list(dict.fromkeys(k for r in rows for k in r if k not in COLUMNS))
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(COLUMNS), lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=[COLUMNS[0], *keys, *COLUMNS[1:]], restval="", lineterminator="\n")
     w.writeheader()
     for r in rows:
         w.writerow(r)
@@ -146,7 +166,8 @@ class SweepSummary(Callback):
 
     def _update(self, sweep_dir: Path) -> None:
         with _Lock(sweep_dir / f".{self.filename}.lock"):
-            write_summary(sweep_dir, self.filename)
+            out = write_summary(sweep_dir, self.filename)
+        print(f"sweep summary: {out}", flush=True)
 
     def on_job_end(self, config: DictConfig, job_return: JobReturn, **kwargs: Any) -> None:
         hydra = config.get("hydra")

@@ -447,7 +447,7 @@ def test_sigint_subprocess_then_resume(tmp_path: Path, uninterrupted: Path) -> N
 def _read_summary(path: Path) -> list[dict[str, str]]:
     with path.open() as f:
         rows = list(csv.DictReader(f))
-    assert rows and set(rows[0]) == set(COLUMNS)
+    assert rows and set(COLUMNS) <= set(rows[0])
     return rows
 
 
@@ -462,9 +462,15 @@ def test_multirun_2x2_basic_launcher_summary(tmp_path: Path) -> None:
     combos = {(o.split("ce.n_elite=")[1].split()[0], o.split("seed=")[1].split()[0])
               for o in (r["overrides"] for r in rows)}
     assert combos == {("1", "0"), ("1", "1"), ("2", "0"), ("2", "1")}
+    assert {(r["ce.n_elite"], r["seed"]) for r in rows} == combos  # a column per swept key
+    header = next(csv.reader((sweep / "summary.csv").open()))
+    assert header[:2] == ["job", "ce.n_envs"] and "final_success" in header
+    assert f"sweep summary: {sweep / 'summary.csv'}" in p.stdout  # the run says where it wrote the table
     for r in rows:
         assert r["feasible"] in ("True", "False") and float(r["wall_time_s"]) > 0
         assert (sweep / r["run_dir"] / RESULT_FILE).is_file()
+        res = json.loads((sweep / r["run_dir"] / RESULT_FILE).read_text())
+        assert float(r["final_success"]) == res["success_per_iter"][-1]
 
 
 def test_sweep_with_a_failing_job(tmp_path: Path) -> None:
@@ -543,8 +549,12 @@ def test_summary_lists_jobs_without_results(tmp_path: Path) -> None:
                                                      "status": status, "error": err}))
     (tmp_path / "0" / RESULT_FILE).write_text(json.dumps({"status": "done", "feasible": True, "best_cost": 412.0,
                                                           "wall_time_s": 12.5, "iterations_done": 10}))
+    (tmp_path / "0" / RESULT_FILE).write_text(json.dumps({"status": "done", "feasible": True, "best_cost": 412.0,
+                                                          "wall_time_s": 12.5, "iterations_done": 10,
+                                                          "success_per_iter": [0.25, 0.5]}))
     rows = _read_summary(write_summary(tmp_path))
     assert [r["status"] for r in rows] == ["done", "failed"]
+    assert [r["seed"] for r in rows] == ["0", "1"] and [r["final_success"] for r in rows] == ["0.5", ""]
     assert rows[0]["best_cost"] == "412.0" and rows[0]["feasible"] == "True"
     assert rows[1]["error"] == "RuntimeError: boom"
 
