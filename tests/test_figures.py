@@ -236,3 +236,33 @@ def test_ramp_modes_classifies_release_points(tmp_path) -> None:
     assert modes == {"s0": "slide", "s1": "carry", "s2": "none"}
     summ = list(csv.DictReader((tmp_path / "m_summary.csv").open()))
     assert {(r["mode"], r["runs"]) for r in summ} == {("slide", "1"), ("carry", "1"), ("none", "1")}
+
+
+def _kept_figure(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The figures the next fig2/fig3 call draws (``plt.close`` no longer discards them)."""
+    from realize.figures.common import plt
+
+    kept: list = []
+    monkeypatch.setattr(plt, "close", lambda fig=None: kept.append(fig))
+    return kept
+
+
+def test_fig3_colour_bar_is_whole_iterations_and_outlines_have_a_legend(run_dir, monkeypatch, tmp_path):
+    kept = _kept_figure(monkeypatch)
+    fig3(run_dir, out_png=tmp_path / "f3.png")
+    fig = kept[-1]
+    cbar_ax = fig.axes[-1]  # the colour bar is the last axes
+    labels = [t.get_text() for t in cbar_ax.get_yticklabels()]
+    assert labels == ["0", "1", "2", "3", "final"], labels  # 4 iterations + the final refit, no 0.5 steps
+    ticks = cbar_ax.get_yticks()
+    assert np.array_equal(ticks, np.round(ticks))
+    legend = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+    assert "parameter region" in legend and "final refit" in legend
+
+
+def test_fig2_legend_names_the_table_and_its_padding_apart(run_dir, monkeypatch, tmp_path):
+    kept = _kept_figure(monkeypatch)
+    fig2(run_dir, out_png=tmp_path / "f2.png")
+    legend = [t.get_text() for lg in kept[-1].legends for t in lg.get_texts()]
+    assert "tables and other obstacles" in legend and any(t.startswith("A* padding (+") for t in legend)
+    assert not any("tables (+" in t for t in legend)

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.lines import Line2D
-from matplotlib.patches import PathPatch
+from matplotlib.patches import Patch, PathPatch
 from matplotlib.path import Path as MplPath
 
 from realize.figures.common import (
@@ -129,8 +129,12 @@ def fig2(
         Line2D([], [], color=CYAN, lw=2.2, label="best plan: base"),
         Line2D([], [], color=CYAN, lw=1.6, ls="--", label="best plan: end effector"),
         PathPatch(MplPath(np.zeros((1, 2))), facecolor=REGION_GREY, edgecolor=REGION_EDGE, label="parameter regions"),
-        Line2D([], [], color="black", lw=4, label=f"tables (+{100 * scene.padding:.0f} cm padding)"),
+        Patch(facecolor="black", edgecolor="black", label="tables and other obstacles"),
+        Line2D([], [], color="#e032c8", marker="s", ms=4, ls="none", label="cube"),
+        Line2D([], [], color="0.3", marker="o", ms=4, ls="none", label="robot start"),
     ]
+    if scene.padding > 0:  # draw_world outlines each obstacle grown by the A* padding
+        handles.append(Line2D([], [], color="black", lw=0.8, label=f"A* padding (+{100 * scene.padding:.0f} cm)"))
     fig.legend(handles=handles, loc="outside lower center", ncol=4, fontsize=8, frameon=False)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=DPI)

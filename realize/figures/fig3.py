@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.colors import Normalize
+from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse
 
 from realize.figures.common import DPI, REGION_EDGE, fmt, plt, write_csv
@@ -82,8 +83,9 @@ def fig3(
     nrow = int(math.ceil(len(params) / ncol))
     fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol + 1.0, 3.4 * nrow + 0.4), squeeze=False,
                              layout="constrained")
-    cmap = plt.get_cmap("viridis")
-    norm = Normalize(vmin=0, vmax=max(n_rows - 1, 1))
+    # one colour per row, centred on integer ticks: the colour bar shows whole iterations only
+    cmap = plt.get_cmap("viridis", max(n_rows, 1))
+    norm = Normalize(vmin=-0.5, vmax=max(n_rows, 1) - 0.5)
     rows: list[list[Any]] = []
     for ax, p in zip(axes.flat, params):
         region = layout.regions[p]
@@ -118,7 +120,16 @@ def fig3(
         ax.set_visible(False)
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     cb = fig.colorbar(sm, ax=axes.ravel().tolist(), shrink=0.8, pad=0.02)
-    cb.set_label("CE iteration" + (" (last: final refit, dashed)" if show_final else ""))
+    step = max(1, int(math.ceil(n_rows / 12)))  # at most ~12 labels
+    ticks = sorted(set(range(0, n_rows, step)) | ({n_rows - 1} if n_rows else set()))
+    cb.set_ticks(ticks, labels=["final" if show_final and t == n_rows - 1 else str(t) for t in ticks])
+    cb.minorticks_off()
+    cb.set_label("CE iteration" + (" (final: the last refit, dashed)" if show_final else ""))
+    handles = [Line2D([], [], color=REGION_EDGE, lw=1.0, label="parameter region"),
+               Line2D([], [], color=cmap(norm(0)), lw=1.3, label=f"sampling distribution ({n_sigma:g} sigma)")]
+    if show_final:
+        handles.append(Line2D([], [], color=cmap(norm(n_rows - 1)), lw=1.8, ls="--", label="final refit"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.suptitle(f"Sampling distribution per CE iteration ({n_sigma:g}-sigma ellipses)", fontsize=11)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=DPI)
