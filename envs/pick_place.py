@@ -40,7 +40,7 @@ from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
-from mani_skill.utils.structs.types import SceneConfig, SimConfig
+from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
 from envs import fetch_omni  # noqa: F401  (registers the agent)
 from realize.config import ConfigError
@@ -49,6 +49,10 @@ from realize.realization.goals import base_in_rectangle, cube_on_table
 
 ENV_ID = "RealizePickPlace-v1"
 TILE_MARGIN = 3.0  # metres of empty floor between tiled copies
+# PhysX GPU contact buffers: ManiSkill's own Fetch task (OpenCabinetDrawer) raises them to 2**21
+# contacts and 2**19 patches; here they also grow with the copies, by this many contacts per copy
+# (not measured on a GPU yet: on overflow PhysX drops contacts with a printed warning only)
+GPU_CONTACTS_PER_COPY = 512
 
 
 def tile_offsets(n: int, extent: tuple[float, float], margin: float = TILE_MARGIN) -> np.ndarray:
@@ -57,6 +61,13 @@ def tile_offsets(n: int, extent: tuple[float, float], margin: float = TILE_MARGI
     sx, sy = extent[0] + margin, extent[1] + margin
     i = np.arange(n)
     return np.stack([(i % cols) * sx, (i // cols) * sy], axis=1).astype(np.float64)
+
+
+def gpu_memory_config(num_envs: int) -> GPUMemoryConfig:
+    """PhysX GPU buffers for ``num_envs`` sub-scenes: ManiSkill's Fetch task's at least, and
+    ``GPU_CONTACTS_PER_COPY`` contacts (a quarter as many patches) per copy, in powers of two."""
+    contacts = max(2**21, 1 << math.ceil(math.log2(max(1, num_envs) * GPU_CONTACTS_PER_COPY)))
+    return GPUMemoryConfig(max_rigid_contact_count=contacts, max_rigid_patch_count=contacts // 4)
 
 
 def yaw_pitch_quat(yaw: float, pitch: float) -> list[float]:
@@ -140,6 +151,8 @@ class RealizePickPlaceEnv(BaseEnv):
         uids = robot if n_tiles == 1 else tuple([robot] * n_tiles)
         if n_tiles > 1:  # the tiled copies' robots are supported as a whole (no warning listing N names)
             self.SUPPORTED_ROBOTS = [*type(self).SUPPORTED_ROBOTS, uids]
+        if kwargs.get("render_backend") == "none":  # nothing renders, so no render mode (ManiSkill would warn)
+            kwargs["render_mode"] = None
         kwargs.setdefault("control_mode", "pd_joint_pos_base_vel")
         super().__init__(*args, robot_uids=uids, **kwargs)
 
@@ -147,11 +160,15 @@ class RealizePickPlaceEnv(BaseEnv):
     @property
     def _default_sim_config(self) -> SimConfig:
         s = self._sim_settings
+        scene = dict(s["scene_config"])
+        if self.device.type == "cuda":  # enhanced determinism is for the CPU's one scene of tiled copies
+            scene["enable_enhanced_determinism"] = False
         return SimConfig(
             sim_freq=s["sim_freq"],
             control_freq=s["control_freq"],
             spacing=max(self.geometry.extent) + TILE_MARGIN,
-            scene_config=SceneConfig(**s["scene_config"]),
+            scene_config=SceneConfig(**scene),
+            gpu_memory_config=gpu_memory_config(self.num_envs),
         )
 
     @property

@@ -14,7 +14,8 @@ planner runs).
 What it doesn't: read Hydra objects (``realize.run`` converts them to plain data first), or run.
 
 ``CEConfig.seed`` is the top-level ``seed``. ``device`` (auto|cpu|cuda) picks the simulator
-backend unless ``sim.backend`` says otherwise; ``auto`` is resolved here (CUDA if torch sees it).
+backend unless ``sim.backend`` says otherwise; ``auto`` is resolved here (the CPU, also where torch
+sees CUDA: ``realize.scene.backends.resolve_backend``).
 
 A run keeps the task it ran: with ``task_file`` set, ``RunSpec.config`` (what result.json and
 the checkpoint save) holds the file's content as ``task``, ``task_file: null`` and

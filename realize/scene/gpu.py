@@ -1,9 +1,14 @@
 """The CUDA backend: ManiSkill's own batching, ``num_envs = N`` sub-scenes on PhysX GPU.
 
-What it does: builds the task with ``num_envs = N`` on ``physx_cuda``; every read is one batched
-ManiSkill tensor (each sub-scene has its own frame, so poses are local already), targets are
-written with ManiSkill's batched drive setters and applied by PhysX GPU, and after the substeps
-the GPU buffers are fetched once.
+What it does: builds the task with ``num_envs = N`` on ``physx_cuda`` (no renderer unless a
+camera is asked for: ManiSkill would build one per sub-scene); every read is one batched
+ManiSkill tensor (each sub-scene has its own frame, so poses are local already). PhysX GPU
+keeps its state in device buffers that ManiSkill's setters write and its getters read, so every
+write is applied before the next step or fetch (a fetch overwrites what was not applied): drive
+targets after the setters, the cube after ``push_cube`` / ``place_cube``; ``set_state`` applies
+joints and poses, updates the links' kinematics, then fetches (ManiSkill's own reset order);
+after the substeps the buffers are fetched once. ``realize.scene.backends`` checks SAPIEN's
+PhysX GPU library (``realize.scene.physx_gpu``) before this backend is built.
 What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
 copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
 the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA
@@ -19,6 +24,9 @@ from realize.geometry import GeometryCfg
 from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, PhysicsBackend, make_task
 from realize.scene.settings import EnvOptions, SimSettings
 
+# ManiSkill builds a renderer per sub-scene wherever it has a render device: none without a camera
+_NO_RENDER = {"render_backend": "none"}
+
 __all__ = ["GpuBackend"]
 
 _NO_FRICTION = ("per-copy cube friction needs the CPU backend: PhysX GPU fixes materials when the scene is "
@@ -33,7 +41,8 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
 
     def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions):
         self.n_envs, self.sim = n_envs, sim
-        self.env = make_task(geometry, sim, options, num_envs=n_envs, sim_backend="physx_cuda")
+        self.env = make_task(geometry, sim, options, num_envs=n_envs, sim_backend="physx_cuda",
+                             **({} if options.camera is not None else _NO_RENDER))
         self.device = torch.device("cuda")
         self.u = self.env.unwrapped
         agent = self.u.agents[0]
@@ -93,6 +102,7 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         v = self._cube.linear_velocity.clone()
         v[copy] = torch.tensor(velocity, device=self.device)
         self._cube.set_linear_velocity(v)
+        self.u.scene.px.gpu_apply_rigid_dynamic_data()
 
     def place_cube(self, positions: torch.Tensor) -> None:
         pose = self._cube.pose.raw_pose.clone()
@@ -101,15 +111,17 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         self._cube.set_pose(pose)
         self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
         self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        self.u.scene.px.gpu_apply_rigid_dynamic_data()
 
     def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
-        """Not run on a GPU yet: ManiSkill's batched setters, then one apply and fetch."""
+        """ManiSkill's batched setters, then apply, update the links' kinematics and fetch."""
         self._robot.set_qpos(qpos.to(self.device))
         self._robot.set_qvel(torch.zeros_like(qpos, device=self.device))
         self._cube.set_pose(cube_pose.to(self.device))  # every GPU sub-scene has its own frame
         self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
         self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
         self.u.scene._gpu_apply_all()
+        self.u.scene.px.gpu_update_articulation_kinematics()  # the links' poses from the new joints
         self.u.scene._gpu_fetch_all()
 
     def cube_friction(self) -> torch.Tensor:

@@ -30,7 +30,7 @@ class SimSettings(Settings):
 
     config_key: ClassVar[str] = "sim"
 
-    backend: str = setting("auto", choices=BACKENDS)  # auto: gpu where torch sees CUDA, else cpu
+    backend: str = setting("auto", choices=BACKENDS)  # auto: cpu (gpu, not verified on a GPU yet, only where asked for)
     sim_freq: int = setting(60, ge=1)
     control_freq: int = setting(20, ge=1)
     solver_position_iterations: int = setting(10, ge=1)
