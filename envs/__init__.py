@@ -1,15 +1,18 @@
 """ManiSkill tasks and robots of realize. Importing this package registers them with gym.
 
 What it does: registers ``RealizePickPlace-v1`` (``plain``/``wall``/``ramp`` worlds),
-``RealizeMoveAndPush-v1`` (the ``push`` world) and the ``fetch_omni`` robot, and maps a world
+``RealizeMoveAndPush-v1`` (the ``push`` world) and every robot of ``configs/robot/`` (one agent class
+built from a robot spec, ``envs.robot_agent``), and maps a world
 variant to the task that builds it (``env_id_for``).
 What it doesn't: hold world geometry (``realize.geometry``) or batch copies for the realizer
 (``realize.scene``).
 """
 
-from envs import fetch_omni  # noqa: F401
+from envs import robot_agent
 from envs.move_and_push import ENV_ID as MOVE_AND_PUSH_ID, RealizeMoveAndPushEnv  # noqa: F401
 from envs.pick_place import ENV_ID, RealizePickPlaceEnv  # noqa: F401
+
+robot_agent.register_known_robots()
 
 
 def env_id_for(variant: str) -> str:

@@ -1,7 +1,7 @@
 """RealizeMoveAndPush-v1: the journal paper's move-and-push world, for plan realization.
 
-**Task description.** A Fetch mobile manipulator (omnidirectional planar base, torso, 7-DOF
-arm, parallel gripper) starts in a free area. A thin stick stands upright on the floor with a
+**Task description.** A mobile manipulator (any robot of ``configs/robot/``, default
+``fetch_omni``: omnidirectional planar base, lift or torso, arm, parallel gripper) starts in a free area. A thin stick stands upright on the floor with a
 small cube resting on its top; an open box (floor and four low walls, open top) stands on the
 floor nearby. The cube must end up in the box. The intended way is to drive to the right side of
 the stick and push its upper part over towards the box, so that the cube falls in; the cube can

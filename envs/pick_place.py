@@ -1,7 +1,8 @@
 """RealizePickPlace-v1: the seed paper's mobile pick-and-place world, for plan realization.
 
-**Task description.** A Fetch mobile manipulator (omnidirectional planar base, torso, 7-DOF
-arm, parallel gripper) starts in a free area. A small cube rests on ``table1``. The robot must
+**Task description.** A mobile manipulator (omnidirectional planar base, a lift or torso, an
+arm and a parallel gripper; ``robot_uids``: any robot of ``configs/robot/``, default Fetch's
+``fetch_omni``) starts in a free area. A small cube rests on ``table1``. The robot must
 carry the cube to ``table2`` and then drive into the exit (rest) area. Between the tables there
 is room to drive; variants add a wall between them (``variant="wall"``) or a ramp from
 table 1's side down onto table 2 (``variant="ramp"``) down which a released cube can slide.
@@ -34,7 +35,6 @@ import numpy as np
 import sapien
 import torch
 
-from mani_skill.agents.robots.fetch import FETCH_BASE_COLLISION_BIT, FETCH_WHEELS_COLLISION_BIT
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
@@ -42,10 +42,11 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
-from envs import fetch_omni  # noqa: F401  (registers the agent)
+from envs import robot_agent
 from realize.config import ConfigError
 from realize.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
 from realize.realization.goals import base_in_rectangle, cube_on_table
+from realize.robot.spec import RobotSpec
 
 ENV_ID = "RealizePickPlace-v1"
 TILE_MARGIN = 3.0  # metres of empty floor between tiled copies
@@ -79,7 +80,7 @@ def yaw_pitch_quat(yaw: float, pitch: float) -> list[float]:
 
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizePickPlaceEnv(BaseEnv):
-    SUPPORTED_ROBOTS = ["fetch_omni", "fetch_omni_lean"]
+    SUPPORTED_ROBOTS: list = []  # any robot of configs/robot/ (or a RobotSpec): set per instance
     TASK_ID = ENV_ID  # the gym id (for messages)
     VARIANTS: tuple[str, ...] = ("plain", "wall", "ramp")  # the geometry variants this task builds
 
@@ -115,6 +116,7 @@ class RealizePickPlaceEnv(BaseEnv):
         cube_xy_noise: float = 0.02,
         robot_xy_noise: float = 0.05,
         robot_uids: str = "fetch_omni",
+        robot: RobotSpec | Mapping[str, Any] | None = None,
         lean_robot: bool = False,
         robot_solver_position_iterations: int | None = None,
         physx_scene: Mapping[str, Any] | None = None,
@@ -141,16 +143,25 @@ class RealizePickPlaceEnv(BaseEnv):
                 **(physx_scene or {}),
             ),
         )
-        if robot_uids != "fetch_omni":
-            raise ValueError(f"robot_uids = {robot_uids!r}: this task supports only 'fetch_omni'")
-        robot = "fetch_omni_lean" if lean_robot else "fetch_omni"  # lean: no links nothing touches
+        # the robot: a spec given as data, else the robot of configs/robot/<robot_uids>.yaml
+        if robot is None:
+            if not isinstance(robot_uids, str):
+                raise ConfigError(f"robot_uids = {robot_uids!r} is invalid: name one robot (tiled copies: n_tiles)")
+            try:
+                spec = robot_agent.robot_spec_for_uid(robot_uids)
+            except ValueError as err:
+                raise ConfigError(str(err)) from None
+        else:
+            spec = robot if isinstance(robot, RobotSpec) else RobotSpec.from_mapping(robot, "robot")
+        self.robot_spec: RobotSpec = spec
+        uid = robot_agent.agent_uid(spec, lean=lean_robot)  # lean: no links nothing touches
         self.robot_solver_position_iterations = robot_solver_position_iterations
-        if robot_collisions not in fetch_omni.ROBOT_COLLISIONS:
-            raise ConfigError(f"robot_collisions = {robot_collisions!r}: must be one of {fetch_omni.ROBOT_COLLISIONS}")
+        if robot_collisions not in robot_agent.ROBOT_COLLISIONS:
+            raise ConfigError(f"robot_collisions = {robot_collisions!r}: must be one of {robot_agent.ROBOT_COLLISIONS}")
         self.robot_collisions = robot_collisions
-        uids = robot if n_tiles == 1 else tuple([robot] * n_tiles)
-        if n_tiles > 1:  # the tiled copies' robots are supported as a whole (no warning listing N names)
-            self.SUPPORTED_ROBOTS = [*type(self).SUPPORTED_ROBOTS, uids]
+        uids = uid if n_tiles == 1 else tuple([uid] * n_tiles)
+        # the tiled copies' robots are supported as a whole (no warning listing N names)
+        self.SUPPORTED_ROBOTS = [uid, uids]
         if kwargs.get("render_backend") == "none":  # nothing renders, so no render mode (ManiSkill would warn)
             kwargs["render_mode"] = None
         kwargs.setdefault("control_mode", "pd_joint_pos_base_vel")
@@ -188,9 +199,9 @@ class RealizePickPlaceEnv(BaseEnv):
     def _load_agent(self, options: dict):
         sx, sy, _ = self.geometry.robot_start
         poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
-        self.scene.__dict__[fetch_omni.ROBOT_COLLISIONS_KEY] = self.robot_collisions  # read where the robot is parsed
+        self.scene.__dict__[robot_agent.ROBOT_COLLISIONS_KEY] = self.robot_collisions  # read where the robot is parsed
         super()._load_agent(options, poses if self.n_tiles > 1 else poses[0])
-        # The robot's joint controllers compensate gravity (as Fetch's own do); the cube keeps it.
+        # The robot's joint controllers compensate gravity; the cube keeps it.
         # Robots may run their own solver iteration count (PhysX solves a touching robot and
         # cube with the larger of their counts; the cubes keep the scene's).
         for agent in self.agents:
@@ -229,9 +240,8 @@ class RealizePickPlaceEnv(BaseEnv):
         )
         ground.initial_pose = sapien.Pose()
         self.ground = ground.build_static(name="ground")
-        # the base is driven through its planar joints: wheels and base never touch the floor
-        self.ground.set_collision_group_bit(group=2, bit_idx=FETCH_WHEELS_COLLISION_BIT, bit=1)
-        self.ground.set_collision_group_bit(group=2, bit_idx=FETCH_BASE_COLLISION_BIT, bit=1)
+        # the base is driven through its planar joints: the robot's no_floor_links never touch the floor
+        self.ground.set_collision_group_bit(group=2, bit_idx=robot_agent.FLOOR_BIT, bit=1)
 
         self.obstacles: list[list] = []
         self.cubes: list = []
@@ -255,11 +265,14 @@ class RealizePickPlaceEnv(BaseEnv):
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         g = self.geometry
         randomize = bool(options.get("randomize", False))
+        names = list(self.agents[0].robot.active_joints_map.keys())
+        rest = [self.robot_spec.rest_value(n) for n in names]
+        ix, iy, iyaw = (names.index(j) for j in self.robot_spec.base.joints)
         with torch.device(self.device):
             b = len(env_idx)
             for c, (agent, cube) in enumerate(zip(self.agents, self.cubes)):
                 off = torch.tensor(self.offsets[c], dtype=torch.float32)
-                qpos = torch.tensor(fetch_omni.REST_QPOS, dtype=torch.float32).repeat(b, 1)
+                qpos = torch.tensor(rest, dtype=torch.float32).repeat(b, 1)
                 start = torch.tensor(g.robot_start[:2], dtype=torch.float32).repeat(b, 1)
                 cube_xy = torch.tensor(g.cube_pos[:2], dtype=torch.float32).repeat(b, 1) + off
                 cube_q = torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)
@@ -270,8 +283,9 @@ class RealizePickPlaceEnv(BaseEnv):
                     cube_q = torch.stack([torch.cos(yaw / 2), 0 * yaw, 0 * yaw, torch.sin(yaw / 2)], dim=1)
                 # The root sits at the copy's start xy with zero yaw; the planar joints hold
                 # the base pose relative to it, so joint velocities are world-frame velocities.
-                qpos[:, 0:2] = start - torch.tensor(g.robot_start[:2])
-                qpos[:, 2] = g.robot_start[2]
+                rel = start - torch.tensor(g.robot_start[:2])
+                qpos[:, ix], qpos[:, iy] = rel[:, 0], rel[:, 1]
+                qpos[:, iyaw] = g.robot_start[2]
                 root = torch.cat([torch.tensor(g.robot_start[:2]) + off, torch.zeros(1)]).repeat(b, 1)
                 agent.robot.set_pose(Pose.create_from_pq(root, torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)))
                 agent.reset(qpos)
@@ -290,7 +304,9 @@ class RealizePickPlaceEnv(BaseEnv):
         p = torch.cat([c.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, c in enumerate(self.cubes)])
         speed = torch.cat([c.linear_velocity for c in self.cubes]).norm(dim=1)
         start = torch.tensor(g.robot_start[:2], dtype=torch.float32, device=self.device)
-        base = torch.cat([a.robot.get_qpos()[:, :2] for a in self.agents]) + start
+        names = list(self.agents[0].robot.active_joints_map.keys())
+        xy = [names.index(j) for j in self.robot_spec.base.joints[:2]]
+        base = torch.cat([a.robot.get_qpos()[:, xy] for a in self.agents]) + start
         on_t2 = cube_on_table(p, speed, g, g.tables[1].name)
         in_exit = base_in_rectangle(base, g.exit_low, g.exit_high)
         return dict(success=on_t2 & in_exit, cube_on_table2=on_t2, base_in_exit=in_exit)

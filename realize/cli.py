@@ -32,7 +32,7 @@ from realize.workers.errors import WorkerFailed
 
 __all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
 
-CONFIG_GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers", "experiment")
+CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "experiment")
 
 
 class SweepJobConfigError(CompactHydraException):

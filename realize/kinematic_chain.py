@@ -2,7 +2,7 @@
 
 What it does
 ------------
-:class:`KinematicChain` takes the joints of a URDF (``realize.fetch_urdf.JointSpec``), the names
+:class:`KinematicChain` takes the joints of a URDF (``realize.robot.urdf.JointSpec``), the names
 of the joints that are degrees of freedom (in the order of ``q``) and fixed values for the other
 movable joints, orders the links parents-first and pre-folds every link's parent joint into
 constants (held joints folded into their fixed transform):
@@ -16,8 +16,8 @@ under autograd and ``torch.func``, on any device). It also checks that the degre
 form one serial chain in ``q`` order, which the closed-form Jacobians (``realize.jacobians``)
 rely on.
 
-What it doesn't: read the URDF file (``realize.fetch_urdf``), know Fetch's TCP or spheres
-(``realize.fetch_body``), or compute Jacobians.
+What it doesn't: read the URDF file (``realize.robot.urdf``), know a robot's TCP or spheres
+(``realize.robot.kinematics``), or compute Jacobians.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
-from realize.fetch_urdf import JointSpec, axis_rotation, rpy_matrix, skew
+from realize.robot.urdf import JointSpec, axis_rotation, rpy_matrix, skew
 
 __all__ = ["ChainNode", "KinematicChain", "homogeneous", "mat3", "matvec3", "FIXED", "REVOLUTE", "PRISMATIC"]
 
@@ -68,7 +68,7 @@ class KinematicChain:
     """The joint tree of a URDF as constant tensors, with ``dof_names`` as the entries of ``q``.
 
     Args:
-        joints: URDF joints keyed by child link (``realize.fetch_urdf.parse_urdf_joints``).
+        joints: URDF joints keyed by child link (``realize.robot.urdf.parse_urdf_joints``).
         dof_names: the joints that are degrees of freedom, in ``q`` order; they must form one
             serial chain in that order.
         fixed_values: values of movable joints that are not in ``dof_names`` (0 if absent).
@@ -179,7 +179,7 @@ class KinematicChain:
         for d in range(1, self.n_dof):  # the actuated joints must be one chain, in q order
             expected = torch.arange(self.n_dof) <= d
             if not torch.equal(self.ancestor_dof_mask(nodes[self.dof_link[d]].link) > 0, expected):
-                raise ValueError("whole-body joints are not a serial chain in WHOLE_BODY_JOINT_NAMES order")
+                raise ValueError("whole-body joints are not a serial chain in q order (base, then the upper joints from the root outwards)")
         self.rev_mask = torch.tensor([k_ == REVOLUTE for k_ in self.dof_kind], device=self.device)
         """(n_dof,) bool: which degrees of freedom are revolute (the rest prismatic)."""
 

@@ -1,25 +1,27 @@
-"""Batched, differentiable, pure-torch kinematics of ManiSkill's Fetch whole body.
+"""Batched, differentiable, pure-torch kinematics of a mobile manipulator's whole body.
 
 What it does
 ------------
-:class:`FetchKinematics` is the model of Fetch's 11-DOF whole body ``q`` (base x, y, yaw, torso,
-7 arm joints; see ``realize.fetch_joints.WHOLE_BODY_JOINT_NAMES``), read once from ManiSkill's
-own ``fetch.urdf`` (``realize.fetch_urdf``) into constant tensors (``realize.kinematic_chain``),
-with the head and finger joints held at values chosen at construction. It gives
+:class:`RobotKinematics` is the model of one robot's whole body ``q`` (base x, y, yaw, then the
+upper joints: a lift or torso and the arm; ``RobotSpec.whole_body_joints``), built from its spec
+(``realize.robot.spec``): its URDF (``realize.robot.urdf``) read once into constant tensors
+(``realize.kinematic_chain``), the held joints (a head) and the fingers at values chosen at
+construction, the TCP and the collision spheres of its sphere file. It gives
 
-* link poses and the tool centre point (TCP) pose and axes (:meth:`~FetchKinematics.ee_pose`,
-  :meth:`~FetchKinematics.tcp_and_axes`; TCP and spheres defined in ``realize.fetch_body``);
-* collision-sphere centres (:meth:`~FetchKinematics.collision_spheres`);
+* link poses and the tool centre point (TCP) pose and axes (:meth:`~RobotKinematics.ee_pose`,
+  :meth:`~RobotKinematics.tcp_and_axes`; the approach and closing axes are the spec's unit
+  vectors in the TCP link's frame);
+* collision-sphere centres (:meth:`~RobotKinematics.collision_spheres`);
 * closed-form geometric Jacobians and curvature terms ``(dJ/dt) q'`` of the TCP and of the
   sphere centres (formulas in ``realize.jacobians``), 10-30x faster on CPU than ``torch.func``
   forward-mode AD through the same FK, matching it to float64 precision;
-* joint limits of ``q``, and the 15 <-> 11 joint maps with this model's held values;
+* joint limits of ``q``;
 * the ``realize.controllers.fabrics.FabricKinematics`` protocol: ``kin(q) -> (tcp, sphere
   centres)``, ``kin.body_radii`` and the fast path ``kin.jets(q, qd)``.
 
 Every map is written with out-of-place torch ops only (no ``.item()``, no numpy, no Python
 control flow on tensor values), so it works under ``torch.func.jacfwd`` / ``jvp`` / ``vmap``
-and under autograd, on any device, for any leading batch shape ``(..., 11)``.
+and under autograd, on any device, for any leading batch shape ``(..., n_dof)``.
 
 Frames: everything is expressed in the robot's *root* frame (the ``root`` link of the URDF,
 the frame in which ``x = y = yaw = 0`` puts ``base_link``), unless a ``root_pose`` (a 4x4
@@ -28,7 +30,7 @@ world frame. In ManiSkill the root pose is ``robot.get_root_pose()``.
 
 What it does not do: no inverse kinematics, no dynamics, no self-collision model (the spheres
 are meant for robot-versus-environment distances); the finger joints are not degrees of freedom
-(the finger spheres sit at the opening given at construction, default fully open).
+(the finger spheres sit at the opening given at construction, default the open target).
 """
 
 from __future__ import annotations
@@ -38,110 +40,114 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
-from realize.fetch_body import FETCH_SPHERES, TCP_OFFSET, SphereSpec
-from realize.fetch_joints import (
-    FULL_JOINT_NAMES,
-    HELD_JOINT_NAMES,
-    WHOLE_BODY_JOINT_NAMES,
-    full_qpos_from_whole_body,
-    whole_body_qpos_from_full,
-)
-from realize.fetch_urdf import fetch_urdf_path, parse_urdf_joints
 from realize.jacobians import jdot_qdot, point_jacobian, point_jets, prefix_ends
 from realize.kinematic_chain import KinematicChain, homogeneous, matvec3
+from realize.robot.sphere_file import SphereSpec
+from realize.robot.spec import RobotSpec
+from realize.robot.urdf import parse_urdf_joints, resolve_urdf
 
-__all__ = ["FetchKinematics"]
+__all__ = ["RobotKinematics"]
 
 
-class FetchKinematics:
-    """Differentiable forward kinematics of Fetch's 11-DOF whole body (see module docstring).
+class RobotKinematics:
+    """Differentiable forward kinematics of a robot's whole body ``q`` (see module docstring).
 
     Args:
-        urdf_path: URDF to read; default ManiSkill's ``fetch.urdf`` (``fetch_urdf_path``).
+        spec: the robot (``realize.robot.spec.RobotSpec``): URDF, joints of ``q``, held joints,
+            TCP, sphere file.
         device, dtype: where and in which precision the constant tensors live.
-        head_pan, head_tilt: fixed head joint values (rad).
-        finger_opening: fixed value of each finger joint (m, 0 closed .. 0.05 open); only the
-            finger spheres depend on it.
-        tcp_offset: TCP in ``gripper_link`` coordinates.
-        spheres: the collision-sphere model.
+        finger_opening: fixed value of each finger joint (m; None: the gripper's open target);
+            only the finger spheres depend on it.
+        held: values of the held joints (None: the spec's ``held``).
+        spheres: the collision-sphere model (None: the spec's sphere file).
+        urdf_path: URDF to read (None: the spec's, ``realize.robot.urdf.resolve_urdf``).
     """
-
-    ee_link: str = "gripper_link"
 
     def __init__(
         self,
-        urdf_path: str | None = None,
+        spec: RobotSpec,
         device: torch.device | str = "cpu",
         dtype: torch.dtype = torch.float32,
-        head_pan: float = 0.0,
-        head_tilt: float = 0.0,
-        finger_opening: float = 0.05,
-        tcp_offset: Sequence[float] = TCP_OFFSET,
-        spheres: Sequence[SphereSpec] = FETCH_SPHERES,
+        finger_opening: float | None = None,
+        held: dict[str, float] | None = None,
+        spheres: Sequence[SphereSpec] | None = None,
+        urdf_path: str | None = None,
     ) -> None:
+        self.spec = spec
         self.device = torch.device(device)
         self.dtype = dtype
-        self.urdf_path = urdf_path or fetch_urdf_path()
+        self.urdf_path = urdf_path or resolve_urdf(spec.urdf, spec.visual_mesh_ext)
         self.joints = parse_urdf_joints(self.urdf_path)
-        self.joint_names: tuple[str, ...] = WHOLE_BODY_JOINT_NAMES
-        self.fixed_values: dict[str, float] = {
-            "head_pan_joint": head_pan,
-            "head_tilt_joint": head_tilt,
-            "r_gripper_finger_joint": finger_opening,
-            "l_gripper_finger_joint": finger_opening,
-        }
-        self.spheres: tuple[SphereSpec, ...] = tuple(spheres)
+        self.ee_link: str = spec.tcp.link
+        self.joint_names: tuple[str, ...] = spec.whole_body_joints
+        opening = spec.gripper.open if finger_opening is None else float(finger_opening)
+        self.fixed_values: dict[str, float] = {**dict(spec.held if held is None else held),
+                                               **{j: opening for j in spec.gripper.joints}}
+        self.spheres: tuple[SphereSpec, ...] = tuple(spec.spheres() if spheres is None else spheres)
 
         by_name = {j.name: j for j in self.joints.values()}
-        for n in WHOLE_BODY_JOINT_NAMES + HELD_JOINT_NAMES:
+        for n in (*self.joint_names, *self.fixed_values):
             if n not in by_name:
-                raise ValueError(f"joint {n!r} not in {self.urdf_path}")
-        self.chain = KinematicChain(self.joints, WHOLE_BODY_JOINT_NAMES, self.fixed_values, self.device, self.dtype)
+                raise ValueError(f"robot {spec.name!r}: joint {n!r} not in {self.urdf_path}")
+        self.chain = KinematicChain(self.joints, self.joint_names, self.fixed_values, self.device, self.dtype)
         self.root_link = self.chain.root_link
         self.link_names: tuple[str, ...] = self.chain.link_names
+        if self.ee_link not in self.chain.index:
+            raise ValueError(f"robot {spec.name!r}: tcp.link {self.ee_link!r} is not a link of {self.urdf_path}")
         self._rev_mask = self.chain.rev_mask
         kw = dict(device=self.device, dtype=self.dtype)
 
         # Joint limits of q.
         lower, upper, vel = [], [], []
-        for n in WHOLE_BODY_JOINT_NAMES:
+        for n in self.joint_names:
             j = by_name[n]
             lower.append(j.lower)
             upper.append(j.upper)
             vel.append(j.velocity)
         self.lower = torch.tensor(lower, **kw)
-        """(11,) lower limits; -inf for continuous joints (yaw, the three arm rolls)."""
+        """(n_dof,) lower limits; -inf for continuous joints (yaw, arm rolls)."""
         self.upper = torch.tensor(upper, **kw)
-        """(11,) upper limits; +inf for continuous joints. Base x/y: the URDF's +-20 m."""
+        """(n_dof,) upper limits; +inf for continuous joints."""
         self.limited = torch.isfinite(self.lower) & torch.isfinite(self.upper)
-        """(11,) bool: which joints have finite limits."""
+        """(n_dof,) bool: which joints have finite limits."""
         self.velocity_limits = torch.tensor(vel, **kw)
-        """(11,) URDF velocity limits (inf where the URDF gives none: the base yaw)."""
+        """(n_dof,) URDF velocity limits (inf where the URDF gives none)."""
 
-        # TCP and spheres.
-        self.tcp_offset = torch.tensor(tuple(tcp_offset), **kw)
+        # TCP, its axes in the TCP link's frame, and spheres.
+        self.tcp_offset = torch.tensor(tuple(spec.tcp.offset), **kw)
+        self.approach_local = torch.tensor(tuple(spec.tcp.approach_axis), **kw)
+        self.closing_local = torch.tensor(tuple(spec.tcp.closing_axis), **kw)
+        self._approach_col = _basis_column(spec.tcp.approach_axis)
+        self._closing_col = _basis_column(spec.tcp.closing_axis)
         for s in self.spheres:
             if s.link not in self.chain.index:
-                raise ValueError(f"sphere {s.name!r}: unknown link {s.link!r}")
+                raise ValueError(f"robot {spec.name!r}: sphere {s.name!r}: unknown link {s.link!r}")
         self.sphere_names: tuple[str, ...] = tuple(s.name for s in self.spheres)
         self.sphere_links: tuple[str, ...] = tuple(s.link for s in self.spheres)
         self.sphere_offsets = torch.tensor([s.offset for s in self.spheres], **kw).reshape(-1, 3)
         self.sphere_radii = torch.tensor([s.radius for s in self.spheres], **kw)
         """(K,) radii."""
         self.sphere_floor_mask = torch.tensor([s.check_floor for s in self.spheres], device=self.device)
-        """(K,) bool: spheres to keep above the floor (all but the base)."""
+        """(K,) bool: spheres to keep above the floor."""
         self.sphere_dof_mask = torch.stack(
             [self.chain.ancestor_dof_mask(s.link) for s in self.spheres]
-        ).to(**kw).reshape(-1, len(WHOLE_BODY_JOINT_NAMES))
-        """(K, 11): 1 where joint j moves sphere k."""
+        ).to(**kw).reshape(-1, len(self.joint_names))
+        """(K, n_dof): 1 where joint j moves sphere k."""
         self._ee_dof_mask = self.chain.ancestor_dof_mask(self.ee_link).to(**kw)
         self._fk_links = [self.ee_link] + list(dict.fromkeys(self.sphere_links))
         self._jets_mask = torch.cat([self._ee_dof_mask.unsqueeze(0), self.sphere_dof_mask], dim=0)
         self._jets_ends = prefix_ends(self._jets_mask)
 
+    @classmethod
+    def for_robot(cls, name: str, **kwargs) -> RobotKinematics:
+        """The model of the robot with config file ``configs/robot/<name>.yaml``."""
+        from realize.robot.spec import load_robot_spec
+
+        return cls(load_robot_spec(name), **kwargs)
+
     @property
     def n_dof(self) -> int:
-        return len(WHOLE_BODY_JOINT_NAMES)
+        return len(self.joint_names)
 
     @property
     def n_spheres(self) -> int:
@@ -169,11 +175,20 @@ class FetchKinematics:
     def tcp_and_axes(self, q: Tensor, root_pose: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
         """TCP position, unit approach axis and unit closing axis, each ``(..., 3)``."""
         r, tcp = self._tcp_from(self._fk(q, [self.ee_link], root_pose))
-        return tcp, r[..., :, 0], r[..., :, 1]
+        return tcp, self._axis(r, self.approach_local, self._approach_col), self._axis(r, self.closing_local, self._closing_col)
+
+    @staticmethod
+    def _axis(r: Tensor, local: Tensor, col: tuple[int, float] | None) -> Tensor:
+        """A unit axis fixed in the TCP link, in the output frame: a column of ``r`` where the
+        axis is a basis vector (exact), else ``r @ local``."""
+        if col is not None:
+            k, sign = col
+            return r[..., :, k] if sign > 0 else -r[..., :, k]
+        return matvec3(r, local)
 
     def ee_pose(self, q: Tensor, root_pose: Tensor | None = None) -> Tensor:
-        """TCP frame ``(..., 4, 4)``: position = TCP, rotation = ``gripper_link``'s
-        (column 0 = approach axis, column 1 = closing axis)."""
+        """TCP frame ``(..., 4, 4)``: position = TCP, rotation = the TCP link's (the approach and
+        closing axes are ``spec.tcp``'s vectors in it)."""
         r, tcp = self._tcp_from(self._fk(q, [self.ee_link], root_pose))
         return homogeneous(r, tcp)
 
@@ -183,19 +198,19 @@ class FetchKinematics:
         return self._sphere_centres(fk), self.sphere_radii
 
     # ------------------------------------------------------------------ closed-form Jacobians
-    # The 11 actuated joints form one serial chain in q order (checked by KinematicChain); the
+    # The actuated joints form one serial chain in q order (checked by KinematicChain); the
     # formulas are in realize.jacobians.
 
     def _chain_terms(self, q: Tensor, links: Sequence[str], root_pose: Tensor | None):
-        """FK of ``links`` plus every joint's axis and origin ``(..., 11, 3)`` in the output frame."""
+        """FK of ``links`` plus every joint's axis and origin ``(..., n_dof, 3)`` in the output frame."""
         return self.chain.joint_frames(q, links, root_pose)
 
     def _point_jacobian(self, z: Tensor, o: Tensor, pts: Tensor, mask: Tensor) -> Tensor:
-        """Jacobian ``(..., P, 3, 11)`` of points ``(..., P, 3)``, dof mask ``(P, 11)``."""
+        """Jacobian ``(..., P, 3, n_dof)`` of points ``(..., P, 3)``, dof mask ``(P, n_dof)``."""
         return point_jacobian(z, o, pts, mask, self._rev_mask)
 
     def _jdot_qdot(self, z: Tensor, o: Tensor, pts: Tensor, mask: Tensor, qd: Tensor) -> Tensor:
-        """(dJ/dt) q' of points ``(..., P, 3)`` with dof mask ``(P, 11)``: ``(..., P, 3)``."""
+        """(dJ/dt) q' of points ``(..., P, 3)`` with dof mask ``(P, n_dof)``: ``(..., P, 3)``."""
         return jdot_qdot(z, o, pts, mask, qd, self._rev_mask)
 
     def _tcp_from(self, fk: dict[str, tuple[Tensor, Tensor]]) -> tuple[Tensor, Tensor]:
@@ -203,7 +218,7 @@ class FetchKinematics:
         return r, p + matvec3(r, self.tcp_offset)
 
     def tcp_jacobian(self, q: Tensor, root_pose: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        """TCP pose ``(..., 4, 4)`` and geometric Jacobian ``(..., 6, 11)``.
+        """TCP pose ``(..., 4, 4)`` and geometric Jacobian ``(..., 6, n_dof)``.
 
         Rows 0-2: TCP linear velocity, rows 3-5: angular velocity ``w``, in the output frame.
         The approach axis ``a`` moves as ``a' = w x a``, so its Jacobian is ``-[a]x J[3:]``.
@@ -232,7 +247,7 @@ class FetchKinematics:
         return matvec3(r, self.sphere_offsets) + p
 
     def sphere_jacobians(self, q: Tensor, root_pose: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
-        """Sphere centres ``(..., K, 3)``, radii ``(K,)`` and centre Jacobians ``(..., K, 3, 11)``."""
+        """Sphere centres ``(..., K, 3)``, radii ``(K,)`` and centre Jacobians ``(..., K, 3, n_dof)``."""
         fk, z, o = self._chain_terms(q, list(dict.fromkeys(self.sphere_links)), root_pose)
         centres = self._sphere_centres(fk)
         jac = self._point_jacobian(z, o, centres, self.sphere_dof_mask)
@@ -260,7 +275,7 @@ class FetchKinematics:
     ) -> tuple[tuple[Tensor, Tensor, Tensor, Tensor], tuple[Tensor, Tensor, Tensor, Tensor]]:
         """Closed-form jets of :meth:`__call__`, as ``fabrics.kinematic_jets`` returns them:
         ``((x, J, J q', (dJ/dt) q') of the TCP, (same) of the sphere centres)``, shapes
-        ``(..., 3), (..., 3, 11), (..., 3), (..., 3)`` and ``(..., K, 3), (..., K, 3, 11), ...``.
+        ``(..., 3), (..., 3, n_dof), (..., 3), (..., 3)`` and ``(..., K, 3), (..., K, 3, 11), ...``.
         ``(dJ/dt) q' = q'^T (d^2 x / dq^2) q'`` (the true curvature term, sign +1)."""
         fk, z, o = self._chain_terms(q, self._fk_links, root_pose)
         pts = torch.cat([self._tcp_from(fk)[1].unsqueeze(-2), self._sphere_centres(fk)], dim=-2)
@@ -269,23 +284,10 @@ class FetchKinematics:
         sph = (pts[..., 1:, :], jac[..., 1:, :, :], vel[..., 1:, :], acc[..., 1:, :])
         return ee, sph
 
-    # ------------------------------------------------------------------ joint-order maps
 
-    def whole_body_qpos_from_full(
-        self, qpos_full: Tensor, full_joint_names: Sequence[str] = FULL_JOINT_NAMES
-    ) -> Tensor:
-        """``(..., 15)`` simulator qpos -> ``(..., 11)`` q."""
-        return whole_body_qpos_from_full(qpos_full, full_joint_names)
-
-    def full_qpos_from_whole_body(
-        self, q: Tensor, rest: Tensor | None = None, full_joint_names: Sequence[str] = FULL_JOINT_NAMES
-    ) -> Tensor:
-        """``(..., 11)`` q -> ``(..., 15)`` qpos; head/fingers from ``rest`` or this model's fixed values."""
-        return full_qpos_from_whole_body(
-            q,
-            rest,
-            full_joint_names,
-            head_pan=self.fixed_values["head_pan_joint"],
-            head_tilt=self.fixed_values["head_tilt_joint"],
-            finger=self.fixed_values["r_gripper_finger_joint"],
-        )
+def _basis_column(axis: Sequence[float]) -> tuple[int, float] | None:
+    """(k, +-1) where ``axis`` is +-e_k exactly, else None."""
+    nz = [(i, v) for i, v in enumerate(axis) if v != 0.0]
+    if len(nz) == 1 and abs(nz[0][1]) == 1.0:
+        return nz[0][0], float(nz[0][1])
+    return None

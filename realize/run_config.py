@@ -43,13 +43,14 @@ from realize.workers.settings import WorkersSettings, worker_count
 if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` starts fast
     from realize.geometry import GeometryCfg, SceneGeometry
     from realize.replan import ReplanSpec
+    from realize.robot.spec import RobotSpec
     from realize.scene.settings import SimSettings
     from realize.scene_state import SceneState
     from realize.task import TaskSpec
 
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
-GROUPS = ("task", "scene", "sim", "controller", "ce", "logging", "workers")
+GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",
                             "replan")
 DEVICES = ("auto", "cpu", "cuda")
@@ -109,6 +110,7 @@ class RunSpec:
     task: TaskSpec
     geometry_cfg: GeometryCfg
     geometry: SceneGeometry
+    robot: RobotSpec
     sim: SimSettings
     rollout: Any  # realize.realization.config.RolloutConfig (imported lazily: it pulls in the controllers)
     ce: CEConfig
@@ -147,6 +149,15 @@ def read_sim(d: Any, where: str = "sim") -> SimSettings:
     from realize.scene.settings import SimSettings
 
     return SimSettings.from_mapping(d, where)
+
+
+def read_robot(d: Any, where: str = "robot") -> RobotSpec:
+    """The ``robot`` group -> ``RobotSpec`` (None: the default robot's config file)."""
+    from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
+
+    if d is None:
+        return load_robot_spec(DEFAULT_ROBOT)
+    return RobotSpec.from_mapping(as_mapping(d, where), where)
 
 
 def resolve_placement(device: str, sim: SimSettings, ce: CEConfig) -> Placement:
@@ -208,6 +219,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     sim = read_sim(d.get("sim"))
     placement = resolve_placement(keys.device, sim, ce)
     geometry_cfg, geometry = _read_geometry(d.get("scene"))
+    robot = read_robot(d.get("robot"))
 
     config = dict(d)
     origin = TaskOrigin.from_json(d.get("task_origin"))
@@ -251,6 +263,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         task=task,
         geometry_cfg=geometry_cfg,
         geometry=geometry,
+        robot=robot,
         sim=sim,
         rollout=_read_rollout(d.get("controller")),
         ce=ce,

@@ -4,8 +4,8 @@ What it does: ``SceneState`` holds what a plan's remaining actions need to begin
 earlier execution left off, in one copy's local frame (the frame of ``realize.geometry``):
 
   * ``base``: the base pose (x, y, yaw) (m, m, rad);
-  * ``joints``: every other active joint of Fetch by name (torso, head, arm, fingers;
-    ``realize.fetch_joints.FULL_JOINT_NAMES[3:]``), in rad or m;
+  * ``joints``: the robot's other active joints by name (lift or torso, head, arm, fingers; the
+    scene's ``state_joints``), in rad or m;
   * ``gripper_closed``: the gripper command (closed squeezes, open lets go);
   * ``cube_position`` (x, y, z) and ``cube_quaternion`` (w, x, y, z) of the cube;
   * ``cube_held``: whether the fingers hold the cube (needs ``gripper_closed``);
@@ -15,8 +15,9 @@ Velocities are not part of it: a restored copy starts at rest. ``save_state`` / 
 write and read it as JSON (``STATE_FORMAT``); every problem with a file (missing, not JSON,
 unknown or missing keys, wrong lengths, non-finite numbers, an unnormalised quaternion, a
 held cube with an open gripper) is one ``realize.config.ConfigError`` naming the file and the
-key. A file written by hand may leave out joints: they take Fetch's rest pose
-(``REST_JOINTS``), as a fresh scene has them.
+key. A file written by hand may leave out joints: they take the robot's rest pose
+(``RobotSpec.rest``) when the scene restores the state, as a fresh scene has them; which joint
+names a robot has is checked there too (``BatchedScene.reset(state=...)``).
 
 What it doesn't: read or write the simulator (``realize.scene.batched.BatchedScene``:
 ``capture_state`` and ``reset(state=...)``), or decide whether a plan can go on from a state
@@ -33,15 +34,10 @@ from pathlib import Path
 from typing import Any
 
 from realize.config import ConfigError
-from realize.fetch_joints import FULL_JOINT_NAMES
 
-__all__ = ["SceneState", "STATE_FORMAT", "STATE_JOINTS", "REST_JOINTS", "save_state", "load_state"]
+__all__ = ["SceneState", "STATE_FORMAT", "save_state", "load_state"]
 
 STATE_FORMAT = "realize.scene_state/1"
-STATE_JOINTS: tuple[str, ...] = FULL_JOINT_NAMES[3:]  # every active joint but the base's three
-# Fetch's rest pose of those joints (envs/fetch_omni.py REST_QPOS, the start of every fresh scene)
-REST_JOINTS: dict[str, float] = dict(zip(STATE_JOINTS, (0.25, 0.0, -0.370, 0.562, -1.032, 0.695, 0.955, -0.1,
-                                                         2.077, 0.0, 0.045, 0.045)))
 _KEYS = ("format", "base", "joints", "gripper_closed", "cube", "cube_held", "source")
 _QUAT_TOL = 1e-3
 
@@ -70,7 +66,7 @@ class SceneState:
     """One copy's state (module docstring); checked when built."""
 
     base: tuple[float, float, float]
-    joints: dict[str, float] = field(default_factory=lambda: dict(REST_JOINTS))
+    joints: dict[str, float] = field(default_factory=dict)  # left out: the robot's rest pose
     gripper_closed: bool = False
     cube_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     cube_quaternion: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
@@ -88,12 +84,10 @@ class SceneState:
         object.__setattr__(self, "cube_quaternion", tuple(x / norm for x in q))
         if not isinstance(self.joints, Mapping):
             raise ConfigError(f"{where}: joints must be a mapping of joint name -> position")
-        unknown = sorted(set(self.joints) - set(STATE_JOINTS))
-        if unknown:
-            raise ConfigError(f"{where}: joints has unknown joint(s) {unknown}; known: {list(STATE_JOINTS)} "
-                              "(the base is the 'base' key)")
-        joints = dict(REST_JOINTS)
+        joints = {}
         for name, v in self.joints.items():
+            if not isinstance(name, str) or not name:
+                raise ConfigError(f"{where}: joints has a key {name!r} that is not a joint name")
             joints[name] = _floats([v], 1, f"{where}: joints.{name}")[0]
         object.__setattr__(self, "joints", joints)
         _flag(self.gripper_closed, f"{where}: gripper_closed")
@@ -102,15 +96,11 @@ class SceneState:
             raise ConfigError(f"{where}: cube_held is true but gripper_closed is false (a held cube needs a "
                               "closed gripper)")
 
-    def joint_positions(self) -> list[float]:
-        """The ``STATE_JOINTS`` positions in that order."""
-        return [self.joints[n] for n in STATE_JOINTS]
-
     def to_json(self) -> dict[str, Any]:
         return {
             "format": STATE_FORMAT,
             "base": list(self.base),
-            "joints": {n: self.joints[n] for n in STATE_JOINTS},
+            "joints": dict(self.joints),
             "gripper_closed": self.gripper_closed,
             "cube": {"position": list(self.cube_position), "quaternion": list(self.cube_quaternion)},
             "cube_held": self.cube_held,

@@ -34,15 +34,13 @@ from typing import Any, Callable
 import torch
 import yaml
 
-from envs.fetch_omni import REST_QPOS
 from realize.geometry import GeometryCfg, build_geometry
 from realize.controllers.astar import astar_world
-from realize.controllers.body import DOF
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import pid_init, pid_step
 from realize.controllers.waypoints import path_to_waypoints
 from realize.controllers.whole_body import WholeBodyFabric
-from realize.fetch_joints import whole_body_qpos_from_full
+from realize.robot.spec import load_robot_spec
 from realize.realization.actions import TEMPLATES
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
@@ -73,7 +71,9 @@ def bench_fabric(n: int, reps: int, dtype: torch.dtype, cfg: RolloutConfig, dt: 
     geometry = build_geometry(GeometryCfg())
     fab = WholeBodyFabric(geometry, cfg.fabric, dt=dt, dtype=dtype)
     g = torch.Generator().manual_seed(0)
-    q = whole_body_qpos_from_full(torch.tensor(REST_QPOS, dtype=dtype)).expand(n, -1).clone()
+    robot = load_robot_spec("fetch_omni")
+    DOF = robot.n_dof
+    q = torch.tensor(robot.rest_q(), dtype=dtype).expand(n, -1).clone()
     q = q + 0.1 * torch.randn(n, DOF, generator=g).to(dtype)
     q[:, 0] = 0.9 + 0.3 * torch.rand(n, generator=g).to(dtype)
     q[:, 1] = 1.2 + 0.3 * (2 * torch.rand(n, generator=g).to(dtype) - 1)

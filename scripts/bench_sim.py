@@ -21,8 +21,8 @@ import numpy as np
 import torch
 
 import envs  # noqa: F401
-from envs.fetch_omni import REST_QPOS
-from realize.scene import ARM_JOINTS, BatchedScene, SimSettings
+from realize.robot.spec import load_robot_spec
+from realize.scene import BatchedScene, SimSettings
 
 
 def scripted_targets(t: float, n: int, rest_arm: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -65,15 +65,17 @@ def bench_naive(plans: int, seconds: float, sim: SimSettings) -> float:
         solver_velocity_iterations=sim.solver_velocity_iterations, lean_robot=sim.lean_robot,
         robot_solver_position_iterations=sim.solver_position_iterations_robot,
     )  # the same robot model and solver settings as the batched scene
-    rest_arm = torch.tensor(REST_QPOS)[[3, 5, 7, 8, 9, 10, 11, 12]]
+    robot = load_robot_spec("fetch_omni")
+    rest_arm = torch.tensor(robot.rest_q()[3:])
     steps = int(seconds * sim.control_freq)
     t0 = time.perf_counter()
     for p in range(plans):
         env.reset(seed=p)
         for k in range(steps):
             v, arm = scripted_targets(k / sim.control_freq, 1, rest_arm)
-            # action layout of the fetch_omni controller: arm(7), gripper(1), body(3: head pan, head tilt, torso), base(3)
-            action = np.concatenate([arm[0, 1:].numpy(), [0.05], [0.0, 0.0, arm[0, 0].item()], v[0].numpy()])
+            # action layout of the fetch_omni controller (envs.robot_agent): torso(1), arm(7), gripper(1),
+            # held(2: head pan, head tilt), base(3)
+            action = np.concatenate([arm[0].numpy(), [robot.gripper.open], [0.0, 0.0], v[0].numpy()])
             env.step(action)
     wall = time.perf_counter() - t0
     env.close()
@@ -88,7 +90,6 @@ def main() -> None:
     args = ap.parse_args()
     seconds = args.seconds or (1.0 if args.quick else 5.0)
     sim = SimSettings()
-    assert len(ARM_JOINTS) == 8
     naive = bench_naive(plans=2 if args.quick else 5, seconds=seconds, sim=sim)
     print(f"naive (1 env per plan, env.step, sequential): {naive:8.2f} robot-s / wall-s")
     ratio = 0.0

@@ -16,10 +16,11 @@ import math
 import pytest
 import torch
 
-from envs.fetch_omni import REST_QPOS
-from realize.controllers.body import DOF
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
-from realize.fetch_joints import whole_body_qpos_from_full
+from realize.robot.spec import load_robot_spec
+
+ROBOT = load_robot_spec("fetch_omni")
+DOF = ROBOT.n_dof
 from realize.geometry import GeometryCfg, build_geometry
 
 N = 96
@@ -34,7 +35,7 @@ def _subsets(seed: int, count: int = 12) -> list[torch.Tensor]:
 def _states(dtype: torch.dtype, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Whole-body states in front of table 1 (some arms near it, some far), random speeds, goals."""
     g = torch.Generator().manual_seed(seed)
-    q = whole_body_qpos_from_full(torch.tensor(REST_QPOS, dtype=torch.float64)).expand(N, -1).clone()
+    q = torch.tensor(ROBOT.rest_q(), dtype=torch.float64).expand(N, -1).clone()
     q = q + 0.3 * torch.randn(N, DOF, generator=g, dtype=torch.float64)
     q[:, 0] = 0.7 + 0.5 * torch.rand(N, generator=g, dtype=torch.float64)
     q[:, 1] = 1.2 + 0.4 * (2 * torch.rand(N, generator=g, dtype=torch.float64) - 1)

@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 import torch
 
-from realize.controllers.body import DOF
+DOF = 11  # the default robot's whole-body joints (fetch_omni: base 3 + torso + 7 arm)
 from realize.controllers.whole_body import WholeBodyFabric
 from realize.geometry import GeometryCfg, build_geometry
 from realize.jacobians import prefix_ends

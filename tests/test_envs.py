@@ -73,9 +73,11 @@ def _unprefixed(name: str) -> str:
 def test_lean_fetch_keeps_joints_and_kinematics_and_drops_only_fixed_leaves() -> None:
     """The lean robot (``sim.lean_robot``) has the full robot's active joints in the same order
     and, at the same joint positions, the same pose of every link it keeps (checked against the
-    full robot, built from the same URDF); only ``LEAN_DROPPED_LINKS`` are gone."""
-    from envs.fetch_omni import LEAN_DROPPED_LINKS
+    full robot, built from the same URDF); only the spec's ``lean_drop_links`` are gone."""
+    from realize.robot.spec import load_robot_spec
     from realize.scene import BatchedScene, SimSettings
+
+    LEAN_DROPPED_LINKS = load_robot_spec("fetch_omni").collision.lean_drop_links
 
     built = {}
     for lean in (False, True):
@@ -100,11 +102,12 @@ def test_drop_links_refuses_moving_or_inner_links() -> None:
     import sapien
     from mani_skill import format_path
 
-    from envs.fetch_omni import FetchOmni, drop_links
+    from envs.robot_agent import drop_links
+    from realize.robot.urdf import source_urdf
 
     def parsed():
         loader = sapien.Scene().create_urdf_loader()
-        articulation_builders = loader.parse(format_path(str(FetchOmni.urdf_path)))[0]  # SAPIEN: (articulations, actors, cameras)
+        articulation_builders = loader.parse(format_path(str(source_urdf("mani_skill:robots/fetch/fetch.urdf"))))[0]  # SAPIEN: (articulations, actors, cameras)
         return articulation_builders[0]
 
     with pytest.raises(ValueError, match="revolute"):
@@ -129,8 +132,10 @@ def test_hand_collisions_keep_every_mass_and_leave_shapes_on_the_hand_only() -> 
     """``sim.robot_collisions=hand``: the gripper link and both fingers keep their collision
     shapes, no other link has one, and every link keeps the mass it has with all its shapes (the
     URDF's inertial, not one computed from shapes)."""
-    from envs.fetch_omni import HAND_LINKS
+    from realize.robot.spec import load_robot_spec
     from realize.scene import BatchedScene, SimSettings
+
+    HAND_LINKS = load_robot_spec("fetch_omni").collision.hand_links
 
     built = {}
     for mode in ("all", "hand"):

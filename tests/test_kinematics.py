@@ -1,33 +1,41 @@
-"""Tests of realize.kinematics: Fetch whole-body FK against pytorch_kinematics and SAPIEN,
-torch.func compatibility, closed-form Jacobians, sphere coverage of the collision meshes."""
+"""Tests of realize.kinematics on Fetch (fetch_omni): FK against pytorch_kinematics and SAPIEN,
+the TCP at the pad centre, torch.func compatibility, closed-form Jacobians, sphere coverage of the
+collision meshes. (Both robots against pytorch_kinematics: tests/test_robot_kinematics.py.)"""
 
 from __future__ import annotations
 
 import os
-import time
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 
 import pytest
 import torch
 from torch.func import jacfwd, jvp, vmap
 
-from realize.fetch_joints import (
-    FULL_JOINT_NAMES,
-    WHOLE_BODY_JOINT_NAMES,
-    full_qpos_from_whole_body,
-    whole_body_qpos_from_full,
-)
-from realize.kinematics import FetchKinematics
+from realize.kinematics import RobotKinematics
+from realize.robot.spec import load_robot_spec
 
 F64 = torch.float64
+FETCH = load_robot_spec("fetch_omni")
 
 
 @pytest.fixture(scope="module")
-def kin64() -> FetchKinematics:
-    return FetchKinematics(dtype=F64)
+def kin64() -> RobotKinematics:
+    return RobotKinematics(FETCH, dtype=F64)
 
 
-def random_q(kin: FetchKinematics, n: int, seed: int = 0) -> torch.Tensor:
+def full_qpos(kin: RobotKinematics, q: torch.Tensor, names: Sequence[str]) -> torch.Tensor:
+    """``(..., len(names))``: ``q``'s joints and the model's fixed (held, finger) values in ``names`` order."""
+    cols = []
+    for n in names:
+        if n in kin.joint_names:
+            cols.append(q[..., kin.joint_names.index(n)])
+        else:
+            cols.append(torch.full(q.shape[:-1], kin.fixed_values.get(n, 0.0), dtype=q.dtype))
+    return torch.stack(cols, dim=-1)
+
+
+def random_q(kin: RobotKinematics, n: int, seed: int = 0) -> torch.Tensor:
     """Random configurations inside the limits (base within +-2 m, free joints in +-pi)."""
     g = torch.Generator().manual_seed(seed)
     lo = torch.nan_to_num(kin.lower, neginf=-torch.pi).clamp(min=-2.0)
@@ -38,15 +46,13 @@ def random_q(kin: FetchKinematics, n: int, seed: int = 0) -> torch.Tensor:
 # ----------------------------------------------------------------------------- reference FK
 
 
-def test_matches_pytorch_kinematics(kin64: FetchKinematics) -> None:
+def test_matches_pytorch_kinematics(kin64: RobotKinematics) -> None:
     pk = pytest.importorskip("pytorch_kinematics")
     with open(kin64.urdf_path, "rb") as f:
         chain = pk.build_chain_from_urdf(f.read()).to(dtype=F64)
     q = random_q(kin64, 64, seed=1)
     # the full tree: head and finger joints at this model's fixed values
-    full = full_qpos_from_whole_body(
-        q, full_joint_names=chain.get_joint_parameter_names(), head_pan=0.0, head_tilt=0.0, finger=0.05
-    )
+    full = full_qpos(kin64, q, chain.get_joint_parameter_names())
     ref = chain.forward_kinematics(full)
     links = [n for n in ref if n in kin64.link_names]
     assert "gripper_link" in links and "l_gripper_finger_link" in links and "head_tilt_link" in links
@@ -55,7 +61,7 @@ def test_matches_pytorch_kinematics(kin64: FetchKinematics) -> None:
         torch.testing.assert_close(ours[:, i], ref[name].get_matrix(), atol=1e-6, rtol=0, msg=name)
 
 
-def test_tcp_is_pad_centre(kin64: FetchKinematics) -> None:
+def test_tcp_is_pad_centre(kin64: RobotKinematics) -> None:
     q = random_q(kin64, 8, seed=2)
     tcp, approach, closing = kin64.tcp_and_axes(q)
     pads = kin64.link_poses(q, ["r_gripper_finger_link", "l_gripper_finger_link"])
@@ -88,34 +94,27 @@ def maniskill_fetch():
     env.close()
 
 
-def test_active_joint_order(maniskill_fetch) -> None:
-    names = tuple(j.name for j in maniskill_fetch.get_active_joints())
-    assert names == FULL_JOINT_NAMES
-    qpos = maniskill_fetch.get_qpos()
-    q = whole_body_qpos_from_full(qpos)
-    assert q.shape == (1, 11)
-    torch.testing.assert_close(full_qpos_from_whole_body(q, rest=qpos), qpos)
-
-
 def test_matches_sapien(maniskill_fetch) -> None:
-    kin = FetchKinematics(dtype=F64, head_pan=0.3, head_tilt=-0.2, finger_opening=0.03)
+    kin = RobotKinematics(FETCH, dtype=F64, held={"head_pan_joint": 0.3, "head_tilt_joint": -0.2}, finger_opening=0.03)
     robot = maniskill_fetch
+    names = [j.name for j in robot.get_active_joints()]
+    wb = [names.index(n) for n in kin.joint_names]
     links = [lk.name for lk in robot.get_links()]
     for q in random_q(kin, 4, seed=3):
-        robot.set_qpos(kin.full_qpos_from_whole_body(q).float().unsqueeze(0))
+        robot.set_qpos(full_qpos(kin, q, names).float().unsqueeze(0))
         root = robot.get_root_pose().to_transformation_matrix()[0].to(F64)
         sim = torch.stack([lk.pose.to_transformation_matrix()[0] for lk in robot.get_links()]).to(F64)
         ours = kin.link_poses(q, links, root_pose=root)
         err = (sim - ours).abs().amax(dim=(-1, -2))
         assert err.max() < 1e-4, f"{links[int(err.argmax())]}: {err.max():.2e}"
         # the simulator's state maps back to q
-        torch.testing.assert_close(whole_body_qpos_from_full(robot.get_qpos()[0].to(F64)), q, atol=1e-6, rtol=0)
+        torch.testing.assert_close(robot.get_qpos()[0].to(F64)[wb], q, atol=1e-6, rtol=0)
 
 
 # ----------------------------------------------------------------------------- torch.func
 
 
-def _tcp6(kin: FetchKinematics):
+def _tcp6(kin: RobotKinematics):
     def f(q: torch.Tensor) -> torch.Tensor:
         p, a, _ = kin.tcp_and_axes(q)
         return torch.cat([p, a], dim=-1)
@@ -123,7 +122,7 @@ def _tcp6(kin: FetchKinematics):
     return f
 
 
-def test_jacfwd_matches_finite_differences(kin64: FetchKinematics) -> None:
+def test_jacfwd_matches_finite_differences(kin64: RobotKinematics) -> None:
     f = _tcp6(kin64)
     q = random_q(kin64, 1, seed=4)[0]
     jac = jacfwd(f)(q)  # (6, 11)
@@ -133,7 +132,7 @@ def test_jacfwd_matches_finite_differences(kin64: FetchKinematics) -> None:
     torch.testing.assert_close(jac, fd, atol=1e-7, rtol=0)
 
 
-def test_vmap_equals_batch_and_loop(kin64: FetchKinematics) -> None:
+def test_vmap_equals_batch_and_loop(kin64: RobotKinematics) -> None:
     q = random_q(kin64, 16, seed=5)
     batched = kin64.ee_pose(q)
     torch.testing.assert_close(vmap(kin64.ee_pose)(q), batched)
@@ -144,7 +143,7 @@ def test_vmap_equals_batch_and_loop(kin64: FetchKinematics) -> None:
     torch.testing.assert_close(kin64.ee_pose(q.reshape(4, 4, 11)).reshape(16, 4, 4), batched)
 
 
-def test_closed_form_jacobians_match_autodiff(kin64: FetchKinematics) -> None:
+def test_closed_form_jacobians_match_autodiff(kin64: RobotKinematics) -> None:
     q = random_q(kin64, 6, seed=6)
     qd = torch.randn(6, 11, dtype=F64, generator=torch.Generator().manual_seed(7))
     root = torch.eye(4, dtype=F64)
@@ -179,7 +178,7 @@ def test_closed_form_jacobians_match_autodiff(kin64: FetchKinematics) -> None:
 
 
 def test_gradients_flow_float32() -> None:
-    kin = FetchKinematics()  # float32 default
+    kin = RobotKinematics(FETCH)  # float32 default
     q = random_q(kin, 3, seed=8).requires_grad_(True)
     tcp, a, _ = kin.tcp_and_axes(q)
     c, r = kin.collision_spheres(q)
@@ -191,7 +190,7 @@ def test_gradients_flow_float32() -> None:
 # ----------------------------------------------------------------------------- spheres, limits
 
 
-def test_spheres_cover_collision_meshes(kin64: FetchKinematics) -> None:
+def test_spheres_cover_collision_meshes(kin64: RobotKinematics) -> None:
     trimesh = pytest.importorskip("trimesh")
     assert 15 <= kin64.n_spheres <= 25
     base = os.path.dirname(kin64.urdf_path)
@@ -217,8 +216,8 @@ def test_spheres_cover_collision_meshes(kin64: FetchKinematics) -> None:
         assert outside < 1e-3, f"{name} sticks out of the spheres by {outside * 1000:.1f} mm"
 
 
-def test_limits_and_names(kin64: FetchKinematics) -> None:
-    assert kin64.joint_names == WHOLE_BODY_JOINT_NAMES
+def test_limits_and_names(kin64: RobotKinematics) -> None:
+    assert kin64.joint_names == FETCH.whole_body_joints
     assert kin64.lower.shape == kin64.upper.shape == (11,)
     assert not kin64.limited[2] and torch.isinf(kin64.lower[2])  # yaw is continuous
     assert kin64.lower[0] <= -20 and kin64.upper[1] >= 20
@@ -226,30 +225,7 @@ def test_limits_and_names(kin64: FetchKinematics) -> None:
     assert bool(kin64.sphere_floor_mask.sum() == kin64.n_spheres - 1)
 
 
-# ----------------------------------------------------------------------------- timing note
-
-
-def test_timing_note(capsys) -> None:
-    """Not an assertion on speed; prints FK + Jacobian time for N=200 (compare DESIGN.md)."""
-    kin = FetchKinematics()
-    q = random_q(kin, 200, seed=10)
-
-    def best(fn, reps: int = 10) -> float:
-        fn()
-        times = []
-        for _ in range(reps):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-        return min(times) * 1e3
-
-    t_tcp = best(lambda: kin.tcp_jacobian(q))
-    t_sph = best(lambda: kin.sphere_jacobians(q))
-    with capsys.disabled():
-        print(f"\n[kinematics] N=200 float32: TCP FK+J {t_tcp:.2f} ms, 23 spheres FK+J {t_sph:.2f} ms")
-
-
-def test_fabrics_protocol_jets_match_autodiff(kin64: FetchKinematics) -> None:
+def test_fabrics_protocol_jets_match_autodiff(kin64: RobotKinematics) -> None:
     """``kin.jets`` (closed form) equals the fabric's own forward-mode jets of ``kin(q)``."""
     fabrics = pytest.importorskip("realize.controllers.fabric_jets")
     q = random_q(kin64, 5, seed=11)

@@ -28,7 +28,9 @@ import torch
 import yaml
 
 from realize.controllers.body import BASE_XY, UPPER
-from realize.fetch_body import TCP_OFFSET
+from realize.robot.spec import load_robot_spec
+
+TCP_OFFSET = load_robot_spec("fetch_omni").tcp.offset
 from realize.realization.actions import TEMPLATES
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext

@@ -9,12 +9,15 @@ import numpy as np
 import pytest
 
 from realize.config import ConfigError
-from realize.fetch_joints import FULL_JOINT_NAMES
 from realize.replan import replan_config
 from realize.run_config import build_run_spec
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
-from realize.scene_state import REST_JOINTS, STATE_JOINTS, SceneState, load_state, save_state
+from realize.robot.spec import load_robot_spec
+from realize.scene_state import SceneState, load_state, save_state
+
+FETCH = load_robot_spec("fetch_omni")
+STATE_JOINTS = [n for n in FETCH.rest if n not in FETCH.base.joints]  # every active joint but the base's
 from realize.task_suffix import check_suffix_start, suffix_columns, task_suffix
 from _compose import compose_config
 
@@ -28,7 +31,7 @@ def _held() -> SceneState:
 
 def test_round_trip_and_defaults(tmp_path: Path) -> None:
     s = _held()
-    assert s.joints == REST_JOINTS  # unspecified joints: the rest pose
+    assert s.joints == {}  # unspecified joints: the robot's rest pose when restored
     back = load_state(save_state(s, tmp_path / "a" / "s.json"))
     assert back.base == s.base and back.joints == s.joints and back.cube_held and back.gripper_closed
     assert back.cube_quaternion == (1.0, 0.0, 0.0, 0.0)
@@ -36,12 +39,22 @@ def test_round_trip_and_defaults(tmp_path: Path) -> None:
     assert fixture.cube_held and set(fixture.joints) == set(STATE_JOINTS)
 
 
-def test_rest_joints_are_fetch_rest_pose() -> None:
-    """The defaults of a hand-written state are the robot's rest keyframe (the env's own table)."""
-    from envs.fetch_omni import REST_QPOS
+def test_left_out_joints_take_the_robots_rest_pose_and_unknown_joints_are_refused() -> None:
+    """A hand-written state restored in a scene: left-out joints start at the robot's rest pose
+    (its config's ``rest``), a joint the robot does not have is one line naming it."""
+    from realize.config import ConfigError
+    from realize.scene import BatchedScene, SimSettings
 
-    rest = dict(zip(FULL_JOINT_NAMES, REST_QPOS.tolist()))
-    assert np.allclose([REST_JOINTS[n] for n in STATE_JOINTS], [rest[n] for n in STATE_JOINTS], atol=1e-6)
+    with BatchedScene(1, None, SimSettings(backend="cpu")) as scene:
+        state = SceneState(base=(-2.0, 0.0, 0.0), joints={"shoulder_pan_joint": 0.2},
+                           cube_position=tuple(scene.geometry.cube_pos))
+        scene.reset(state=state)
+        got = scene.capture_state()
+        assert set(got.joints) == set(STATE_JOINTS)
+        assert abs(got.joints["shoulder_pan_joint"] - 0.2) < 1e-3
+        assert abs(got.joints["elbow_flex_joint"] - FETCH.rest["elbow_flex_joint"]) < 1e-3
+        with pytest.raises(ConfigError, match="no_such_joint"):
+            scene.reset(state=SceneState(base=(-2.0, 0.0, 0.0), joints={"no_such_joint": 0.0}))
 
 
 @pytest.mark.parametrize("edit, message", [
@@ -49,7 +62,6 @@ def test_rest_joints_are_fetch_rest_pose() -> None:
     (lambda d: d.update(speed=1), "unknown key"),
     (lambda d: d.update(base=[0, 0]), "base has 2 values, expected 3"),
     (lambda d: d["cube"].update(quaternion=[1, 1, 0, 0]), "not a unit quaternion"),
-    (lambda d: d["joints"].update(knee_joint=0.1), "unknown joint"),
     (lambda d: d["joints"].update(torso_lift_joint="up"), "joints.torso_lift_joint"),
     (lambda d: d.update(gripper_closed=False), "needs a closed gripper"),
     (lambda d: d.update(cube_held="yes"), "cube_held"),

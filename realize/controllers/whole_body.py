@@ -1,18 +1,19 @@
-"""Whole-body optimization fabric for Fetch: base x, y, yaw + torso + 7 arm joints to a gripper pose.
+"""Whole-body optimization fabric of a mobile manipulator: base x, y, yaw + upper joints to a gripper pose.
 
-What it does: wraps the generic fabric (``realize.controllers.fabrics``) for the Fetch model of
-``realize.kinematics``:
+What it does: wraps the generic fabric (``realize.controllers.fabrics``) for a robot's model
+(``realize.kinematics.RobotKinematics``, built from its ``RobotSpec``):
   * the forcing term attracts three points of the gripper, the tool centre point (TCP), a point
     ``axis_length`` behind it on the approach axis and one beside it on the closing axis, to the
     same points of the goal pose; together they pull position and orientation;
   * collision leaves keep the robot's spheres off the scene's static boxes (tables, wall, ramp,
     a container; not the push scene's stick, which the gripper must touch) and off the floor,
-    with a box signed distance (``realize.controllers.obstacles``); the fingers and the front
-    of the gripper are left out of the box leaves (they must reach a cube lying on a table);
-  * joint-limit leaves for torso and arm;
+    with a box signed distance (``realize.controllers.obstacles``); the spheres the robot spec
+    names in ``fabric_exclude`` (fingers, the front of the hand) are left out of the box leaves
+    (they must reach a cube lying on a table);
+  * joint-limit leaves for the upper joints (lift or torso, arm);
   * the fabric integrates its own reference state (q_ref, qd_ref), the way a fabric planner
     commands a real robot; the reference is re-synchronised with the measured state when they
-    drift apart (contacts). Outputs: base velocity (world frame), torso/arm position and
+    drift apart (contacts). Outputs: base velocity (world frame), upper-joint position and
     velocity targets for the PD drives, at the control rate, and a per-plan ``valid`` flag.
 What it doesn't: decide goals or phases (the grasp/place action templates do), or touch the
 simulator (the rollout writes the targets to ``realize.scene.BatchedScene``).
@@ -27,17 +28,16 @@ import torch
 from torch import Tensor
 
 from realize.config import ConfigError, Settings, setting
-from realize.controllers.body import BASE_XY, DOF, YAW
+from realize.controllers.body import BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.geometry import SceneGeometry
 from realize.jacobians import point_jets, prefix_ends
 from realize.kinematic_chain import matvec3
-from realize.kinematics import FetchKinematics
+from realize.kinematics import RobotKinematics
+from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 
-# spheres that may touch a table top while grasping or placing a cube lying on it
-DEFAULT_EXCLUDE = ("finger_r", "finger_l", "gripper_front")
-LIMIT_MARGIN = 0.005  # rad (m for the torso): the fabric's state stays this far inside the limits
+LIMIT_MARGIN = 0.005  # rad (m for a lift): the fabric's state stays this far inside the limits
 
 
 @dataclass
@@ -53,11 +53,11 @@ class WholeBodyConfig(Settings):
     axis_length: float = setting(0.25, gt=0)  # m, orientation points behind / beside the TCP
     collision_lam: float = setting(0.5, ge=0)
     collision_margin: float = setting(0.02, ge=0)  # m added to every sphere radius
-    collision_exclude: tuple[str, ...] = DEFAULT_EXCLUDE
+    collision_exclude: tuple[str, ...] | None = None  # spheres without box leaves (None: the robot's fabric_exclude)
     floor: bool = True
     max_base_speed: float = setting(0.6, gt=0)  # m/s
     max_yaw_rate: float = setting(1.0, gt=0)  # rad/s
-    max_joint_speed: float = setting(1.2, gt=0)  # rad/s or m/s for the torso
+    max_joint_speed: float = setting(1.2, gt=0)  # rad/s, or m/s for a lift
     resync_tolerance: float = setting(0.08, gt=0)  # reference/measured drift that triggers a re-sync
 
     def fabric(self) -> FabricConfig:
@@ -66,10 +66,10 @@ class WholeBodyConfig(Settings):
 
 
 class _PoseMap:
-    """Fabric kinematics of Fetch with a 9-D 'pose' end effector:
+    """Fabric kinematics of a robot with a 9-D 'pose' end effector:
     [TCP, TCP - L * approach axis, TCP + L * closing axis]."""
 
-    def __init__(self, kin: FetchKinematics, axis_length: float, radii: Tensor):
+    def __init__(self, kin: RobotKinematics, axis_length: float, radii: Tensor):
         self.kin = kin
         self.axis_length = axis_length
         self.body_radii = radii
@@ -78,8 +78,8 @@ class _PoseMap:
         L, kw = axis_length, dict(dtype=kin.tcp_offset.dtype, device=kin.device)
         self._offsets = torch.stack([
             kin.tcp_offset,
-            kin.tcp_offset - torch.tensor([L, 0.0, 0.0], **kw),  # behind the TCP on the approach axis
-            kin.tcp_offset + torch.tensor([0.0, L, 0.0], **kw),  # beside it on the closing axis
+            kin.tcp_offset - L * kin.approach_local,  # behind the TCP on the approach axis
+            kin.tcp_offset + L * kin.closing_local,  # beside it on the closing axis
         ])
         self._mask = torch.cat([kin._ee_dof_mask.unsqueeze(0).expand(3, -1), kin.sphere_dof_mask], dim=0)
         self._ends = prefix_ends(self._mask)
@@ -102,35 +102,39 @@ class _PoseMap:
 
 @dataclass
 class FabricState:
-    """Reference state integrated by the fabric, per plan: (N, DOF) each (``realize.controllers.body``)."""
+    """Reference state integrated by the fabric, per plan: (N, n_dof) each (``realize.controllers.body``)."""
 
     q: Tensor
     qd: Tensor
 
 
 class WholeBodyFabric:
-    """Batched whole-body fabric controller of Fetch in one scene geometry.
+    """Batched whole-body fabric controller of one robot in one scene geometry.
 
     Args:
         geometry: the world (its boxes become obstacles).
         cfg: fabric settings.
         dt: control period (s).
         device, dtype: where the controller computes (float64 is the safe default on CPU).
+        robot: the robot (None: the default robot, ``realize.robot.spec.DEFAULT_ROBOT``).
     """
 
     def __init__(self, geometry: SceneGeometry, cfg: WholeBodyConfig | None = None, dt: float = 0.05,
-                 device: torch.device | str = "cpu", dtype: torch.dtype = torch.float64):
+                 device: torch.device | str = "cpu", dtype: torch.dtype = torch.float64,
+                 robot: RobotSpec | None = None):
         self.cfg = cfg or WholeBodyConfig()  # checked when it was built
         self.dt = dt
         self.device, self.dtype = torch.device(device), dtype
-        self.kin = FetchKinematics(device=device, dtype=dtype)
+        self.robot = robot or load_robot_spec(DEFAULT_ROBOT)
+        self.kin = RobotKinematics(self.robot, device=device, dtype=dtype)
         names = list(self.kin.sphere_names)
-        unknown = [s for s in self.cfg.collision_exclude if s not in names]
+        exclude = self.robot.fabric_exclude if self.cfg.collision_exclude is None else self.cfg.collision_exclude
+        unknown = [s for s in exclude if s not in names]
         if unknown:
-            raise ConfigError(f"controller.fabric.collision_exclude = {list(self.cfg.collision_exclude)!r} is "
-                              f"invalid: unknown spheres {unknown}; known: {names}")
+            raise ConfigError(f"controller.fabric.collision_exclude = {list(exclude)!r} is "
+                              f"invalid: unknown spheres {unknown} of robot {self.robot.name!r}; known: {names}")
         radii = self.kin.sphere_radii.to(device, dtype) + self.cfg.collision_margin
-        box_ok = torch.tensor([s not in self.cfg.collision_exclude for s in names], device=device)
+        box_ok = torch.tensor([s not in exclude for s in names], device=device)
         floor_ok = self.kin.sphere_floor_mask.to(device=device, dtype=torch.bool)
         self.distance = BoxDistance(box_ok, floor_ok)
         self.map = _PoseMap(self.kin, self.cfg.axis_length, radii)
@@ -140,7 +144,7 @@ class WholeBodyFabric:
         self.lower, self.upper = lo, up
         self._clamp_lo, self._clamp_hi = lo + LIMIT_MARGIN, up - LIMIT_MARGIN
         self.fabric_cfg = self.cfg.fabric()
-        limit = torch.full((DOF,), self.cfg.max_joint_speed, dtype=dtype, device=device)
+        limit = torch.full((self.kin.n_dof,), self.cfg.max_joint_speed, dtype=dtype, device=device)
         limit[BASE_XY] = self.cfg.max_base_speed
         limit[YAW] = self.cfg.max_yaw_rate
         self.speed_limit = limit
@@ -162,7 +166,7 @@ class WholeBodyFabric:
         """Advance the reference one control period towards ``goal`` (N, 9); returns (state, valid).
 
         Rows whose reference drifted more than ``resync_tolerance`` from the measured joints
-        (``q_meas``, (N, DOF)) restart from the measured configuration at rest.
+        (``q_meas``, (N, n_dof)) restart from the measured configuration at rest.
         """
         q_meas = q_meas.to(self.device, self.dtype)
         drift = (state.q - q_meas).abs().max(dim=1).values > self.cfg.resync_tolerance

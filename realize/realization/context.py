@@ -4,7 +4,7 @@ What it does: ``StepContext`` holds, for all N copies of the scene, the measured
 current control step (whole-body joints, base pose, tool centre point and gripper axes, cube
 pose and speed, whether the fingers hold the cube), the shared controllers (the whole-body
 fabric, the A* grid and occupancy), and the commands the action templates write this step
-(base velocity, torso/arm targets, gripper). Templates that want the fabric register a goal
+(base velocity, upper-joint targets, gripper). Templates that want the fabric register a goal
 for their rows (``fabric_goal``); ``run_fabric`` then runs ONE batched fabric step for all of
 them and turns the fabric's reference into commands. Every field is declared below; templates
 get everything else they need as arguments.
@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from realize.controllers.body import BASE, DOF, N_BASE, N_UPPER, UPPER
+from realize.controllers.body import BASE, N_BASE, UPPER
 from realize.controllers.occupancy import GridSpec
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
 from realize.realization.config import RolloutConfig
@@ -30,13 +30,13 @@ class StepContext:
     Constant for a rollout: ``scene``, ``cfg``, ``fabric``, ``grid``, ``occupancy`` (A*'s
     padded (H, W) grid), ``occupancy_tight`` (the grid padded by ``astar.fallback_padding``, for
     plans with no path on the padded one; None: no retry), ``n_envs``, ``device``, ``dt`` (control period, s).
-    Measured by ``read()`` after every physics step, (N, ...) float32: ``q`` / ``qd`` (N, DOF)
+    Measured by ``read()`` after every physics step, (N, ...) float32: ``q`` / ``qd`` (N, n_dof)
     whole-body joints (``realize.controllers.body``), ``base`` (N, 3) x, y, yaw, ``tcp`` (N, 3),
     ``approach`` / ``closing`` (N, 3) gripper axes, ``cube`` (N, 7) pose, ``cube_speed`` (N,);
     ``holds(rows)`` reads finger contacts on demand (once per step).
     Commands, reset by ``begin_step()``: ``base_cmd`` (N, 3) world-frame base velocity,
-    ``arm_cmd`` / ``arm_vel_cmd`` (N, N_UPPER) torso + arm targets, ``grip_cmd`` (N,) closed;
-    ``arm_hold`` (N, N_UPPER) is where an arm not driven by the fabric stays.
+    ``arm_cmd`` / ``arm_vel_cmd`` (N, n_upper) lift/torso + arm targets, ``grip_cmd`` (N,) closed;
+    ``arm_hold`` (N, n_upper) is where an arm not driven by the fabric stays.
     """
 
     scene: BatchedScene
@@ -71,13 +71,15 @@ class StepContext:
         self.n_envs, self.device = scene.n_envs, scene.device
         self.dt = scene.control_dt
         n, dev = self.n_envs, self.device
+        n_dof = fabric.kin.n_dof
+        n_upper = n_dof - N_BASE
         self.base_cmd = torch.zeros(n, N_BASE, device=dev)
-        self.arm_cmd = torch.zeros(n, N_UPPER, device=dev)
-        self.arm_vel_cmd = torch.zeros(n, N_UPPER, device=dev)
+        self.arm_cmd = torch.zeros(n, n_upper, device=dev)
+        self.arm_vel_cmd = torch.zeros(n, n_upper, device=dev)
         self.grip_cmd = torch.zeros(n, dtype=torch.bool, device=dev)
-        self.arm_hold = torch.zeros(n, N_UPPER, device=dev)
+        self.arm_hold = torch.zeros(n, n_upper, device=dev)
         fab = dict(dtype=fabric.dtype, device=fabric.device)
-        self.fab_state = FabricState(torch.zeros(n, DOF, **fab), torch.zeros(n, DOF, **fab))
+        self.fab_state = FabricState(torch.zeros(n, n_dof, **fab), torch.zeros(n, n_dof, **fab))
         self._fab_rows: list[Tensor] = []
         self._fab_goals: list[Tensor] = []
         self._fab_approach: list[Tensor] = []
@@ -108,7 +110,7 @@ class StepContext:
         return self._holds[rows]
 
     def hold_arm(self, rows: Tensor) -> None:
-        """Keep the torso and arm of ``rows`` where they are now."""
+        """Keep the upper joints (lift/torso, arm) of ``rows`` where they are now."""
         self.arm_hold[rows] = self.q[rows, UPPER]
 
     def start_fabric(self, rows: Tensor) -> None:

@@ -306,7 +306,7 @@ class PlanRealizer:
         self.occupancy_tight = None if tight is None else occupancy_from_boxes(
             self.grid, centers, halves, yaws, padding=tight + g.robot_radius).to(self.device)
         self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
-                                      dtype=fabric_dtype)
+                                      dtype=fabric_dtype, robot=scene.robot)
         self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}
         self.last: RolloutResult | None = None
 

@@ -16,10 +16,8 @@ What it doesn't: decide anything (controllers and the rollout do), or hold world
 """
 
 from realize.scene.batched import BatchedScene, SceneSpec, StepHook, quat_to_matrix
-from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN
 from realize.scene.settings import Camera, EnvOptions, SimSettings
 
 __all__ = [
     "BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix", "SimSettings", "EnvOptions", "Camera",
-    "ARM_JOINTS", "BASE_JOINTS", "FINGER_JOINTS", "GRIPPER_CLOSED", "GRIPPER_OPEN",
 ]

@@ -23,6 +23,7 @@ from realize.geometry import GeometryCfg
 from realize.scene.cpu_tiled import CpuTiledBackend
 from realize.scene.gpu import GpuBackend
 from realize.scene.physx_gpu import check_library
+from realize.robot.spec import RobotSpec
 from realize.scene.physics import PhysicsBackend
 from realize.scene.settings import EnvOptions, SimSettings
 
@@ -60,8 +61,9 @@ def shardable(backend: str) -> bool:
     return backend == "cpu"
 
 
-def open_backend(n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions) -> PhysicsBackend:
-    """Build N copies of ``geometry``'s world on the backend ``sim.backend`` resolves to."""
+def open_backend(n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions,
+                 robot: RobotSpec) -> PhysicsBackend:
+    """Build N copies of ``geometry``'s world with ``robot`` on the backend ``sim.backend`` resolves to."""
     if resolve_backend(sim.backend) == "cpu":
-        return CpuTiledBackend(n_envs, geometry, sim, options)
-    return GpuBackend(n_envs, geometry, sim, options)
+        return CpuTiledBackend(n_envs, geometry, sim, options, robot)
+    return GpuBackend(n_envs, geometry, sim, options, robot)

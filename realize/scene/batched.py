@@ -7,7 +7,7 @@ resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, 
     the gripper holds the cube (finger contact forces), all in one copy's local frame (the frame
     of ``realize.geometry``), so nothing above it sees tile offsets; each is read from the
     simulator once per state (cached until a step, reset, freeze or cube move; ``state_changed``);
-  * writes: base velocity commands, torso/arm joint targets, the gripper opening; ``step``
+  * writes: base velocity commands, upper-joint targets, the gripper opening; ``step``
     advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
   * step hooks (``add_step_hook``: a video writer renders there), per-copy cube friction and the
     ``EnvOptions`` the task is built with (render camera, reset noise, forced randomization),
@@ -15,8 +15,8 @@ resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, 
 What it doesn't: decide anything (controllers compute the targets, the rollout runs actions),
 or ask which backend runs (``backend``/``deterministic`` only report it).
 
-Whole-body joint vector ``q`` (11): base x, base y, base yaw, torso, then the 7 arm joints
-(shoulder_pan, shoulder_lift, upperarm_roll, elbow_flex, forearm_roll, wrist_flex, wrist_roll).
+Whole-body joint vector ``q`` (n_dof): base x, base y, base yaw, then the robot's upper joints
+(``RobotSpec.whole_body_joints``: a lift or torso, then the arm).
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ from realize.config import ConfigError
 from realize.controllers.body import BASE, BASE_XY, UPPER, YAW
 from realize.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
-from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, GRIPPER_CLOSED, GRIPPER_OPEN, WHOLE_BODY_JOINTS
+from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
-from realize.scene_state import STATE_JOINTS, SceneState
+from realize.scene_state import SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
 
@@ -46,6 +46,7 @@ class SceneSpec(Protocol):
 
     geometry_cfg: GeometryCfg
     sim: SimSettings
+    robot: RobotSpec
 
 
 def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
@@ -71,19 +72,22 @@ class BatchedScene:
         sim: physics settings (None: the defaults).
         env: what the task is built and reset with besides (render camera, reset noise, forced
             randomization; None: as registered).
+        robot: the robot (None: the default robot, ``realize.robot.spec.DEFAULT_ROBOT``).
     """
 
     def __init__(self, n_envs: int, geometry: GeometryCfg | Mapping[str, Any] | None = None,
-                 sim: SimSettings | None = None, *, env: EnvOptions | None = None):
+                 sim: SimSettings | None = None, *, env: EnvOptions | None = None,
+                 robot: RobotSpec | None = None):
         if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
             raise ConfigError(
                 f"n_envs = {n_envs!r} is invalid: the number of parallel plans (ce.n_envs) must be an integer >= 1"
             )
         self.sim = sim or SimSettings()
         self.options = env or EnvOptions()
+        self.robot: RobotSpec = robot or load_robot_spec(DEFAULT_ROBOT)
         gcfg = geometry if isinstance(geometry, GeometryCfg) else GeometryCfg.from_mapping(geometry)
         self.n_envs = n_envs
-        self._impl = open_backend(n_envs, gcfg, self.sim, self.options)
+        self._impl = open_backend(n_envs, gcfg, self.sim, self.options, self.robot)
         self.backend: str = self._impl.name
         self.deterministic: bool = self._impl.deterministic
         self.env, self.u, self.device = self._impl.env, self._impl.u, self._impl.device
@@ -93,12 +97,15 @@ class BatchedScene:
         self._start_xy = torch.tensor(self.geometry.robot_start[:2], dtype=torch.float32, device=self.device)
         names = list(self.u.agents[0].robot.active_joints_map.keys())
         self.joint_names = names
-        self._wb_idx = torch.tensor([names.index(j) for j in WHOLE_BODY_JOINTS], device=self.device)
-        self._finger_idx = torch.tensor([names.index(j) for j in FINGER_JOINTS], device=self.device)
+        self.state_joints: tuple[str, ...] = tuple(n for n in names if n not in self.robot.base.joints)
+        """Every active joint but the base's: what a ``SceneState`` holds by name."""
+        self._wb_idx = torch.tensor([names.index(j) for j in self.robot.whole_body_joints], device=self.device)
+        self._finger_idx = torch.tensor([names.index(j) for j in self.robot.gripper.joints], device=self.device)
+        self._grip_open, self._grip_closed = self.robot.gripper.open, self.robot.gripper.closed
         self._base_cmd = torch.zeros(n_envs, 3, device=self.device)
-        self._arm_target = torch.zeros(n_envs, len(ARM_JOINTS), device=self.device)
-        self._arm_vel_target = torch.zeros(n_envs, len(ARM_JOINTS), device=self.device)
-        self._grip_target = torch.full((n_envs,), GRIPPER_OPEN, device=self.device)
+        self._arm_target = torch.zeros(n_envs, self.robot.n_upper, device=self.device)
+        self._arm_vel_target = torch.zeros(n_envs, self.robot.n_upper, device=self.device)
+        self._grip_target = torch.full((n_envs,), self._grip_open, device=self.device)
         self._frozen = torch.zeros(n_envs, dtype=torch.bool, device=self.device)
         self._hooks: list[tuple[StepHook, int]] = []
         self.step_count = 0  # control steps since the last reset
@@ -106,8 +113,8 @@ class BatchedScene:
 
     @classmethod
     def from_spec(cls, spec: SceneSpec, n_envs: int, env: EnvOptions | None = None) -> BatchedScene:
-        """The scene of a run spec (its ``geometry_cfg`` and ``sim``) with ``n_envs`` copies."""
-        return cls(n_envs, spec.geometry_cfg, spec.sim, env=env)
+        """The scene of a run spec (its ``geometry_cfg``, ``sim`` and ``robot``) with ``n_envs`` copies."""
+        return cls(n_envs, spec.geometry_cfg, spec.sim, env=env, robot=spec.robot)
 
     # ------------------------------------------------------------------ reset, hooks
     def add_step_hook(self, hook: StepHook, every: int = 1) -> None:
@@ -141,7 +148,7 @@ class BatchedScene:
         self._arm_target = q[:, UPPER].clone()
         self._arm_vel_target = torch.zeros_like(self._arm_target)
         closed = state is not None and state.gripper_closed
-        self._grip_target.fill_(GRIPPER_CLOSED if closed else GRIPPER_OPEN)
+        self._grip_target.fill_(self._grip_closed if closed else self._grip_open)
         self._apply_targets()
         if state is not None and state.cube_held:
             for _ in range(RESTORE_SETTLE_STEPS):
@@ -156,10 +163,14 @@ class BatchedScene:
         row = torch.zeros(len(self.joint_names))
         base = torch.tensor(state.base, dtype=torch.float32)
         base[:2] -= self._start_xy.cpu()  # the base joints are relative to the task's robot start
-        for name, v in zip(BASE_JOINTS, base.tolist()):
+        for name, v in zip(self.robot.base.joints, base.tolist()):
             row[self.joint_names.index(name)] = v
-        for name, v in zip(STATE_JOINTS, state.joint_positions()):
-            row[self.joint_names.index(name)] = v
+        unknown = sorted(set(state.joints) - set(self.state_joints))
+        if unknown:
+            raise ConfigError(f"{state.source or 'state'}: joints has unknown joint(s) {unknown} of robot "
+                              f"{self.robot.name!r}; known: {list(self.state_joints)} (the base is the 'base' key)")
+        for name in self.state_joints:  # joints a state leaves out take the robot's rest pose
+            row[self.joint_names.index(name)] = state.joints.get(name, self.robot.rest_value(name))
         pose = torch.tensor([*state.cube_position, *state.cube_quaternion], dtype=torch.float32)
         self._impl.set_state(row.repeat(n, 1), pose.repeat(n, 1))
 
@@ -168,8 +179,8 @@ class BatchedScene:
         qpos = self._read("qpos", self._impl.qpos)[copy].tolist()
         base = self.base_pose()[copy].tolist()
         cube = self.cube_pose()[copy].tolist()
-        return SceneState(base=tuple(base), joints={n: qpos[self.joint_names.index(n)] for n in STATE_JOINTS},
-                          gripper_closed=bool(self._grip_target[copy] == GRIPPER_CLOSED),
+        return SceneState(base=tuple(base), joints={n: qpos[self.joint_names.index(n)] for n in self.state_joints},
+                          gripper_closed=bool(self._grip_target[copy] == self._grip_closed),
                           cube_position=tuple(cube[:3]), cube_quaternion=tuple(cube[3:]),
                           cube_held=bool(self.holds_cube()[copy]), source=source)
 
@@ -189,7 +200,7 @@ class BatchedScene:
         return value
 
     def qpos(self) -> torch.Tensor:
-        """(N, 15) every active joint, in ManiSkill Fetch's joint order (``self.joint_names``)."""
+        """(N, J) every active joint of the robot, in the articulation's order (``self.joint_names``)."""
         return self._read("qpos", self._impl.qpos).clone()
 
     def qvel(self) -> torch.Tensor:
@@ -200,7 +211,7 @@ class BatchedScene:
         return torch.cat([q[:, BASE_XY] + self._start_xy, q[:, YAW:]], dim=1)
 
     def whole_body_q(self) -> torch.Tensor:
-        """(N, 11) base x, y (local frame), yaw, torso, 7 arm joints."""
+        """(N, n_dof) base x, y (local frame), yaw, then the upper joints (lift/torso, arm)."""
         return self._read("whole_body_q", self._whole_body_q).clone()
 
     def whole_body_qd(self) -> torch.Tensor:
@@ -212,14 +223,14 @@ class BatchedScene:
 
     def gripper_command(self) -> torch.Tensor:
         """(N,) bool: the gripper target is closed (the last ``set_gripper``, or the reset's)."""
-        return self._grip_target == GRIPPER_CLOSED
+        return self._grip_target == self._grip_closed
 
     def finger_width(self) -> torch.Tensor:
-        """(N,) sum of the two finger joint positions (m): 0.1 fully open."""
+        """(N,) sum of the finger joint positions (m): ``robot.gripper.width_open`` fully open."""
         return self._read("qpos", self._impl.qpos)[:, self._finger_idx].sum(dim=1)
 
     def ee_pose(self) -> torch.Tensor:
-        """(N, 7) gripper_link position (local frame) and wxyz quaternion."""
+        """(N, 7) the TCP link's (``robot.tcp.link``) position (local frame) and wxyz quaternion."""
         return self._read("ee_pose", self._impl.ee_pose).clone()
 
     def cube_pose(self) -> torch.Tensor:
@@ -266,7 +277,7 @@ class BatchedScene:
         self.set_base_velocity(torch.stack([vx, vy, v_robot[:, 2]], dim=1))
 
     def set_arm_targets(self, q_target: torch.Tensor, qd_target: torch.Tensor | None = None) -> None:
-        """(N, 8) torso + 7 arm joint position targets (rad, m), and optional velocity targets."""
+        """(N, n_upper) upper-joint position targets (rad, m), and optional velocity targets."""
         self._arm_target = q_target.detach().to(self.device, torch.float32)
         self._arm_vel_target = (torch.zeros_like(self._arm_target) if qd_target is None
                                 else qd_target.detach().to(self.device, torch.float32))
@@ -274,11 +285,11 @@ class BatchedScene:
     def set_gripper(self, closed: torch.Tensor) -> None:
         """(N,) bool: close (True) or open (False) the gripper."""
         c = closed.to(self.device, torch.bool)
-        self._grip_target = torch.where(c, torch.tensor(GRIPPER_CLOSED, device=self.device),
-                                        torch.tensor(GRIPPER_OPEN, device=self.device))
+        self._grip_target = torch.where(c, torch.tensor(self._grip_closed, device=self.device),
+                                        torch.tensor(self._grip_open, device=self.device))
 
     def hold_still(self, mask: torch.Tensor | None = None) -> None:
-        """Zero base velocity and freeze torso/arm at their current positions for masked copies."""
+        """Zero base velocity and freeze the upper joints at their current positions for masked copies."""
         q = self.whole_body_q()
         m = torch.ones(self.n_envs, dtype=torch.bool, device=self.device) if mask is None else mask
         self._base_cmd = torch.where(m[:, None], torch.zeros_like(self._base_cmd), self._base_cmd)

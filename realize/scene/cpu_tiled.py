@@ -27,14 +27,12 @@ import torch
 
 from realize.config import ConfigError
 from realize.geometry import GeometryCfg
-from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, FINGER_LINKS, EE_LINK, PhysicsBackend, make_task
+from realize.robot.spec import RobotSpec
+from realize.scene.physics import PhysicsBackend, make_task
 from realize.scene.settings import EnvOptions, SimSettings
 
 __all__ = ["CpuTiledBackend", "available_cores"]
 
-# columns of the per-copy drive-target row: base velocities, torso+arm positions and velocities, fingers
-_BASE, _ARM, _ARM_VEL, _GRIP = slice(0, 3), slice(3, 11), slice(11, 19), slice(19, 21)
-_N_TARGETS = 21
 
 
 def available_cores() -> int:
@@ -57,8 +55,8 @@ class CpuTiledBackend(PhysicsBackend):
     deterministic = True
     rewrite_all_targets = False  # True: write every target every step, as before (tests compare)
 
-    def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions):
-        self.n_envs, self.sim = n_envs, sim
+    def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robot: RobotSpec):
+        self.n_envs, self.sim, self.robot = n_envs, sim, robot
         workers = sim.cpu_workers
         if workers is None:
             workers = 0 if n_envs < 8 else min(available_cores(), 8)
@@ -67,23 +65,28 @@ class CpuTiledBackend(PhysicsBackend):
         # (measured: a 16-plan rollout took 12x longer with torch's default thread pool).
         if sim.torch_threads_cpu is not None:
             torch.set_num_threads(sim.torch_threads_cpu)
-        self.env = make_task(geometry, sim, options, n_tiles=n_envs, sim_backend="physx_cpu", cpu_workers=workers)
+        self.env = make_task(geometry, sim, options, robot, n_tiles=n_envs, sim_backend="physx_cpu", cpu_workers=workers)
         self.device = torch.device("cpu")
         self.u = self.env.unwrapped
         self._offsets = torch.tensor(self.u.offsets, dtype=torch.float32, device=self.device)
         self._arts = [a.robot._objs[0] for a in self.u.agents]
         joints_by_name = [{k: j._objs[0] for k, j in a.robot.active_joints_map.items()} for a in self.u.agents]
-        self._base_joints = [[jm[j] for j in BASE_JOINTS] for jm in joints_by_name]
-        self._arm_joints = [[jm[j] for j in ARM_JOINTS] for jm in joints_by_name]
-        self._finger_joints = [[jm[j] for j in FINGER_JOINTS] for jm in joints_by_name]
-        self._ee_links = [a.robot.links_map[EE_LINK]._objs[0] for a in self.u.agents]
+        self._base_joints = [[jm[j] for j in robot.base.joints] for jm in joints_by_name]
+        self._arm_joints = [[jm[j] for j in robot.upper.joints] for jm in joints_by_name]
+        self._finger_joints = [[jm[j] for j in robot.gripper.joints] for jm in joints_by_name]
+        self._ee_links = [a.robot.links_map[robot.tcp.link]._objs[0] for a in self.u.agents]
+        # columns of the per-copy drive-target row: base velocities, upper-joint positions and
+        # velocities, fingers
+        nb, nu, nf = len(robot.base.joints), len(robot.upper.joints), len(robot.gripper.joints)
+        self._cols = (slice(0, nb), slice(nb, nb + nu), slice(nb + nu, nb + 2 * nu), slice(nb + 2 * nu, nb + 2 * nu + nf))
+        self._n_targets = nb + 2 * nu + nf
         self._cube_bodies = [c._bodies[0] for c in self.u.cubes]
         self._dynamic_bodies = [a._bodies[0] for a in self.u.dynamic_actors]  # cubes (and sticks)
         # contact bookkeeping: physx component -> (copy index, role) with role 0/1 finger, 2 cube
         self._contact_role: dict[int, tuple[int, int]] = {}
         self._keep_alive = []  # id() keys stay valid while the wrappers live
         for c, a in enumerate(self.u.agents):
-            for r, ln in enumerate(FINGER_LINKS):
+            for r, ln in enumerate(robot.gripper.finger_links):
                 link = a.robot.links_map[ln]._objs[0]
                 self._keep_alive.append(link)
                 self._contact_role[id(link)] = (c, r)
@@ -106,9 +109,9 @@ class CpuTiledBackend(PhysicsBackend):
             + [j.set_drive_target for j in self._finger_joints[c]]
             for c in range(n_envs)
         ]
-        assert all(len(row) == _N_TARGETS for row in self._setters)
+        assert all(len(row) == self._n_targets for row in self._setters)
         self._wake = [art.root.wake_up for art in self._arts]
-        self._written = np.zeros((n_envs, _N_TARGETS), dtype=np.float64)  # last targets written
+        self._written = np.zeros((n_envs, self._n_targets), dtype=np.float64)  # last targets written
         self._write_all = True  # until the first write after a reset
 
     def after_reset(self) -> None:
@@ -194,11 +197,12 @@ class CpuTiledBackend(PhysicsBackend):
         setters wake the articulation, and a robot left unwritten could fall asleep). Frozen
         copies are not touched: writing would wake them."""
         n = self.n_envs
-        new = np.empty((n, _N_TARGETS), dtype=np.float64)
-        new[:, _BASE] = base_vel.numpy()
-        new[:, _ARM] = arm.numpy()
-        new[:, _ARM_VEL] = arm_vel.numpy()
-        new[:, _GRIP] = grip.numpy()[:, None]
+        c_base, c_arm, c_arm_vel, c_grip = self._cols
+        new = np.empty((n, self._n_targets), dtype=np.float64)
+        new[:, c_base] = base_vel.numpy()
+        new[:, c_arm] = arm.numpy()
+        new[:, c_arm_vel] = arm_vel.numpy()
+        new[:, c_grip] = grip.numpy()[:, None]
         running = ~frozen.numpy()
         changed = new.view(np.int64) != self._written.view(np.int64)
         if self._write_all or self.rewrite_all_targets:
@@ -223,7 +227,7 @@ class CpuTiledBackend(PhysicsBackend):
             art = self._arts[c]
             for joint in self._base_joints[c]:  # a sleeping robot keeps its last targets
                 joint.set_drive_velocity_target(0.0)
-            self._written[c, _BASE] = 0.0
+            self._written[c, self._cols[0]] = 0.0
             art.set_qvel(np.zeros(art.dof, dtype=np.float32))
             art.root.put_to_sleep()
 

@@ -21,7 +21,8 @@ import torch
 
 from realize.config import ConfigError
 from realize.geometry import GeometryCfg
-from realize.scene.physics import ARM_JOINTS, BASE_JOINTS, FINGER_JOINTS, PhysicsBackend, make_task
+from realize.robot.spec import RobotSpec
+from realize.scene.physics import PhysicsBackend, make_task
 from realize.scene.settings import EnvOptions, SimSettings
 
 # ManiSkill builds a renderer per sub-scene wherever it has a render device: none without a camera
@@ -39,9 +40,9 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
     name = "gpu"
     deterministic = False
 
-    def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions):
-        self.n_envs, self.sim = n_envs, sim
-        self.env = make_task(geometry, sim, options, num_envs=n_envs, sim_backend="physx_cuda",
+    def __init__(self, n_envs: int, geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robot: RobotSpec):
+        self.n_envs, self.sim, self.robot = n_envs, sim, robot
+        self.env = make_task(geometry, sim, options, robot, num_envs=n_envs, sim_backend="physx_cuda",
                              **({} if options.camera is not None else _NO_RENDER))
         self.device = torch.device("cuda")
         self.u = self.env.unwrapped
@@ -51,9 +52,9 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         self._cube = self.u.cubes[0]
         self._ee_link = agent.tcp
         joints = {j.name: j for j in self._robot.get_active_joints()}
-        self._base_j = [joints[j] for j in BASE_JOINTS]
-        self._arm_j = [joints[j] for j in ARM_JOINTS]
-        self._finger_j = [joints[j] for j in FINGER_JOINTS]
+        self._base_j = [joints[j] for j in robot.base.joints]
+        self._arm_j = [joints[j] for j in robot.upper.joints]
+        self._finger_j = [joints[j] for j in robot.gripper.joints]
 
     def after_reset(self) -> None:
         pass
@@ -74,7 +75,7 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         return torch.cat([self._cube.linear_velocity, self._cube.angular_velocity], dim=1)
 
     def finger_cube_forces(self) -> torch.Tensor:
-        fingers = (self._agent.finger1_link, self._agent.finger2_link)
+        fingers = self._agent.finger_links
         return torch.stack(
             [self.u.scene.get_pairwise_contact_forces(f, self._cube).norm(dim=1) for f in fingers], dim=1
         )
@@ -85,7 +86,7 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         r.set_joint_drive_velocity_targets(base_vel, self._base_j)
         r.set_joint_drive_targets(arm, self._arm_j)
         r.set_joint_drive_velocity_targets(arm_vel, self._arm_j)
-        r.set_joint_drive_targets(grip[:, None].repeat(1, 2), self._finger_j)
+        r.set_joint_drive_targets(grip[:, None].repeat(1, len(self._finger_j)), self._finger_j)
         px = self.u.scene.px
         px.gpu_apply_articulation_target_position()
         px.gpu_apply_articulation_target_velocity()

@@ -9,7 +9,6 @@ What it does:
   * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
     variant, ``envs.env_id_for``) with the physics settings and the ``EnvOptions`` (render camera,
     reset noise) as ``gym.make`` kwargs; each backend adds its own (tiles or ``num_envs``).
-  * the robot's joint and link names the scene reads and drives, and the gripper targets.
 What it doesn't: pick a backend (``realize.scene.backends``), or hold the backend-independent
 logic of the scene (whole-body vectors, target bookkeeping, step hooks: ``realize.scene.batched``).
 """
@@ -24,29 +23,21 @@ import torch
 from mani_skill.utils import sapien_utils
 
 import envs  # registers the tasks
-from realize.fetch_joints import WHOLE_BODY_JOINT_NAMES
 from realize.geometry import GeometryCfg
+from realize.robot.spec import RobotSpec
 from realize.scene.settings import EnvOptions, SimSettings
 
-__all__ = [
-    "BASE_JOINTS", "ARM_JOINTS", "WHOLE_BODY_JOINTS", "FINGER_JOINTS", "FINGER_LINKS", "EE_LINK",
-    "GRIPPER_OPEN", "GRIPPER_CLOSED", "PhysicsBackend", "make_task",
-]
-
-BASE_JOINTS = WHOLE_BODY_JOINT_NAMES[:3]  # x, y, yaw
-ARM_JOINTS = WHOLE_BODY_JOINT_NAMES[3:]  # torso + 7 arm joints
-WHOLE_BODY_JOINTS = BASE_JOINTS + ARM_JOINTS
-FINGER_JOINTS = ("l_gripper_finger_joint", "r_gripper_finger_joint")
-FINGER_LINKS = ("l_gripper_finger_link", "r_gripper_finger_link")
-EE_LINK = "gripper_link"
-GRIPPER_OPEN, GRIPPER_CLOSED = 0.05, -0.01  # finger joint targets (m); closed < 0 squeezes
+__all__ = ["PhysicsBackend", "make_task"]
 
 
-def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, **backend_kwargs: Any) -> Any:
-    """``gym.make`` the task that builds ``geometry``'s world, with ``sim``'s physics, the
-    ``options`` that are set (the rest stays the task's) and the backend's own kwargs."""
+def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robot: RobotSpec,
+              **backend_kwargs: Any) -> Any:
+    """``gym.make`` the task that builds ``geometry``'s world with ``robot``, with ``sim``'s
+    physics, the ``options`` that are set (the rest stays the task's) and the backend's own kwargs."""
     kwargs: dict[str, Any] = dict(
         geometry=geometry,
+        robot_uids=robot.name,
+        robot=robot,
         obs_mode="none",
         sim_freq=sim.sim_freq,
         control_freq=sim.control_freq,
@@ -80,7 +71,8 @@ class PhysicsBackend(ABC):
     """One simulator backend under ``BatchedScene``: N copies of the task's world.
 
     Attributes every backend sets: ``env`` (the gym env), ``u`` (the unwrapped ManiSkill task),
-    ``device`` (where its tensors live), ``n_envs``. Poses are in a copy's local frame
+    ``device`` (where its tensors live), ``n_envs``, ``robot`` (its ``RobotSpec``: the joints it
+    reads and drives, the finger links, the TCP link). Poses are in a copy's local frame
     (``realize.geometry``'s), position then wxyz quaternion, float32."""
 
     name: ClassVar[str]  # "cpu" | "gpu": what run reports and logs call the backend
@@ -91,6 +83,7 @@ class PhysicsBackend(ABC):
     device: torch.device
     n_envs: int
     sim: SimSettings
+    robot: RobotSpec
 
     @abstractmethod
     def after_reset(self) -> None:
@@ -98,7 +91,7 @@ class PhysicsBackend(ABC):
 
     @abstractmethod
     def qpos(self) -> torch.Tensor:
-        """(N, 15) every active joint, in ManiSkill Fetch's joint order."""
+        """(N, J) every active joint of the robot, in the articulation's order."""
 
     @abstractmethod
     def qvel(self) -> torch.Tensor:
@@ -106,7 +99,7 @@ class PhysicsBackend(ABC):
 
     @abstractmethod
     def ee_pose(self) -> torch.Tensor:
-        """(N, 7) gripper_link pose."""
+        """(N, 7) pose of the robot's TCP link (``robot.tcp.link``)."""
 
     @abstractmethod
     def cube_pose(self) -> torch.Tensor:
@@ -118,13 +111,14 @@ class PhysicsBackend(ABC):
 
     @abstractmethod
     def finger_cube_forces(self) -> torch.Tensor:
-        """(N, 2) magnitude of the contact force (N) between each finger and the cube."""
+        """(N, 2) magnitude of the contact force (N) between each finger link
+        (``robot.gripper.finger_links``) and the cube."""
 
     @abstractmethod
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
                       grip: torch.Tensor, frozen: torch.Tensor) -> None:
-        """Write drive targets: base velocities (N, 3), torso+arm positions and velocities
-        (N, 8), finger positions (N,); copies in ``frozen`` (N,) may be skipped (asleep)."""
+        """Write drive targets: base velocities (N, 3), upper-joint positions and velocities
+        (N, n_upper), finger positions (N,); copies in ``frozen`` (N,) may be skipped (asleep)."""
 
     @abstractmethod
     def step(self, substeps: int) -> None:
@@ -145,7 +139,7 @@ class PhysicsBackend(ABC):
 
     @abstractmethod
     def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
-        """Teleport every copy, after a reset: robot joints to ``qpos`` (N, 15, in the order of
+        """Teleport every copy, after a reset: robot joints to ``qpos`` (N, J, in the order of
         ``qpos()``, base joints relative to the task's robot start) at rest, cube to ``cube_pose``
         (N, 7, local frame, wxyz) at rest. Both CPU float32."""
 

@@ -21,7 +21,7 @@ __all__ = ["BACKENDS", "SimSettings", "Camera", "EnvOptions"]
 
 BACKENDS = ("auto", "cpu", "gpu")
 SOLVERS = ("tgs", "pgs")
-ROBOT_COLLISIONS = ("all", "no_self", "hand")  # envs.fetch_omni.ROBOT_COLLISIONS
+ROBOT_COLLISIONS = ("all", "no_self", "hand")  # envs.robot_agent.ROBOT_COLLISIONS
 
 
 @dataclass
@@ -36,7 +36,7 @@ class SimSettings(Settings):
     solver_position_iterations: int = setting(10, ge=1)
     solver_velocity_iterations: int = setting(1, ge=0)
     solver_position_iterations_robot: int | None = setting(None, ge=1)  # robots' own count (None: as above); breaks copy independence (a woken cube in one copy changes the others' robots), so off by default
-    lean_robot: bool = True  # simulate Fetch without the links nothing touches (envs.fetch_omni)
+    lean_robot: bool = True  # simulate the robot without its collision.lean_drop_links (envs.robot_agent)
     robot_collisions: str = setting("all", choices=ROBOT_COLLISIONS)  # all | no_self (links never touch each other) | hand (only gripper and fingers have shapes)
     cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"

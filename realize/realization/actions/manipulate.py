@@ -15,14 +15,12 @@ import math
 import torch
 from torch import Tensor
 
-from realize.fetch_body import FINGERTIP_REACH
 from realize.hemisphere import Hemisphere
 from realize.realization.actions.base import Template
 from realize.realization.context import StepContext
 from realize.regions import Region
 from realize.scene import quat_to_matrix
 
-PAD_HALF_WIDTH = 0.013  # m, half width of the finger pads across the closing axis (fetch.urdf)
 
 # phases of grasp / place
 APPROACH, DESCEND, GRIP, RETREAT = 0, 1, 2, 3
@@ -80,7 +78,8 @@ class Manipulate(Template):
         support = centre[:, 2] - g.cube_half_size
         a_z = approach[:, 2].clamp(max=-0.2)  # approaches from below the horizon are not useful
         tilt = torch.sqrt((1.0 - approach[:, 2] ** 2).clamp(min=0.0))
-        lowest = FINGERTIP_REACH * a_z - PAD_HALF_WIDTH * tilt  # fingertip height below the TCP
+        hand = ctx.scene.robot.gripper
+        lowest = hand.fingertip_reach * a_z - hand.pad_half_width * tilt  # fingertip height below the TCP
         back = (support + cfg.grasp_clearance - centre[:, 2] - lowest) / (-a_z)
         back = back.clamp(min=0.0) + cfg.grasp_offset
         return centre - approach * back[:, None]
