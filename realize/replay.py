@@ -46,6 +46,7 @@ from realize.run_dir.names import RESULT_FILE
 from realize.replay_shard import ShardReplay, ShardReplayError, replay_shard
 from realize.run_config import RunSpec, build_run_spec
 from realize.task_plans import TaskOrigin
+from realize.video import Caption, FollowCamera, VideoRecorder, VideoReport, focus_points
 from realize.scene import BatchedScene, Camera, EnvOptions
 from realize.scene_state import SceneState, save_state
 
@@ -121,73 +122,6 @@ def video_camera(geometry: SceneGeometry) -> tuple[list[float], list[float]]:
     return [cx + 0.2, cy - 3.6, 3.5], [cx + 0.2, cy + 0.1, 0.3]
 
 
-@dataclass
-class VideoReport:
-    path: str
-    frames: int
-    fps: float
-    every: int
-    seconds: float  # video length
-    bytes: int
-    width: int
-    height: int
-    first_render_s: float  # the first frame (on lavapipe it compiles the shaders)
-    render_s_per_frame: float  # mean over the other frames
-    hold_s: float
-
-
-class VideoRecorder:
-    """Renders copy 0 of a scene into an MP4 (H.264 through imageio's ffmpeg), frame by frame.
-
-    Use as ``scene.add_step_hook(recorder, every)`` after ``recorder.attach(scene)``; frames are
-    written as they are rendered (nothing is kept in memory).
-    """
-
-    def __init__(self, path: str | Path, fps: float = 20.0, every: int = 1, quality: int = 7):
-        import imageio.v2 as imageio
-
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.fps, self.every = float(fps), int(every)
-        self._writer = imageio.get_writer(str(self.path), format="FFMPEG", mode="I", fps=self.fps, codec="libx264",
-                                          quality=quality, pixelformat="yuv420p", macro_block_size=1)
-        self.scene: BatchedScene | None = None
-        self.frames = 0
-        self.render_times: list[float] = []
-        self.last: np.ndarray | None = None
-        self.shape: tuple[int, int] = (0, 0)
-
-    def attach(self, scene: BatchedScene) -> None:
-        self.scene = scene
-        scene.add_step_hook(self, self.every)
-
-    def __call__(self, step: int) -> None:
-        assert self.scene is not None
-        t0 = time.perf_counter()
-        frame = np.ascontiguousarray(self.scene.render()[..., :3]).astype(np.uint8, copy=False)
-        self.render_times.append(time.perf_counter() - t0)
-        self._writer.append_data(frame)
-        self.frames += 1
-        self.last = frame
-        self.shape = frame.shape[:2]
-
-    def close(self, hold_s: float = 0.0) -> VideoReport:
-        """Repeat the last frame for ``hold_s`` seconds, finish the file and report."""
-        held = 0
-        if self.last is not None:
-            held = int(round(hold_s * self.fps))
-            for _ in range(held):
-                self._writer.append_data(self.last)
-        self._writer.close()
-        rt = self.render_times
-        return VideoReport(
-            path=str(self.path), frames=self.frames + held, fps=self.fps, every=self.every,
-            seconds=(self.frames + held) / self.fps, bytes=self.path.stat().st_size if self.path.exists() else 0,
-            width=int(self.shape[1]), height=int(self.shape[0]), first_render_s=rt[0] if rt else math.nan,
-            render_s_per_frame=float(np.mean(rt[1:])) if len(rt) > 1 else math.nan, hold_s=held / self.fps,
-        )
-
-
 # --------------------------------------------------------------------------------------------
 # replay
 # --------------------------------------------------------------------------------------------
@@ -217,17 +151,20 @@ class ReplayReport:
 
 
 def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float = 20.0, every: int = 2,
-           width: int | None = 640, height: int | None = 480, eye: Sequence[float] | None = None,
+           width: int | None = 960, height: int | None = 720, eye: Sequence[float] | None = None,
            target: Sequence[float] | None = None, task_camera: bool = False, backend: str = "cpu",
            hold_s: float = 1.0, state_at: int | None = None, state_out: str | Path | None = None,
-           exact: bool = False) -> ReplayReport:
+           exact: bool = False, overview: bool = False) -> ReplayReport:
     """Re-simulate the run's best plan in one copy; with ``video`` write an MP4 of it.
 
     The video shows every ``every``-th control step at ``fps`` frames per second (the control
     rate is ``sim.control_freq``: at 20 Hz, ``every=2, fps=20`` plays at twice real time), then
-    holds the last frame for ``hold_s`` seconds. ``width``/``height`` set the frame size (None:
-    the task camera's); the camera sits at ``eye`` looking at ``target``, by default at
-    ``video_camera(geometry)``, or where the task's render camera is with ``task_camera``.
+    holds the last frame for ``hold_s`` seconds (captioned with the outcome). ``width``/``height``
+    set the frame size (None: the task camera's). By default the camera follows the robot and
+    what the current action works on (``realize.video.FollowCamera``); with ``eye`` and
+    ``target`` it stays there, with ``task_camera`` where the task's render camera is
+    (``overview``: ``video_camera(geometry)``, a fixed view of the whole world). Every frame is labelled with
+    the current action and the control step (``realize.video.Caption``).
 
     With ``state_at=K`` and ``state_out``, the scene's state at the moment action K (0-based)
     begins, right after action K-1 succeeded, is written there as a
@@ -262,28 +199,38 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
                            t0, shard=shard, notes=notes)
     captured: list[SceneState] = []
     options = EnvOptions()
+    recorder = None
     if video is not None:
-        if eye is None and target is None and not task_camera:
+        follow = None
+        if overview and eye is None and target is None:
             eye, target = video_camera(spec.geometry)
+        elif eye is None and target is None and not task_camera:  # the camera follows the action
+            follow = FollowCamera(focus_points(spec.task, np.asarray(run.best_z)))
+            eye, target = video_camera(spec.geometry)  # the pose it starts from (moved before each frame)
         cam = Camera(width=width, height=height, eye=None if eye is None else tuple(map(float, eye)),
                      target=None if target is None else tuple(map(float, target)))
         options = EnvOptions(camera=cam)
-    recorder = VideoRecorder(video, fps=fps, every=every) if video is not None else None
+        caption = Caption([str(a) for a in spec.task.plan], spec.sim.control_freq, height or 512)
+        recorder = VideoRecorder(video, fps=fps, every=every, follow=follow, caption=caption)
     try:
         scene, (realizer,) = open_realization(spec, n_envs=1, env=options)
         with scene:
             if recorder is not None:
                 recorder.attach(scene)
-            if state_at is not None:
-                where = f"replay of {run.run_dir} at the start of action {state_at} ({spec.task.plan[state_at]})"
+            where = "" if state_at is None else (f"replay of {run.run_dir} at the start of action {state_at} "
+                                                 f"({spec.task.plan[state_at]})")
 
-                def capture(a: int, rows: torch.Tensor) -> None:
-                    if a == state_at and bool((rows == 0).any()):
-                        captured.append(scene.capture_state(0, source=where))
+            def on_action(a: int, rows: torch.Tensor) -> None:
+                if recorder is not None and recorder.caption is not None:
+                    recorder.caption.on_action(a, rows)
+                if a == state_at and bool((rows == 0).any()):
+                    captured.append(scene.capture_state(0, source=where))
 
-                realizer.action_hook = capture
+            realizer.action_hook = on_action
             res = realizer.rollout(best_z_rows(run))
-            vid = recorder.close(hold_s) if recorder is not None else None
+            outcome = (f"reaches the goal, cost {float(res.cost[0]):.0f}" if bool(res.feasible[0])
+                       else f"fails: {res.failure[0]}")
+            vid = recorder.close(hold_s, final_text=f"end: {outcome}") if recorder is not None else None
             recorder = None
     finally:
         if recorder is not None:  # an error mid-rollout: still close the file

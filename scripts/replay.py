@@ -1,13 +1,14 @@
 """Replay a run's best plan in one simulated copy (CPU by default) and check it reaches the goal.
 
 Usage: python scripts/replay.py RUN_DIR [--video out.mp4] [--fps 20] [--every 2]
-                                [--width 640 --height 480] [--eye X Y Z --target X Y Z | --task-camera]
+                                [--width 960 --height 720] [--eye X Y Z --target X Y Z | --task-camera | --overview]
                                 [--backend cpu|gpu|auto] [--json] [--state-at K --state-out FILE] [--exact]
 
 Reads RUN_DIR/result.json (the resolved config and best_z), rebuilds the task, scene and
 controllers from that config, re-simulates the plan and prints its cost next to the saved
 best_cost. With --video it renders every --every-th control step of copy 0 into an MP4 (on CPU
-through lavapipe). With --state-at K --state-out FILE it writes the scene state at the moment
+through lavapipe): a camera that follows the robot and what the current action works on, the
+action and control step written on every frame. With --state-at K --state-out FILE it writes the scene state at the moment
 action K (0-based) begins, right after action K-1 succeeded (realize/scene_state.py), the state
 `realize replan_from=RUN_DIR replan.action=K replan.state=FILE` starts from. With --exact it
 re-runs the shard of copies the run simulated its best sample in (that iteration's samples from
@@ -36,12 +37,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--video", type=Path, default=None, help="write an MP4 of the replay here")
     ap.add_argument("--fps", type=float, default=20.0, help="video frames per second (default 20)")
     ap.add_argument("--every", type=int, default=2, help="render every k-th control step (default 2)")
-    ap.add_argument("--width", type=int, default=640)
-    ap.add_argument("--height", type=int, default=480)
+    ap.add_argument("--width", type=int, default=960)
+    ap.add_argument("--height", type=int, default=720)
     ap.add_argument("--eye", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
-                    help="camera position (with --target; default: a high view from -y over the whole world)")
+                    help="a fixed camera position (with --target; default: a camera that follows the robot and "
+                         "what the current action works on)")
     ap.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"))
     ap.add_argument("--task-camera", action="store_true", help="use the task's own render camera pose")
+    ap.add_argument("--overview", action="store_true", help="a fixed high view of the whole world from -y")
     ap.add_argument("--hold", type=float, default=1.0, help="seconds to hold the last frame")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -58,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rep = replay(args.run_dir, args.video, fps=args.fps, every=args.every, width=args.width,
                      height=args.height, eye=args.eye, target=args.target,
-                     task_camera=args.task_camera, backend=args.backend, hold_s=args.hold,
+                     task_camera=args.task_camera, overview=args.overview, backend=args.backend, hold_s=args.hold,
                      state_at=args.state_at, state_out=args.state_out, exact=args.exact)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)

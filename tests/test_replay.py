@@ -167,3 +167,28 @@ def test_push_scene_gets_its_camera_and_noise(tmp_path: Path) -> None:
     reader = imageio.get_reader(str(out))
     assert reader.get_data(0).shape == (64, 96, 3)
     reader.close()
+
+
+def test_video_follows_the_action_and_labels_every_frame(tmp_path: Path) -> None:
+    """The default video camera follows the robot and what it acts on: during the grasp the
+    4.5 cm (red) cube is at least 20 px wide, and a dark caption band with white text tops
+    every frame (the caption's text itself: ``Caption.text``)."""
+    import imageio.v2 as imageio
+
+    from realize.video import Caption
+
+    d = _write_run(tmp_path / "grasp", ["controller.max_time_s=11"])  # through the start of the grasp
+    out = tmp_path / "grasp.mp4"
+    v = replay(d, out, fps=10, every=10, hold_s=0.0).video
+    assert v is not None and (v.width, v.height) == (960, 720)
+    reader = imageio.get_reader(str(out))
+    frames = np.stack(list(reader.iter_data())).astype(int)
+    reader.close()
+    band = frames[:, :30]
+    assert (band.mean(axis=(1, 2, 3)) < 80).all() and ((band > 200).all(axis=-1).sum(axis=(1, 2)) > 50).all()
+    red = (frames[..., 0] > 150) & (frames[..., 1] < 90) & (frames[..., 2] < 90)
+    widths = [int(np.ptp(np.nonzero(r.any(axis=0))[0])) + 1 if r.any() else 0 for r in red]
+    assert max(widths) >= 20, widths
+    cap = Caption(["move_to(Table1)", "grasp(Cube_g)"], control_freq=20, height=720)
+    cap.on_action(1, torch.tensor([0]))
+    assert cap.text(412) == "2/2 grasp(Cube_g)   step 412   20.6 s"
