@@ -1,4 +1,4 @@
-"""Tests of realize.kinematics on Fetch (fetch_omni): FK against pytorch_kinematics and SAPIEN,
+"""Tests of realize.robot.kinematics on Fetch (fetch_omni): FK against pytorch_kinematics and SAPIEN,
 the TCP at the pad centre, torch.func compatibility, closed-form Jacobians, sphere coverage of the
 collision meshes. (Both robots against pytorch_kinematics: tests/test_robot_kinematics.py.)"""
 
@@ -12,7 +12,7 @@ import pytest
 import torch
 from torch.func import jacfwd, jvp, vmap
 
-from realize.kinematics import RobotKinematics
+from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import load_robot_spec
 
 F64 = torch.float64

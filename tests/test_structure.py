@@ -92,3 +92,38 @@ def test_backend_branches_only_in_backend_modules() -> None:
 def test_module_has_docstring(name: str) -> None:
     tree = ast.parse(_modules()[name].read_text())
     assert ast.get_docstring(tree), f"{name} has no module docstring"
+
+
+def _robot_names() -> set[str]:
+    """Every joint and link name of every robot's URDF (names with an underscore: 'root' is a word)."""
+    import xml.etree.ElementTree as ET
+
+    from realize.robot.spec import known_robots, load_robot_spec
+    from realize.robot.urdf import source_urdf
+
+    names: set[str] = set()
+    for robot in known_robots():
+        root = ET.parse(source_urdf(load_robot_spec(robot).urdf)).getroot()
+        names |= {e.get("name", "") for e in [*root.iter("joint"), *root.iter("link")]}
+    return {n for n in names if "_" in n}
+
+
+# where a robot's own joints and links may be named: its package and the one agent class
+ROBOT_MODULES = ("realize.robot", "envs.robot_agent")
+
+
+def test_no_robot_joint_or_link_named_outside_the_robot_package() -> None:
+    """Robots are data: generic code asks the spec, it never names a joint or link of a robot
+    (in code, strings or docstrings)."""
+    names = _robot_names()
+    assert {"torso_lift_joint", "gripper_link", "right_panda_hand", "linear_actuator_height"} <= names
+    word = re.compile(r"[A-Za-z0-9_]+")
+    hits = []
+    for n, p in _modules().items():
+        if n.startswith(ROBOT_MODULES):
+            continue
+        for i, line in enumerate(p.read_text().splitlines()):
+            found = sorted(set(word.findall(line)) & names)
+            if found:
+                hits.append(f"{n}:{i + 1} {found}")
+    assert not hits, "robot joints/links named outside realize/robot/ and envs/robot_agent.py:\n" + "\n".join(hits)

@@ -6,7 +6,7 @@ use. Every robot's ``q`` is ``[x, y, yaw, *upper]`` (``RobotSpec.whole_body_join
 (m, local frame), base yaw (rad), then the ``UPPER`` body, the joints driven by position
 targets (a lift or torso if any, then the arm; the base is driven by velocity). How many upper
 joints there are is the robot's (``RobotSpec.n_upper``, ``RobotKinematics.n_dof``).
-What it doesn't: know joint names, limits or kinematics (``realize.robot``, ``realize.kinematics``).
+What it doesn't: know joint names, limits or kinematics (``realize.robot``, ``realize.robot.kinematics``).
 """
 
 from __future__ import annotations

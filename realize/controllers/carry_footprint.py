@@ -2,7 +2,7 @@
 
 What it does: ``move_to`` holds the torso and arm still and its PID keeps the base's yaw, so
 while the base translates, every collision sphere of the body (the robot's sphere file, placed by
-``realize.kinematics``) keeps its horizontal offset from the base and its height. A sphere that
+``realize.robot.kinematics``) keeps its horizontal offset from the base and its height. A sphere that
 stays inside the base's padded disc (the radius the occupancy grid is inflated by) is covered by
 the shared grid already. For the others, an arm stretched out with the cube in hand or over a
 table, :func:`carry_blocked` marks the grid cells where a base there would put such a sphere

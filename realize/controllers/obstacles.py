@@ -16,7 +16,7 @@ import torch
 from torch import Tensor
 
 from realize.geometry import SceneGeometry
-from realize.kinematic_chain import mat3, matvec3
+from realize.robot.chain import mat3, matvec3
 
 # columns of one obstacle-box row
 BOX_CENTER = slice(0, 3)  # centre x, y, z (m)

@@ -1,7 +1,7 @@
 """Whole-body optimization fabric of a mobile manipulator: base x, y, yaw + upper joints to a gripper pose.
 
 What it does: wraps the generic fabric (``realize.controllers.fabrics``) for a robot's model
-(``realize.kinematics.RobotKinematics``, built from its ``RobotSpec``):
+(``realize.robot.kinematics.RobotKinematics``, built from its ``RobotSpec``):
   * the forcing term attracts three points of the gripper, the tool centre point (TCP), a point
     ``axis_length`` behind it on the approach axis and one beside it on the closing axis, to the
     same points of the goal pose; together they pull position and orientation;
@@ -32,9 +32,9 @@ from realize.controllers.body import BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.geometry import SceneGeometry
-from realize.jacobians import point_jets, prefix_ends
-from realize.kinematic_chain import matvec3
-from realize.kinematics import RobotKinematics
+from realize.robot.jacobians import point_jets, prefix_ends
+from realize.robot.chain import matvec3
+from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 
 LIMIT_MARGIN = 0.005  # rad (m for a lift): the fabric's state stays this far inside the limits

@@ -10,7 +10,7 @@ axis, limits), keyed by child link; :func:`rpy_matrix`, :func:`skew` and :func:`
 turn URDF origins and axes into float64 rotation matrices. All of it runs once, when a model
 is built.
 
-What it doesn't: build the kinematic tree or compute anything batched (``realize.kinematic_chain``
+What it doesn't: build the kinematic tree or compute anything batched (``realize.robot.chain``
 and ``realize.robot.kinematics`` do), read inertials, or load anything into the simulator.
 """
 

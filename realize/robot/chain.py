@@ -13,7 +13,7 @@ constants (held joints folded into their fixed transform):
 :meth:`KinematicChain.forward` then gives rotation ``(..., 3, 3)`` and position ``(..., 3)`` of
 any set of links for ``q`` of any leading batch shape, with out-of-place torch ops only (works
 under autograd and ``torch.func``, on any device). It also checks that the degrees of freedom
-form one serial chain in ``q`` order, which the closed-form Jacobians (``realize.jacobians``)
+form one serial chain in ``q`` order, which the closed-form Jacobians (``realize.robot.jacobians``)
 rely on.
 
 What it doesn't: read the URDF file (``realize.robot.urdf``), know a robot's TCP or spheres

@@ -3,7 +3,7 @@
 What it does
 ------------
 For points ``c`` rigidly attached to links of a serial chain whose degrees of freedom have
-axes ``z_j`` and origins ``o_j`` (``realize.kinematic_chain.KinematicChain.joint_frames``) and a
+axes ``z_j`` and origins ``o_j`` (``realize.robot.chain.KinematicChain.joint_frames``) and a
 dof mask ``mask_j`` (1 where joint j moves the point's link):
 
 * :func:`point_jacobian`: ``J[:, j] = mask_j * (z_j x (c - o_j))`` for revolute joints,

@@ -5,7 +5,7 @@ What it does
 :class:`RobotKinematics` is the model of one robot's whole body ``q`` (base x, y, yaw, then the
 upper joints: a lift or torso and the arm; ``RobotSpec.whole_body_joints``), built from its spec
 (``realize.robot.spec``): its URDF (``realize.robot.urdf``) read once into constant tensors
-(``realize.kinematic_chain``), the held joints (a head) and the fingers at values chosen at
+(``realize.robot.chain``), the held joints (a head) and the fingers at values chosen at
 construction, the TCP and the collision spheres of its sphere file. It gives
 
 * link poses and the tool centre point (TCP) pose and axes (:meth:`~RobotKinematics.ee_pose`,
@@ -13,7 +13,7 @@ construction, the TCP and the collision spheres of its sphere file. It gives
   vectors in the TCP link's frame);
 * collision-sphere centres (:meth:`~RobotKinematics.collision_spheres`);
 * closed-form geometric Jacobians and curvature terms ``(dJ/dt) q'`` of the TCP and of the
-  sphere centres (formulas in ``realize.jacobians``), 10-30x faster on CPU than ``torch.func``
+  sphere centres (formulas in ``realize.robot.jacobians``), 10-30x faster on CPU than ``torch.func``
   forward-mode AD through the same FK, matching it to float64 precision;
 * joint limits of ``q``;
 * the ``realize.controllers.fabrics.FabricKinematics`` protocol: ``kin(q) -> (tcp, sphere
@@ -40,8 +40,8 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
-from realize.jacobians import jdot_qdot, point_jacobian, point_jets, prefix_ends
-from realize.kinematic_chain import KinematicChain, homogeneous, matvec3
+from realize.robot.jacobians import jdot_qdot, point_jacobian, point_jets, prefix_ends
+from realize.robot.chain import KinematicChain, homogeneous, matvec3
 from realize.robot.sphere_file import SphereSpec
 from realize.robot.spec import RobotSpec
 from realize.robot.urdf import parse_urdf_joints, resolve_urdf
@@ -199,7 +199,7 @@ class RobotKinematics:
 
     # ------------------------------------------------------------------ closed-form Jacobians
     # The actuated joints form one serial chain in q order (checked by KinematicChain); the
-    # formulas are in realize.jacobians.
+    # formulas are in realize.robot.jacobians.
 
     def _chain_terms(self, q: Tensor, links: Sequence[str], root_pose: Tensor | None):
         """FK of ``links`` plus every joint's axis and origin ``(..., n_dof, 3)`` in the output frame."""

@@ -1,0 +1,105 @@
+"""Every robot's kinematics against pytorch_kinematics (an independent implementation, and one of
+the project's declared dependencies): on 1,000 random configurations in float64, the TCP pose,
+every collision-sphere centre, and their Jacobians agree within 1e-9."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import pytest
+import torch
+
+from realize.robot.kinematics import RobotKinematics
+from realize.robot.spec import known_robots, load_robot_spec
+
+pk = pytest.importorskip("pytorch_kinematics")
+F64 = torch.float64
+N = 1000
+TOL = 1e-9
+
+
+@pytest.fixture(autouse=True)
+def float64_urdf_origins(monkeypatch: pytest.MonkeyPatch) -> None:
+    """pytorch_kinematics 0.7.6 reads URDF origins (xyz, rpy) in float32 (~1e-8 m off); its
+    kinematics are compared here in float64, so its origin reader is made to keep float64."""
+    import pytorch_kinematics.transforms as tf
+    import pytorch_kinematics.urdf as pk_urdf
+
+    def convert(origin):
+        if origin is None:
+            return tf.Transform3d(dtype=F64)
+        rpy = torch.tensor(origin.rpy, dtype=F64)
+        return tf.Transform3d(rot=tf.quaternion_from_euler(rpy, "sxyz"), pos=torch.tensor(origin.xyz, dtype=F64),
+                              dtype=F64)
+
+    monkeypatch.setattr(pk_urdf, "_convert_transform", convert)
+
+
+def full_qpos(kin: RobotKinematics, q: torch.Tensor, names: Sequence[str]) -> torch.Tensor:
+    """``(N, len(names))``: ``q``'s joints and the model's fixed (held, finger) values in ``names`` order."""
+    cols = [q[:, kin.joint_names.index(n)] if n in kin.joint_names
+            else torch.full((q.shape[0],), kin.fixed_values.get(n, 0.0), dtype=q.dtype) for n in names]
+    return torch.stack(cols, dim=-1)
+
+
+def random_q(kin: RobotKinematics, n: int, seed: int) -> torch.Tensor:
+    """Random configurations inside the joint limits (base within +-2 m, free joints in +-pi)."""
+    g = torch.Generator().manual_seed(seed)
+    lo = torch.nan_to_num(kin.lower, neginf=-torch.pi).clamp(min=-2.0)
+    hi = torch.nan_to_num(kin.upper, posinf=torch.pi).clamp(max=2.0)
+    return lo + (hi - lo) * torch.rand(n, kin.n_dof, generator=g, dtype=F64)
+
+
+def _with_efforts(urdf: bytes) -> bytes:
+    """pytorch_kinematics' URDF parser requires ``effort`` on every ``<limit>`` (the mobile Panda's
+    base and lift give none); it plays no part in kinematics."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(urdf)
+    for limit in root.iter("limit"):
+        limit.attrib.setdefault("effort", "0")
+    return ET.tostring(root)
+
+
+def _point(t: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
+    """(N, 3) the point ``offset`` of a link whose poses are ``t`` (N, 4, 4)."""
+    return t[:, :3, :3] @ offset + t[:, :3, 3]
+
+
+@pytest.mark.parametrize("robot", known_robots())
+def test_tcp_spheres_and_jacobians_match_pytorch_kinematics(robot: str) -> None:
+    spec = load_robot_spec(robot)
+    kin = RobotKinematics(spec, dtype=F64)
+    with open(kin.urdf_path, "rb") as f:
+        urdf = _with_efforts(f.read())
+    q = random_q(kin, N, seed=7)
+    chain = pk.build_chain_from_urdf(urdf).to(dtype=F64)
+    ref = {k: v.get_matrix() for k, v in chain.forward_kinematics(full_qpos(kin, q, chain.get_joint_parameter_names())).items()}
+
+    pose, jac = kin.tcp_jacobian(q)
+    tcp_ref = _point(ref[kin.ee_link], kin.tcp_offset)
+    assert (pose[:, :3, 3] - tcp_ref).abs().max() < TOL
+    assert (pose[:, :3, :3] - ref[kin.ee_link][:, :3, :3]).abs().max() < TOL
+    centres, _, sjac = kin.sphere_jacobians(q)
+    for k, s in enumerate(kin.spheres):
+        err = (centres[:, k] - _point(ref[s.link], kin.sphere_offsets[k])).abs().max()
+        assert err < TOL, f"{robot}: sphere {s.name}: {err:.2e}"
+
+    # Jacobians: pytorch_kinematics' serial chain from the root to each link, its columns mapped
+    # to q's joints by name (joints on the path that are not in q are held: no column of ours)
+    points = [(kin.ee_link, kin.tcp_offset, jac, "tcp")] + [
+        (s.link, kin.sphere_offsets[k], sjac[:, k], s.name) for k, s in enumerate(kin.spheres)]
+    serial: dict[str, object] = {}
+    for link, offset, ours, name in points:
+        sc = serial.get(link)
+        if sc is None:
+            sc = serial[link] = pk.build_serial_chain_from_urdf(urdf, link).to(dtype=F64)
+        names = sc.get_joint_parameter_names()
+        jref = sc.jacobian(full_qpos(kin, q, names), locations=offset.expand(N, 3))
+        rows = ours.shape[1]  # 6 for the TCP (linear and angular), 3 for a sphere centre
+        expected = torch.zeros_like(ours)
+        for i, joint in enumerate(names):
+            if joint in kin.joint_names:
+                expected[:, :, kin.joint_names.index(joint)] = jref[:, :rows, i]
+        err = (ours - expected).abs().max()
+        assert err < TOL, f"{robot}: Jacobian of {name}: {err:.2e}"
