@@ -1,0 +1,288 @@
+"""Fit collision spheres to every link of a robot that has collision geometry; write its sphere file.
+
+Usage::
+
+    .venv/bin/python scripts/fit_spheres.py mobile_panda --count adjustable_body=5 ...
+    .venv/bin/python scripts/fit_spheres.py fetch_omni --out /tmp/fetch_fitted.yaml --compare fetch_omni
+    .venv/bin/python scripts/fit_spheres.py --urdf path/to/robot.urdf --links a b --out x.yaml
+
+ROBOT names ``configs/robot/ROBOT.yaml`` (``realize.robot.spec.load_robot_spec``); its URDF is
+read as the source file (collision meshes only, so no derived URDF is needed). ``--urdf`` reads a
+URDF directly instead. Each link gets ``--count LINK=N`` spheres, or else the fewest (up to
+``--max-spheres``) whose radii are all at most ``--max-radius`` (``realize.robot.sphere_fit``).
+The file goes to ``realize/robot/spheres/ROBOT.yaml`` unless ``--out`` says otherwise; a coverage
+report (per link: spheres, share of fresh surface samples inside the link's own spheres, how
+far the worst sample is outside, largest overshoot; and in total) is printed. ``--compare FILE``
+also reports an existing sphere file (a name in ``realize/robot/spheres/`` or a path), and for
+links that file gives no spheres of their own, the share covered by all its spheres with the
+robot at its joint-limit corners (see ``_corner_configs``).
+
+``check_floor`` (whether the fabric keeps a sphere above the floor) is false where that cannot
+hold at any height: for every sphere of a link whose collision geometry reaches the floor
+(z <= ``--floor-tol`` in the URDF root frame, the floor being z = 0) at every corner
+configuration, and for a sphere that itself reaches below the floor at every corner
+configuration. Corner configurations: the lift/torso and other short-range prismatic joints at
+both limits, revolute joints at 0. So a base, or a lift column that hangs down to the floor at
+every height, is left out of floor avoidance; a torso that reaches the floor only with the lift
+all the way down is kept above it. The spec's ``collision.no_floor_links`` (the simulator's floor
+contact filter) is printed beside the result, not used.
+
+Sphere counts: ``--count LINK=N``, else the per-link counts of the file being replaced when it
+was written by this script (so ``fit_spheres.py ROBOT`` refits a robot as committed), else the
+``--max-radius`` rule. A file not written by this script (Fetch's hand-made one) is never
+overwritten; write elsewhere with ``--out``.
+
+What it doesn't: fit self-collision models, or change a sphere file it is only comparing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import itertools
+from collections import Counter
+import shlex
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from realize.paths import REPO_ROOT
+from realize.robot.sphere_file import SPHERE_DIR, SphereSpec, load_spheres, sphere_file_path, write_spheres
+from realize.robot.sphere_fit import (Coverage, LinkGeometry, Sphere, collision_links, coverage, fit_spheres,
+                                      link_geometry, origin_matrix)
+from realize.robot.urdf import JointSpec, axis_rotation, parse_urdf_joints
+
+FITTED_MARK = "fitted by scripts/fit_spheres.py"
+PRISMATIC_RANGE = 2.0  # m: prismatic joints of at most this range are a lift, torso or finger; wider ones a planar base
+
+
+@dataclass(frozen=True)
+class LinkReport:
+    link: str
+    spheres: int
+    cov: Coverage
+    area: float
+
+
+# ----------------------------------------------------------------------------- kinematics (numpy, once)
+
+
+def _joint_transform(j: JointSpec, value: float) -> np.ndarray:
+    t = origin_matrix(j.xyz, j.rpy)
+    if j.type not in ("prismatic", "revolute", "continuous"):
+        return t
+    axis = np.asarray(j.axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    m = np.eye(4)
+    if j.type == "prismatic":
+        m[:3, 3] = axis * value
+    else:
+        m[:3, :3] = axis_rotation(torch.as_tensor(axis), value).numpy()
+    return t @ m
+
+
+def link_poses(joints: dict[str, JointSpec], values: dict[str, float], links: list[str]) -> dict[str, np.ndarray]:
+    """4x4 pose of each link in the URDF root frame, joints at ``values`` (absent: 0)."""
+    out: dict[str, np.ndarray] = {}
+
+    def pose(link: str) -> np.ndarray:
+        if link not in out:
+            j = joints.get(link)
+            out[link] = np.eye(4) if j is None else pose(j.parent) @ _joint_transform(j, values.get(j.name, 0.0))
+        return out[link]
+
+    return {l: pose(l) for l in links}
+
+
+def _chain(joints: dict[str, JointSpec], link: str) -> list[JointSpec]:
+    chain = []
+    while link in joints:
+        chain.append(joints[link])
+        link = joints[link].parent
+    return chain
+
+
+def _short_prismatic(j: JointSpec) -> bool:
+    finite = np.isfinite(j.lower) and np.isfinite(j.upper)
+    return j.type == "prismatic" and finite and j.upper - j.lower <= PRISMATIC_RANGE
+
+
+def _corner_configs(joints: list[JointSpec]) -> list[dict[str, float]]:
+    """Every combination of the short-range prismatic joints at their limits; all else at 0."""
+    lifts = [j for j in joints if _short_prismatic(j)]
+    combos = itertools.product(*[(j.lower, j.upper) for j in lifts])
+    return [{j.name: v for j, v in zip(lifts, combo)} for combo in combos]
+
+
+def _lowest(joints: dict[str, JointSpec], link: str, local: np.ndarray, radius: float = 0.0) -> list[float]:
+    """Lowest root-frame z of ``local`` points of ``link`` (minus ``radius``), at each corner configuration."""
+    out = []
+    for cfg in _corner_configs(_chain(joints, link)):
+        t = link_poses(joints, cfg, [link])[link]
+        out.append(float((local @ t[:3, :3].T + t[:3, 3])[:, 2].min()) - radius)
+    return out
+
+
+def floor_checks(joints: dict[str, JointSpec], geom: LinkGeometry, spheres: list[Sphere], tol: float) -> list[bool]:
+    """``check_floor`` of each sphere of ``geom``'s link (rule in the module docstring)."""
+    if max(_lowest(joints, geom.link, geom.vertices)) <= tol:
+        return [False] * len(spheres)
+    return [max(_lowest(joints, geom.link, np.asarray([s.centre]), s.radius)) > tol for s in spheres]
+
+
+# ----------------------------------------------------------------------------- reports
+
+
+def _fmt(r: LinkReport) -> str:
+    c = r.cov
+    return (f"  {r.link:28s} {r.spheres:3d}  {100 * c.share_inside:7.2f} %  {1000 * c.worst_outside:6.1f} mm"
+            f"  {1000 * c.overshoot:6.1f} mm")
+
+
+def print_report(title: str, reports: list[LinkReport]) -> None:
+    print(f"{title}\n  {'link':28s} {'n':>3s}  {'inside':>9s}  {'worst out':>9s}  {'overshoot':>9s}")
+    for r in reports:
+        print(_fmt(r))
+    sphered = [r for r in reports if r.spheres]
+    area = sum(r.area for r in sphered)
+    if sphered:
+        share = sum(r.cov.share_inside * r.area for r in sphered) / area
+        print(f"  total: {sum(r.spheres for r in reports)} spheres; inside {100 * share:.2f} % of the surface "
+              f"(area-weighted), worst link {min(r.cov.share_inside for r in sphered) * 100:.2f} % "
+              f"({min(sphered, key=lambda r: r.cov.share_inside).link}); largest overshoot "
+              f"{1000 * max(r.cov.overshoot for r in sphered):.1f} mm "
+              f"({max(sphered, key=lambda r: r.cov.overshoot).link})")
+
+
+def link_reports(geoms: dict[str, LinkGeometry], spheres: list[SphereSpec], seed: int) -> list[LinkReport]:
+    """Coverage of each link's geometry by the spheres on that link (samples seeded apart from the fit)."""
+    out = []
+    for name, g in geoms.items():
+        own = [Sphere(s.offset, s.radius) for s in spheres if s.link == name]
+        cov = coverage(g, own, seed=seed) if own else Coverage(0.0, float("inf"), 0.0, 0)
+        out.append(LinkReport(name, len(own), cov, g.area))
+    return out
+
+
+def borrowed_coverage(joints: dict[str, JointSpec], geoms: dict[str, LinkGeometry], spheres: list[SphereSpec],
+                      link: str, seed: int) -> list[tuple[dict[str, float], float]]:
+    """Share of ``link``'s surface inside any sphere of the robot, at each corner configuration."""
+    links = sorted({link, *(s.link for s in spheres)})
+    out = []
+    for cfg in _corner_configs([j for j in joints.values()]):
+        poses = link_poses(joints, cfg, links)
+        world = [Sphere(tuple(poses[s.link][:3, :3] @ np.asarray(s.offset) + poses[s.link][:3, 3]), s.radius)
+                 for s in spheres]
+        cov = coverage(geoms[link].transformed(poses[link]), world, seed=seed, n_dirs=8)
+        out.append((cfg, cov.share_inside))
+    return out
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def _parse_counts(items: list[str]) -> dict[str, int]:
+    counts = {}
+    for item in items:
+        link, _, n = item.partition("=")
+        if not n.isdigit() or int(n) < 1:
+            raise SystemExit(f"--count {item!r}: expected LINK=N with N >= 1")
+        counts[link] = int(n)
+    return counts
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("robot", nargs="?", help="configs/robot/ROBOT.yaml (needed unless --urdf and --out are given)")
+    ap.add_argument("--urdf", help="read this URDF instead of the robot config's")
+    ap.add_argument("--links", nargs="+", help="fit only these links (default: every link with collision geometry)")
+    ap.add_argument("--count", action="append", default=[], metavar="LINK=N", help="spheres for one link")
+    ap.add_argument("--max-radius", type=float, default=0.09, help="radius bound for links without --count (m)")
+    ap.add_argument("--max-spheres", type=int, default=4, help="sphere bound per link without --count")
+    ap.add_argument("--samples", type=int, default=3000, help="surface samples fitted per link")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--floor-tol", type=float, default=0.01, help="m above the floor that counts as touching it")
+    ap.add_argument("--out", help="sphere file to write (default realize/robot/spheres/ROBOT.yaml)")
+    ap.add_argument("--compare", help="also report this existing sphere file (name or path)")
+    args = ap.parse_args(argv)
+
+    no_floor: tuple[str, ...] = ()
+    if args.urdf:
+        urdf = Path(args.urdf)
+    elif args.robot:
+        from realize.robot.spec import load_robot_spec
+        from realize.robot.urdf import source_urdf
+
+        spec = load_robot_spec(args.robot)
+        urdf = source_urdf(spec.urdf)
+        no_floor = spec.collision.no_floor_links
+    else:
+        ap.error("give ROBOT or --urdf")
+    robot = args.robot or urdf.stem
+    out = Path(args.out) if args.out else SPHERE_DIR / f"{robot}.yaml"
+    if out.is_file() and FITTED_MARK not in out.read_text():
+        ap.error(f"{out.name} was not written by this script (hand-made?): not replacing it; give --out")
+    counts = _parse_counts(args.count)
+    links = args.links or collision_links(urdf)
+    unknown = sorted(set(counts) - set(links))
+    if unknown:
+        ap.error(f"--count names links without collision geometry or not fitted: {unknown}")
+    if out.is_file():
+        kept = Counter(s.link for s in load_spheres(str(out)))
+        counts = {**{l: n for l, n in kept.items() if l in links}, **counts}
+    joints = parse_urdf_joints(str(urdf))
+    geoms = {l: link_geometry(urdf, l) for l in links}
+    report_seed = args.seed + 1_000_003
+
+    fitted: list[SphereSpec] = []
+    for link, g in geoms.items():
+        if link in counts:
+            spheres = fit_spheres(g, n_spheres=counts[link], n_samples=args.samples, seed=args.seed)
+        else:
+            spheres = fit_spheres(g, max_radius=args.max_radius, max_spheres=args.max_spheres,
+                                  n_samples=args.samples, seed=args.seed)
+        checks = floor_checks(joints, g, spheres, args.floor_tol)
+        fitted += [SphereSpec(f"{link}_{i}", link, s.centre, s.radius, c)
+                   for i, (s, c) in enumerate(zip(spheres, checks))]
+    print_report(f"fitted spheres ({urdf.name}, seed {args.seed}):", link_reports(geoms, fitted, report_seed))
+    off_floor = [s.name for s in fitted if not s.check_floor]
+    print(f"  check_floor: false on {off_floor or 'no sphere'}; the spec's no_floor_links (sim contact filter, "
+          f"not used here): {list(no_floor)}")
+
+    try:
+        where = out.resolve().relative_to(REPO_ROOT)
+    except ValueError:
+        where = out.name
+    argv_ = argv if argv is not None else sys.argv[1:]
+    cmd = " ".join(shlex.quote(a) for a in ["scripts/fit_spheres.py", *argv_])
+    header = [
+        f"Collision spheres of {robot}, {FITTED_MARK} (realize.robot.sphere_fit)",
+        f"on {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d} to the collision geometry of {urdf.name}. Per link: vertices,",
+        f"sharp-edge points and {args.samples} surface samples split among the link's spheres (principal-axis",
+        "and k-means++ starts, Lloyd rounds; each sphere then shrunk to the minimal enclosing ball of what",
+        "only it covers, then grown to cover fresh samples); centres rounded to 1 mm, radii rounded up.",
+        "check_floor: false for spheres that cannot leave the floor (their link reaches the floor at every",
+        "lift height, or they do). Offsets in the link frame (m), radii (m). Made with (sphere counts:",
+        "--count, else those of the file it replaced):",
+        f"  .venv/bin/python {cmd}",
+    ]
+    write_spheres(out, robot, fitted, header)
+    print(f"wrote {len(fitted)} spheres to {where}")
+
+    if args.compare:
+        existing = list(load_spheres(args.compare))
+        print_report(f"\n{sphere_file_path(args.compare).name} (existing):", link_reports(geoms, existing, report_seed))
+        have = {s.link for s in existing}
+        for link in [l for l in links if l not in have]:
+            shares = borrowed_coverage(joints, geoms, existing, link, report_seed)
+            text = ", ".join(f"{100 * s:.1f} %" for _, s in shares)
+            print(f"  {link}: no spheres of its own; inside the robot's spheres at the {len(shares)} "
+                  f"joint-limit corners: {text}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
