@@ -27,7 +27,7 @@ from pathlib import Path
 import torch
 import yaml
 
-from realize.controllers.body import BASE_XY, UPPER
+from realize.robot.layout import BASE_XY, UPPER
 from realize.robot.spec import load_robot_spec
 
 TCP_OFFSET = load_robot_spec("fetch_omni").tcp.offset

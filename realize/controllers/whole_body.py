@@ -28,7 +28,7 @@ import torch
 from torch import Tensor
 
 from realize.config import ConfigError, Settings, setting
-from realize.controllers.body import BASE_XY, YAW
+from realize.robot.layout import BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.geometry import SceneGeometry
@@ -102,7 +102,7 @@ class _PoseMap:
 
 @dataclass
 class FabricState:
-    """Reference state integrated by the fabric, per plan: (N, n_dof) each (``realize.controllers.body``)."""
+    """Reference state integrated by the fabric, per plan: (N, n_dof) each (``realize.robot.layout``)."""
 
     q: Tensor
     qd: Tensor

@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from realize.controllers.body import BASE, N_BASE, UPPER
+from realize.robot.layout import BASE, N_BASE, UPPER
 from realize.controllers.occupancy import GridSpec
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
 from realize.realization.config import RolloutConfig
@@ -31,7 +31,7 @@ class StepContext:
     padded (H, W) grid), ``occupancy_tight`` (the grid padded by ``astar.fallback_padding``, for
     plans with no path on the padded one; None: no retry), ``n_envs``, ``device``, ``dt`` (control period, s).
     Measured by ``read()`` after every physics step, (N, ...) float32: ``q`` / ``qd`` (N, n_dof)
-    whole-body joints (``realize.controllers.body``), ``base`` (N, 3) x, y, yaw, ``tcp`` (N, 3),
+    whole-body joints (``realize.robot.layout``), ``base`` (N, 3) x, y, yaw, ``tcp`` (N, 3),
     ``approach`` / ``closing`` (N, 3) gripper axes, ``cube`` (N, 7) pose, ``cube_speed`` (N,);
     ``holds(rows)`` reads finger contacts on demand (once per step).
     Commands, reset by ``begin_step()``: ``base_cmd`` (N, 3) world-frame base velocity,

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from realize.controllers.body import BASE_XY
+from realize.robot.layout import BASE_XY
 from realize.searcher import EvalResult
 from realize.realization.context import StepContext
 

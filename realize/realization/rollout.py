@@ -27,7 +27,7 @@ from typing import Protocol
 import torch
 from torch import Tensor
 
-from realize.controllers.body import BASE_XY, UPPER
+from realize.robot.layout import BASE_XY, UPPER
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.whole_body import WholeBodyFabric
 from realize.searcher import EvalResult

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from realize.config import ConfigError
-from realize.controllers.body import BASE, BASE_XY, UPPER, YAW
+from realize.robot.layout import BASE, BASE_XY, UPPER, YAW
 from realize.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec

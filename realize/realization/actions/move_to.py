@@ -16,7 +16,7 @@ import torch
 from torch import Tensor
 
 from realize.controllers.astar import astar_world
-from realize.controllers.body import BASE_XY, YAW
+from realize.robot.layout import BASE_XY, YAW
 from realize.controllers.carry_footprint import carry_blocked
 from realize.controllers.obstacles import boxes_tensor
 from realize.controllers.pid import PIDState, pid_init, pid_step

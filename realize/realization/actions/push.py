@@ -13,7 +13,7 @@ import math
 import torch
 from torch import Tensor
 
-from realize.controllers.body import BASE_XY, YAW
+from realize.robot.layout import BASE_XY, YAW
 from realize.realization.actions.base import Outcome, Template
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
