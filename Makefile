@@ -20,6 +20,9 @@ bench: setup
 	$(PY) scripts/bench_sim.py --quick
 	$(PY) scripts/bench_controllers.py --quick
 
-# On a machine with a CUDA GPU: CUDA tests + seed-paper and journal-budget runs on PhysX GPU, one table
-gpu-check: setup
-	$(PY) scripts/gpu_check.py $(ARGS)
+# On a machine with a CUDA GPU: the torch controllers and CE on CUDA vs the CPU, one table (README "GPU").
+# No setup and no network: the project's venv where there is one, else python3 with torch (offline
+# machines; --urdf FILE there). ARGS=--physics adds the PhysX GPU parts (after `make setup`).
+GPU_PY ?= $(shell [ -x $(PY) ] && echo $(PY) || echo python3)
+gpu-check:
+	$(GPU_PY) scripts/gpu_check.py $(ARGS)

@@ -1,147 +1,427 @@
-"""GPU check: the CUDA tests, a seed-paper run and a journal-budget run on the PhysX GPU backend.
+"""GPU check: the torch-batched controllers and the CE optimizer on CUDA against the CPU, in one command.
 
-On a machine with a CUDA GPU (``make gpu-check``) it runs, one after the other, each in a child
-process with its own time limit:
+Sized for an offline CUDA machine with only a preinstalled Python (torch, numpy, scipy, PyYAML):
+it imports this checkout's ``realize`` controllers and nothing of ManiSkill, SAPIEN, Hydra or
+rerun. The robot's URDF is the one file it needs from ManiSkill: ``--urdf FILE`` (default:
+ManiSkill's ``fetch.urdf`` where ManiSkill is installed; ``--bundle DIR`` copies it into DIR, a
+folder to carry to a machine without ManiSkill).
 
-1. ``pytest -m gpu`` (the tests that need CUDA: GPU scene, batched A* and CE on CUDA);
-2. ``realize experiment=seed_paper device=cuda`` (200 plans x 10 iterations);
-3. ``realize experiment=journal device=cuda`` (3000 -> 300 plans, 20 iterations);
+Parts, each in a child process with its own time limit, for every N of ``--sizes``: the same
+inputs (made on the CPU from a fixed seed) run on ``--device`` and on the CPU; a row gives the
+time per call on both, the largest difference and the tolerance it is held to:
 
-and prints one Markdown table (part, status, wall time, result) that goes into the README
-beside the paper's numbers; the table is also written to ``--out``/gpu_check.md with each
-part's log, as soon as each part ends (a part that runs out of time still leaves its row and
-log). Each run's own directory (``result.json``, ...) is under ``--out`` too.
+  kinematics  forward kinematics + closed-form Jacobian jets of the TCP and spheres (float64)
+  fabric      3 steps of the whole-body fabric from perturbed rest poses (float32, the rollout's)
+  astar       batched A* on the seed world's padded grid, start to random goals (costs, statuses)
+  field       the distance-field planner (``planner="field"``) on the same queries (same paths)
+  pid         20 PID steps along straight waypoint lines, pose integrated (float32)
+  ce          3 CE iterations ask/tell, a 10-D box layout, a quadratic cost on the device (exact)
 
-What it doesn't: run anything without CUDA (it says so and exits 2), or compare with the CPU
-(``scripts/bench_seed_paper.py`` does that on the CPU).
+The table (``gpu_check.md``), the rows (``rows.jsonl``) and one log per part are written to
+``--out`` (or ``$OUT``; default ``outputs/gpu_check/<time>``) as each part ends. A part that
+reaches its limit keeps its finished rows and adds one saying where it stopped; the whole run
+stays within ``--budget`` seconds. ``--physics`` adds the PhysX GPU parts for a CUDA machine
+with the whole project and network: ``pytest -m gpu`` and a seed-paper run on ``device=cuda``.
+What it doesn't: simulate physics without ``--physics``, or judge speed (it reports it).
 
-    python scripts/gpu_check.py [--out DIR] [--quick] [--limit-tests S] [--limit-seed S] [--limit-journal S]
+    python3 scripts/gpu_check.py [--device cuda|cpu] [--sizes 200,3000,30000] [--out DIR]
+                                 [--urdf FILE] [--budget S] [--physics] [--bundle DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import importlib.util
+import json
+import math
 import os
+import shutil
+import statistics
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Callable
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+URDF_IN_MANISKILL = ("assets", "robots", "fetch", "fetch.urdf")
+# part -> (limit on CUDA in s, tolerance, what the difference is measured in)
+PARTS: dict[str, tuple[float, float, str]] = {
+    "kinematics": (25.0, 1e-9, "m (positions, Jacobians, velocities, curvature)"),
+    "fabric": (60.0, 1e-3, "rad or m (q and q' after 3 steps)"),
+    "astar": (50.0, 1e-9, "cells (path cost; statuses must be equal)"),
+    "field": (25.0, 1e-9, "cells (path cost; statuses, lengths, paths equal)"),
+    "pid": (20.0, 1e-3, "m/s or rad/s (commands over 20 steps)"),
+    "ce": (25.0, 0.0, "samples and costs (bit for bit)"),
+}
+PHYSICS: dict[str, tuple[float, str]] = {"physx gpu tests": (240.0, "physx_tests.log"),
+                                         "seed paper (200 x 10) on PhysX GPU": (600.0, "seed_paper.log")}
 
 
-@dataclass
-class Part:
-    name: str
-    cmd: list[str]
-    limit_s: float
-    run_dir: Path | None = None
+# ------------------------------------------------------------------ the parts (child processes)
+
+def _inputs_fabric(n: int, spec: Any) -> dict[str, Any]:
+    import torch
+
+    g = torch.Generator().manual_seed(n)
+    q = torch.tensor(spec.rest_q(), dtype=torch.float64).expand(n, -1) + 0.1 * torch.randn(n, spec.n_dof, generator=g,
+                                                                                         dtype=torch.float64)
+    q[:, 0] = 0.9 + 0.3 * torch.rand(n, generator=g, dtype=torch.float64)
+    q[:, 1] = 1.2 + 0.3 * (2 * torch.rand(n, generator=g, dtype=torch.float64) - 1)
+    q[:, 2] = math.pi
+    qd = 0.3 * torch.randn(n, spec.n_dof, generator=g, dtype=torch.float64)
+    return {"q": q, "qd": qd}
 
 
-@dataclass
-class Row:
-    name: str
-    status: str
-    wall_s: float
-    result: str
+class Parts:
+    """Each part: ``make(n)`` (CPU inputs) and ``run(inputs, device)`` (a tuple of result tensors;
+    ``calls`` of them per run, for the time per call), using what ``built(part, device)`` made once
+    (a kinematic model, a fabric, an occupancy grid: not part of the time per call)."""
+
+    def __init__(self, urdf: str | None) -> None:
+        import torch
+
+        from realize.geometry import GeometryCfg, build_geometry
+        from realize.realization.config import RolloutConfig
+        from realize.robot.spec import load_robot_spec
+
+        self.torch = torch
+        spec = load_robot_spec("fetch_omni")
+        self.spec = spec if urdf is None else dataclasses.replace(spec, urdf=str(Path(urdf).resolve()))
+        self.geometry = build_geometry(GeometryCfg())
+        self.cfg = RolloutConfig()
+        self.calls = {"fabric": 3, "pid": 20, "ce": 3}
+        self._built: dict[tuple[str, str], Any] = {}
+
+    def built(self, part: str, dev: Any) -> Any:
+        """The part's controller on ``dev`` (None where it has none), made on first use."""
+        key = (part, str(dev))
+        if key not in self._built:
+            make = getattr(self, f"build_{part}", None)
+            self._built[key] = None if make is None else make(dev)
+        return self._built[key]
+
+    # kinematics --------------------------------------------------
+    def make_kinematics(self, n: int) -> dict[str, Any]:
+        return _inputs_fabric(n, self.spec)
+
+    def build_kinematics(self, dev: Any) -> Any:
+        from realize.robot.kinematics import RobotKinematics
+
+        return RobotKinematics(self.spec, device=dev, dtype=self.torch.float64)
+
+    def run_kinematics(self, x: dict[str, Any], dev: Any) -> tuple:
+        ee, sph = self.built("kinematics", dev).jets(x["q"].to(dev), x["qd"].to(dev))
+        return (*ee, *sph)
+
+    # whole-body fabric -------------------------------------------
+    def make_fabric(self, n: int) -> dict[str, Any]:
+        t = self.torch
+        x = _inputs_fabric(n, self.spec)
+        x["goal"] = (t.tensor([0.0, 1.2, 0.82]).expand(n, 3), t.tensor([0.0, 0.0, -1.0]).expand(n, 3),
+                     t.tensor([0.0, 1.0, 0.0]).expand(n, 3))
+        return x
+
+    def build_fabric(self, dev: Any) -> Any:
+        from realize.controllers.whole_body import WholeBodyFabric
+
+        return WholeBodyFabric(self.geometry, self.cfg.fabric, dt=0.05, device=dev, dtype=self.torch.float32,
+                               robot=self.spec)
+
+    def run_fabric(self, x: dict[str, Any], dev: Any) -> tuple:
+        f32, fab = self.torch.float32, self.built("fabric", dev)
+        q = x["q"].to(dev, f32)
+        goal = fab.goal_points(*(g.to(dev, f32) for g in x["goal"]))
+        state = fab.start(q, x["qd"].to(dev, f32))
+        for _ in range(self.calls["fabric"]):
+            state, valid = fab.step(state, state.q, goal)
+        return state.q, state.qd, valid
+
+    # A* and the distance-field planner ---------------------------
+    def build_astar(self, dev: Any) -> tuple[Any, Any]:
+        """The seed world's grid and padded occupancy (on ``dev``), as the rollout builds them."""
+        from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
+
+        t, g, a = self.torch, self.geometry, self.cfg.astar
+        grid = grid_from_bounds((g.bounds_low[0], g.bounds_low[1], g.bounds_high[0], g.bounds_high[1]), a.resolution)
+        obs = g.obstacles
+        occ = occupancy_from_boxes(grid, t.tensor([b.center[:2] for b in obs]),
+                                   t.tensor([list(b.footprint_half_size()) for b in obs]),
+                                   t.tensor([b.yaw for b in obs]), padding=a.padding + g.robot_radius)
+        return grid, occ.to(dev)
+
+    build_field = build_astar
+
+    def make_astar(self, n: int) -> dict[str, Any]:
+        t, g = self.torch, self.geometry
+        gen = t.Generator().manual_seed(n)
+        lo, hi = t.tensor(g.bounds_low[:2]), t.tensor(g.bounds_high[:2])
+        goal = lo + (hi - lo) * t.rand(n, 2, generator=gen, dtype=t.float64)
+        start = t.tensor(g.robot_start[:2], dtype=t.float64).expand(n, 2)
+        return {"start": start, "goal": goal}
+
+    make_field = make_astar
+
+    def _plan(self, x: dict[str, Any], dev: Any, planner: str):
+        from realize.controllers.astar import astar_world
+
+        grid, occ = self.built(planner if planner == "field" else "astar", dev)
+        return astar_world(occ, grid, x["start"].to(dev), x["goal"].to(dev), planner=planner)
+
+    def run_astar(self, x: dict[str, Any], dev: Any) -> tuple:
+        r = self._plan(x, dev, "astar")
+        return r.status.double(), r.cost.nan_to_num(posinf=-1.0)
+
+    def run_field(self, x: dict[str, Any], dev: Any) -> tuple:
+        r = self._plan(x, dev, "field")
+        return r.status.double(), r.cost.nan_to_num(posinf=-1.0), r.lengths.double(), r.path.double()
+
+    # PID ---------------------------------------------------------
+    def make_pid(self, n: int) -> dict[str, Any]:
+        t = self.torch
+        gen = t.Generator().manual_seed(n)
+        pose = t.zeros(n, 3)
+        pose[:, 2] = math.pi * (2 * t.rand(n, generator=gen) - 1)
+        ends = 2.0 * (2 * t.rand(n, 2, generator=gen) - 1)
+        wps = t.stack([0.5 * ends, ends], dim=1)  # two waypoints on a straight line
+        return {"pose": pose, "waypoints": wps, "lengths": t.full((n,), 2, dtype=t.long)}
+
+    def run_pid(self, x: dict[str, Any], dev: Any) -> tuple:
+        from realize.controllers.pid import pid_init, pid_step
+
+        t, cfg, dt = self.torch, self.cfg.pid, 0.05
+        pose, wps, lengths = x["pose"].to(dev), x["waypoints"].to(dev), x["lengths"].to(dev)
+        state = pid_init(cfg, pose, wps, lengths)
+        cmds = []
+        for _ in range(self.calls["pid"]):
+            out = pid_step(cfg, state, pose, wps, lengths, dt)
+            state, cmd = out.state, out.cmd
+            c, s = t.cos(pose[:, 2]), t.sin(pose[:, 2])
+            v = t.stack([c * cmd[:, 0] - s * cmd[:, 1], s * cmd[:, 0] + c * cmd[:, 1], cmd[:, 2]], dim=1)
+            pose = pose + dt * v
+            cmds.append(cmd)
+        return t.stack(cmds), pose
+
+    # CE ask/tell -------------------------------------------------
+    def make_ce(self, n: int) -> dict[str, Any]:
+        return {"n": n}
+
+    def run_ce(self, x: dict[str, Any], dev: Any) -> tuple:
+        from realize.ce.config import CEConfig
+        from realize.ce.optimizer import CrossEntropyOptimizer
+        from realize.param_layout import ParamLayout
+        from realize.regions import Box
+        from realize.searcher import EvalResult
+
+        t, n = self.torch, x["n"]
+        layout = ParamLayout({"p": Box([-5.0] * 10, [5.0] * 10)})
+        cfg = CEConfig(n_envs=n, n_elite=max(2, n // 20), iterations=self.calls["ce"], seed=0)
+        opt = CrossEntropyOptimizer(layout, cfg, device=dev)
+        target = t.linspace(-1.0, 1.0, 10, dtype=t.float64, device=dev)
+        Zs, costs = [], []
+        while (batch := opt.ask()) is not None:
+            cost = ((batch.Z - target) ** 2).sum(dim=1)
+            opt.tell(EvalResult(cost=cost, feasible=cost < 60.0))
+            Zs.append(batch.Z)
+            costs.append(cost)
+        return t.stack(Zs), t.stack(costs)
 
 
-def describe_run(run_dir: Path) -> str:
-    from realize.run_dir.directory import RunDir
-
-    rd = RunDir(run_dir)
-    doc = rd.result()
-    if doc is None:
-        return "no result.json"
-    try:
-        success = rd.success_per_iter()
-    except Exception:  # noqa: BLE001 - a partial run may lack history
-        success = []
-    parts = [f"status {getattr(doc, 'status', '?')}"]
-    if getattr(doc, "iterations_done", None) is not None:
-        parts.append(f"{doc.iterations_done} iterations")
-    parts.append(f"feasible {getattr(doc, 'feasible', '?')}")
-    if getattr(doc, "best_cost", None) is not None:
-        parts.append(f"best cost {doc.best_cost:.0f}")
-    if len(success):
-        parts.append(f"success {success[0] * 100:.0f} % -> {success[-1] * 100:.0f} %")
-    times = getattr(doc, "iteration_time_s", None) or []
-    if times:
-        parts.append(f"{sum(times) / len(times):.1f} s per iteration")
-    return ", ".join(parts)
+def _timed(fn: Callable[[], Any], sync: Callable[[], None], budget_s: float) -> tuple[float, Any, int]:
+    """Median seconds of the calls after the first (warm-up: kernels, caches, allocations): at
+    least one more unless the first took over 10 ``budget_s``, more while within ``budget_s``
+    (at most 10); the last output, and how many calls ran."""
+    times, out = [], None
+    while (not times or (len(times) < 2 and times[0] < 10 * budget_s)
+           or (sum(times) < budget_s and len(times) < 10)):
+        t0 = time.perf_counter()
+        out = fn()
+        sync()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times[1:] or times), out, len(times)
 
 
-def describe_tests(log: str) -> str:
-    tail = [ln for ln in log.strip().splitlines() if ln.strip()]
-    return tail[-1].strip("= ") if tail else "no output"
+def _max_diff(a: tuple, b: tuple) -> float:
+    worst = 0.0
+    for x, y in zip(a, b):
+        x, y = x.detach().cpu().double(), y.detach().cpu().double()
+        if x.shape != y.shape:
+            return math.inf
+        if x.numel():
+            worst = max(worst, float((x - y).abs().nan_to_num(nan=math.inf).max()))
+    return worst
 
 
-def run_part(part: Part, out: Path) -> Row:
-    log_path = out / f"{part.name.replace(' ', '_')}.log"
-    t0 = time.perf_counter()
-    with open(log_path, "w") as log:
-        proc = subprocess.Popen(part.cmd, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        try:
-            rc = proc.wait(timeout=part.limit_s)
-            status = "ok" if rc == 0 else f"failed (exit {rc})"
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, 15)
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, 9)
-                proc.wait()
-            status = f"stopped at the {part.limit_s:.0f} s limit"
-    wall = time.perf_counter() - t0
-    text = log_path.read_text(errors="replace")
-    result = describe_run(part.run_dir) if part.run_dir is not None else describe_tests(text)
-    if status != "ok":
-        last = [ln for ln in text.strip().splitlines() if ln.strip()][-1:] or [""]
-        result = f"{result}; last log line: {last[0][:160]}"
-    return Row(part.name, status, wall, result)
+def run_part(name: str, device: str, sizes: list[int], urdf: str | None, records: Path, timing_s: float) -> None:
+    """One part in this (child) process; a JSON line per size and stage, flushed at once."""
+    import torch
+
+    dev = torch.device(device)
+    sync = torch.cuda.synchronize if dev.type == "cuda" else (lambda: None)
+    parts = Parts(urdf)
+    make, run = getattr(parts, f"make_{name}"), getattr(parts, f"run_{name}")
+    calls = parts.calls.get(name, 1)
+    tol = PARTS[name][1]
+    cpu = torch.device("cpu")
+    parts.built(name, dev), parts.built(name, cpu)
+    with open(records, "a") as rec:
+        def emit(**kw: Any) -> None:
+            rec.write(json.dumps({"part": name, **kw}) + "\n")
+            rec.flush()
+
+        for n in sizes:
+            x = make(n)
+            emit(n=n, stage="started")
+            t_dev, out_dev, reps = _timed(lambda: run(x, dev), sync, timing_s)
+            emit(n=n, stage="device", device_s=t_dev / calls, device_reps=reps)
+            t_cpu, out_cpu, cpu_reps = _timed(lambda: run(x, cpu), lambda: None, timing_s)
+            err = _max_diff(out_dev, out_cpu)
+            emit(n=n, stage="done", cpu_s=t_cpu / calls, cpu_reps=cpu_reps, max_diff=err, ok=err <= tol)
 
 
-def table(rows: list[Row], device: str) -> str:
-    lines = [f"GPU check on {device}", "", "| part | status | wall time | result |", "|---|---|---|---|"]
-    lines += [f"| {r.name} | {r.status} | {r.wall_s:.0f} s | {r.result} |" for r in rows]
+# ------------------------------------------------------------------ the driver
+
+def _rows(records: Path, name: str, sizes: list[int], status: str) -> list[dict[str, Any]]:
+    """The part's rows from its records: one per size it finished, one saying where it stopped."""
+    by_n: dict[int, dict[str, Any]] = {}
+    if records.exists():
+        for line in records.read_text().splitlines():
+            r = json.loads(line)
+            if r["part"] == name:
+                by_n.setdefault(r["n"], {}).update(r)
+    rows = []
+    for n in sizes:
+        r = by_n.get(n)
+        if r is None:
+            if status != "ok":
+                rows.append({"part": name, "n": n, "result": f"not reached ({status})"})
+            break
+        if r["stage"] == "done":
+            r["result"] = "ok" if r["ok"] else "MISMATCH"
+        else:
+            r["result"] = f"{status} while timing the {'device' if r['stage'] == 'started' else 'CPU'}"
+        rows.append(r)
+        if r["stage"] != "done":
+            break
+    return rows
+
+
+def _fmt(v: Any, unit: float = 1e3) -> str:
+    return "-" if v is None else f"{v * unit:.3g}"
+
+
+def table(rows: list[dict[str, Any]], head: str) -> str:
+    lines = [head, "", "| part | N | device ms/call | CPU ms/call | CPU / device | max diff | tolerance | result |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "n" not in r:  # a physics part
+            lines.append(f"| {r['part']} | - | - | - | - | - | - | {r['result']} ({r['wall_s']:.0f} s) |")
+            continue
+        dev, cpu = r.get("device_s"), r.get("cpu_s")
+        ratio = f"{cpu / dev:.2g}x" if dev and cpu else "-"
+        diff = "-" if r.get("max_diff") is None else f"{r['max_diff']:.2g}"
+        lines.append(f"| {r['part']} | {r['n']} | {_fmt(dev)} | {_fmt(cpu)} | {ratio} | {diff} | "
+                     f"{PARTS[r['part']][1]:g} {PARTS[r['part']][2]} | {r['result']} |")
     return "\n".join(lines) + "\n"
 
 
-def main() -> int:
+def _run_child(cmd: list[str], log: Path, limit_s: float, env: dict[str, str] | None = None) -> tuple[str, float]:
+    t0 = time.perf_counter()
+    with open(log, "w") as f:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=f, stderr=subprocess.STDOUT, start_new_session=True, env=env)
+        try:
+            rc = proc.wait(timeout=max(1.0, limit_s))
+            status = "ok" if rc == 0 else f"failed (exit {rc}, see {log.name})"
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, 9)
+            proc.wait()
+            status = f"stopped at its {limit_s:.0f} s limit"
+    return status, time.perf_counter() - t0
+
+
+def default_urdf() -> str | None:
+    """ManiSkill's fetch.urdf, located without importing ManiSkill (None where it is not installed)."""
+    spec = importlib.util.find_spec("mani_skill")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    path = Path(list(spec.submodule_search_locations)[0]).joinpath(*URDF_IN_MANISKILL)
+    return str(path) if path.is_file() else None
+
+
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=REPO / "outputs" / "gpu_check")
-    ap.add_argument("--quick", action="store_true", help="seed-paper budget for the journal part too (2 iterations)")
-    ap.add_argument("--limit-tests", type=float, default=120.0)
-    ap.add_argument("--limit-seed", type=float, default=240.0)
-    ap.add_argument("--limit-journal", type=float, default=240.0)
-    args = ap.parse_args()
+    ap.add_argument("--device", default="cuda", help="cuda (default) or cpu (a check of this script itself)")
+    ap.add_argument("--sizes", default="200,3000,30000", help="comma-separated N")
+    ap.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated subset of {','.join(PARTS)}")
+    ap.add_argument("--out", type=Path, default=None, help="output folder (default $OUT, else outputs/gpu_check/<time>)")
+    ap.add_argument("--urdf", default=None, help="Fetch's URDF (default: ManiSkill's, where it is installed)")
+    ap.add_argument("--budget", type=float, default=280.0, help="seconds for the whole check")
+    ap.add_argument("--limit-scale", type=float, default=1.0, help="multiplies every part's time limit")
+    ap.add_argument("--timing", type=float, default=2.0, help="seconds of repeated calls per time measurement")
+    ap.add_argument("--physics", action="store_true", help="also the PhysX GPU parts (whole project, network)")
+    ap.add_argument("--bundle", type=Path, default=None, help="copy the URDF into this folder and exit")
+    ap.add_argument("--part", default=None, help=argparse.SUPPRESS)  # internal: run one part here
+    ap.add_argument("--records", type=Path, default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    sizes = [int(s) for s in a.sizes.split(",") if s.strip()]
+    urdf = a.urdf or default_urdf()
+    if a.part is not None:
+        run_part(a.part, a.device, sizes, urdf, a.records, a.timing)
+        return 0
+    if urdf is None or not Path(urdf).is_file():
+        print(f"gpu_check: error: no Fetch URDF ({urdf or 'ManiSkill is not installed'}); pass --urdf FILE "
+              "(copy one with `python scripts/gpu_check.py --bundle DIR` where ManiSkill is)", file=sys.stderr)
+        return 2
+    if a.bundle is not None:
+        a.bundle.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(urdf, a.bundle / "fetch.urdf")
+        print(f"gpu_check: copied {urdf} to {a.bundle / 'fetch.urdf'}; there: --urdf {a.bundle / 'fetch.urdf'}")
+        return 0
+    unknown = [p for p in a.parts.split(",") if p not in PARTS]
+    if unknown or not sizes or min(sizes) < 1:
+        print(f"gpu_check: error: --parts {unknown} unknown (known: {list(PARTS)}) or bad --sizes {a.sizes!r}",
+              file=sys.stderr)
+        return 2
     import torch
 
-    if not torch.cuda.is_available():
-        print("gpu_check: no CUDA GPU here (torch.cuda.is_available() is False); nothing to check", file=sys.stderr)
+    if a.device == "cuda" and not torch.cuda.is_available():
+        print("gpu_check: error: torch sees no CUDA device (use --device cpu to check the script itself)",
+              file=sys.stderr)
         return 2
-    device = torch.cuda.get_device_name(0)
-    out = args.out.resolve()
+    out = a.out or (Path(os.environ["OUT"]) if os.environ.get("OUT") else
+                    REPO / "outputs" / "gpu_check" / time.strftime("%Y%m%d-%H%M%S"))
     out.mkdir(parents=True, exist_ok=True)
-    py = sys.executable
-    realize = [py, "-m", "realize", "device=cuda", "logging.progress=false"]
-    journal = ["experiment=journal"] + (["ce.iterations=2"] if args.quick else [])
-    parts = [
-        Part("CUDA tests", [py, "-m", "pytest", "-q", "-m", "gpu", "tests"], args.limit_tests),
-        Part("seed paper (200 x 10)", [*realize, "experiment=seed_paper", f"hydra.run.dir={out / 'seed_paper'}"],
-             args.limit_seed, out / "seed_paper"),
-        Part("journal (3000 -> 300 x 20)" if not args.quick else "journal (3000 -> 300, 2 iterations)",
-             [*realize, *journal, f"hydra.run.dir={out / 'journal'}"], args.limit_journal, out / "journal"),
-    ]
-    rows: list[Row] = []
-    for part in parts:
-        rows.append(run_part(part, out))
-        (out / "gpu_check.md").write_text(table(rows, device))
-        print(f"{part.name}: {rows[-1].status}, {rows[-1].wall_s:.0f} s", flush=True)
-    print(table(rows, device))
-    return 0 if all(r.status == "ok" for r in rows) else 1
+    records = out / "rows.jsonl"
+    records.unlink(missing_ok=True)
+    name = torch.cuda.get_device_name(0) if a.device == "cuda" else "CPU"
+    head = (f"GPU check on {name} vs the CPU ({os.cpu_count()} cores, torch {torch.__version__} with "
+            f"{torch.get_num_threads()} threads, Python {sys.version.split()[0]}), sizes {sizes}")
+    deadline = time.monotonic() + a.budget
+    rows: list[dict[str, Any]] = []
+    for part in a.parts.split(","):
+        limit = min(PARTS[part][0] * a.limit_scale, deadline - time.monotonic())
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--part", part, "--device", a.device,
+               "--sizes", a.sizes, "--records", str(records), "--timing", str(a.timing), "--urdf", urdf]
+        status, wall = _run_child(cmd, out / f"{part}.log", limit)
+        rows += _rows(records, part, sizes, status)
+        (out / "gpu_check.md").write_text(table(rows, head))
+        print(f"gpu_check: {part}: {status}, {wall:.1f} s", flush=True)
+    if a.physics:
+        py, run_dir = sys.executable, out / "seed_paper"
+        physics = {"physx gpu tests": [py, "-m", "pytest", "-q", "-m", "gpu", "tests"],
+                   "seed paper (200 x 10) on PhysX GPU": [py, "-m", "realize", "device=cuda", "experiment=seed_paper",
+                                                          "logging.progress=false", f"hydra.run.dir={run_dir}"]}
+        for part, cmd in physics.items():
+            limit, log = PHYSICS[part]
+            status, wall = _run_child(cmd, out / log, limit * a.limit_scale)
+            rows.append({"part": part, "result": status, "wall_s": wall})
+            (out / "gpu_check.md").write_text(table(rows, head))
+            print(f"gpu_check: {part}: {status}, {wall:.0f} s", flush=True)
+    print(table(rows, head))
+    print(f"gpu_check: table and logs in {out}")
+    return 0 if all(r["result"] == "ok" for r in rows) else 1
 
 
 if __name__ == "__main__":

@@ -4,18 +4,31 @@
 #   2. torch: a CPU build where there is no NVIDIA GPU (never a multi-GB CUDA download there),
 #   3. this project, its test extras and Ray (workers.backend=ray; its tests), editable,
 #   4. a Vulkan driver SAPIEN can use. Without a GPU driver that is Mesa's lavapipe >= 24.3;
-#      on Debian 12 it comes from bookworm-backports, elsewhere we say what to install.
+#      on Debian 12 it comes from bookworm-backports, elsewhere we say what to install,
+#   5. where there is an NVIDIA GPU: SAPIEN's PhysX GPU library (it would otherwise download it
+#      with no time limit the first time GPU physics starts); without network it says so and goes on.
 # Re-run it any time; it only does what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=.venv
 PY=${PYTHON:-python3}
 STAMP=$VENV/.realize-setup
+TORCH_VERSION=2.13.0  # the same torch on CPU and CUDA machines
 
 say() { printf '[setup] %s\n' "$*"; }
+has_gpu() { command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1; }
+# 5. SAPIEN's PhysX GPU library, where there is a GPU (checked on every run: cheap, and a fetch
+#    that failed offline is tried again once there is network)
+physx_gpu() {
+  has_gpu || return 0
+  "$VENV/bin/python" -m realize.physx_gpu >/dev/null 2>&1 && return 0
+  "$VENV/bin/python" -m realize.physx_gpu --fetch --timeout 300 \
+    || say "warning: no PhysX GPU library: device=cuda will refuse to start until it is there (see above)"
+}
 
 want=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
 if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$want" ] && [ -x "$VENV/bin/python" ]; then
+  physx_gpu
   exit 0
 fi
 
@@ -30,13 +43,14 @@ PIP="$VENV/bin/python -m pip"
 
 # 2. torch
 if ! "$VENV/bin/python" -c 'import torch' 2>/dev/null; then
-  if command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1; then
-    say "NVIDIA GPU found: installing torch with CUDA"
-    $PIP install -q "torch>=2.3"
+  if has_gpu; then
+    say "NVIDIA GPU found: installing torch $TORCH_VERSION with CUDA"
+    $PIP install -q "torch==$TORCH_VERSION" \
+      || { echo "[setup] error: could not install torch==$TORCH_VERSION (CUDA build from the package index)" >&2; exit 1; }
   else
     say "no NVIDIA GPU: installing a CPU build of torch"
     # a local CPU wheel (torch==X+cpu) is preferred; a configured CPU index works too
-    $PIP install -q "torch==2.13.0+cpu" 2>/dev/null || $PIP install -q "torch==2.13.0" \
+    $PIP install -q "torch==$TORCH_VERSION+cpu" 2>/dev/null || $PIP install -q "torch==$TORCH_VERSION" \
       || { echo "[setup] error: could not install a CPU build of torch. Configure pip with a CPU wheel index (or a local wheel) and re-run." >&2; exit 1; }
   fi
 fi
@@ -82,5 +96,6 @@ MSG
     exit 1
   fi
 fi
+physx_gpu
 echo "$want" > "$STAMP"
 say "done"

@@ -6,7 +6,7 @@
   new joints only after ``gpu_update_articulation_kinematics`` (or a step). ``_GpuPhysx`` below
   records that protocol (a write lost, a stale link pose) while the backend runs against it with
   ManiSkill's own ``_gpu_apply_all`` / ``_gpu_fetch_all``.
-* The PhysX GPU library check and fetch (``realize.scene.physx_gpu``), with HOME in a temporary
+* The PhysX GPU library check and fetch (``realize.physx_gpu``), with HOME in a temporary
   folder, a real ELF library from this environment and a local HTTP server.
 * ``device: auto`` picks the CPU where torch reports CUDA; ``gpu`` warns once (CUDA mocked).
 * The task's PhysX GPU settings (``envs.pick_place``): contact buffers, no enhanced determinism.
@@ -37,7 +37,7 @@ import realize.scene.backends as backends
 from envs.pick_place import RealizePickPlaceEnv, gpu_memory_config
 from realize.config import ConfigError
 from realize.geometry import GeometryCfg, build_geometry
-from realize.scene import physx_gpu
+from realize import physx_gpu
 from realize.scene.gpu import GpuBackend
 
 REPO = Path(__file__).resolve().parents[1]

@@ -4,7 +4,7 @@ What it does: ``resolve_backend`` turns ``auto`` into ``cpu``, also where torch 
 GPU backend has not been verified on a GPU yet, so it runs only where asked for (``gpu``, or
 ``device=cuda``), which warns once per process (``UnverifiedBackendWarning``) and is refused in
 one line (``ConfigError``: callers check it at the config edge) without CUDA or without SAPIEN's
-PhysX GPU library whole on disk (``realize.scene.physx_gpu``);
+PhysX GPU library whole on disk (``realize.physx_gpu``);
 ``open_backend`` builds the chosen one (``realize.scene.cpu_tiled`` or
 ``realize.scene.gpu``) for N copies. This module, ``cpu_tiled`` and ``gpu`` are the only ones
 that may ask which backend runs.
@@ -20,10 +20,10 @@ import torch
 
 from realize.config import ConfigError
 from realize.geometry import GeometryCfg
+from realize.physx_gpu import check_library
+from realize.robot.spec import RobotSpec
 from realize.scene.cpu_tiled import CpuTiledBackend
 from realize.scene.gpu import GpuBackend
-from realize.scene.physx_gpu import check_library
-from realize.robot.spec import RobotSpec
 from realize.scene.physics import PhysicsBackend
 from realize.scene.settings import EnvOptions, SimSettings
 

@@ -8,7 +8,7 @@ write is applied before the next step or fetch (a fetch overwrites what was not 
 targets after the setters, the cube after ``push_cube`` / ``place_cube``; ``set_state`` applies
 joints and poses, updates the links' kinematics, then fetches (ManiSkill's own reset order);
 after the substeps the buffers are fetched once. ``realize.scene.backends`` checks SAPIEN's
-PhysX GPU library (``realize.scene.physx_gpu``) before this backend is built.
+PhysX GPU library (``realize.physx_gpu``) before this backend is built.
 What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
 copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
 the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA

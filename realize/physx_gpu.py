@@ -13,7 +13,7 @@ then on. What this module does:
   * ``check_library()``: ``ConfigError`` with that line, the file and the URL; called where
     ``sim.backend = gpu`` is chosen (``realize.scene.backends``), before anything is built;
   * ``fetch_library()``: the download SAPIEN would do, with a time limit, unpacked next to the
-    target and moved into place only when whole (``python -m realize.scene.physx_gpu --fetch``;
+    target and moved into place only when whole (``python -m realize.physx_gpu --fetch``;
     ``scripts/setup.sh`` runs it where there is an NVIDIA GPU).
 
 What it doesn't: load the library or turn GPU physics on (SAPIEN does, when ManiSkill builds a
@@ -111,7 +111,7 @@ def check_library(where: str = "sim.backend") -> None:
     if problem is not None:
         raise ConfigError(
             f"{where} = 'gpu' needs SAPIEN's PhysX GPU library {path}, which {problem}; SAPIEN gets it from "
-            f"{url} (a download without a time limit): run `python -m realize.scene.physx_gpu --fetch` (or "
+            f"{url} (a download without a time limit): run `python -m realize.physx_gpu --fetch` (or "
             f"scripts/setup.sh) where there is network, or unzip that file into {path.parent}"
         )
 
@@ -152,7 +152,7 @@ def fetch_library(timeout_s: float = 300.0, url: str | None = None, dest: Path |
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m realize.scene.physx_gpu [--fetch] [--timeout S]``: say whether the library is
+    """``python -m realize.physx_gpu [--fetch] [--timeout S]``: say whether the library is
     there and whole (exit 0) or not (exit 1); ``--fetch`` downloads it where it is not."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fetch", action="store_true", help="download it where it is missing or partial")
