@@ -245,6 +245,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         check_no_replan(d.get("replan"))
     else:  # the plan's remaining actions only, from the given state
         task, replan = read_replan(keys.replan_from, d.get("replan"), task, planner.top_k)
+        robot.check_state_joints(replan.state.joints, f"replan.state {replan.state_file}")  # before anything runs
         candidates = [task]
     workers = WorkersSettings.from_mapping(d.get("workers"))
     from realize.scene.backends import shardable

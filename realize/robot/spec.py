@@ -209,6 +209,18 @@ class RobotSpec(Settings):
             return float(self.gripper.open)
         return 0.0
 
+    @property
+    def state_joints(self) -> tuple[str, ...]:
+        """Every joint a scene state names (all but the base's): upper, held, gripper."""
+        return (*self.upper.joints, *self.held, *self.gripper.joints)
+
+    def check_state_joints(self, joints, where: str) -> None:
+        """Refuse joint names of a scene state that this robot does not have (one line)."""
+        unknown = sorted(set(joints) - set(self.state_joints))
+        if unknown:
+            raise ConfigError(f"{where}: joints has unknown joint(s) {unknown} of robot {self.name!r}; known: "
+                              f"{list(self.state_joints)} (the base is the 'base' key)")
+
     def rest_q(self) -> tuple[float, ...]:
         """The rest pose as a whole-body ``q`` (base at 0)."""
         return tuple(self.rest_value(j) for j in self.whole_body_joints)

@@ -165,10 +165,7 @@ class BatchedScene:
         base[:2] -= self._start_xy.cpu()  # the base joints are relative to the task's robot start
         for name, v in zip(self.robot.base.joints, base.tolist()):
             row[self.joint_names.index(name)] = v
-        unknown = sorted(set(state.joints) - set(self.state_joints))
-        if unknown:
-            raise ConfigError(f"{state.source or 'state'}: joints has unknown joint(s) {unknown} of robot "
-                              f"{self.robot.name!r}; known: {list(self.state_joints)} (the base is the 'base' key)")
+        self.robot.check_state_joints(state.joints, state.source or "state")
         for name in self.state_joints:  # joints a state leaves out take the robot's rest pose
             row[self.joint_names.index(name)] = state.joints.get(name, self.robot.rest_value(name))
         pose = torch.tensor([*state.cube_position, *state.cube_quaternion], dtype=torch.float32)
