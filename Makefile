@@ -22,7 +22,8 @@ bench: setup
 
 # On a machine with a CUDA GPU: the torch controllers and CE on CUDA vs the CPU, one table (README "GPU").
 # No setup and no network: the project's venv where there is one, else python3 with torch (offline
-# machines; --urdf FILE there). ARGS=--physics adds the PhysX GPU parts (after `make setup`).
+# machines; --urdf FILE there). Where ManiSkill and SAPIEN are installed (`make setup`) it runs the
+# PhysX GPU parts too (ARGS=--no-physics: not these).
 GPU_PY ?= $(shell [ -x $(PY) ] && echo $(PY) || echo python3)
 gpu-check:
 	$(GPU_PY) scripts/gpu_check.py $(ARGS)

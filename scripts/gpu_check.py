@@ -20,12 +20,14 @@ time per call on both, the largest difference and the tolerance it is held to:
 The table (``gpu_check.md``), the rows (``rows.jsonl``) and one log per part are written to
 ``--out`` (or ``$OUT``; default ``outputs/gpu_check/<time>``) as each part ends. A part that
 reaches its limit keeps its finished rows and adds one saying where it stopped; the whole run
-stays within ``--budget`` seconds. ``--physics`` adds the PhysX GPU parts for a CUDA machine
-with the whole project and network: ``pytest -m gpu`` and a seed-paper run on ``device=cuda``.
+stays within ``--budget`` seconds. Then, where ManiSkill and SAPIEN are installed (or with
+``--physics``; ``--no-physics`` skips them), the PhysX GPU parts with their own limits: ``pytest
+-m gpu`` and a seed-paper run on ``device=cuda`` (they need SAPIEN's PhysX GPU library:
+``python -m realize.physx_gpu --fetch``, or ``make setup``, where there is network).
 What it doesn't: simulate physics without ``--physics``, or judge speed (it reports it).
 
     python3 scripts/gpu_check.py [--device cuda|cpu] [--sizes 200,3000,30000] [--out DIR]
-                                 [--urdf FILE] [--budget S] [--physics] [--bundle DIR]
+                                 [--urdf FILE] [--budget S] [--[no-]physics] [--bundle DIR]
 """
 
 from __future__ import annotations
@@ -360,7 +362,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=float, default=280.0, help="seconds for the whole check")
     ap.add_argument("--limit-scale", type=float, default=1.0, help="multiplies every part's time limit")
     ap.add_argument("--timing", type=float, default=2.0, help="seconds of repeated calls per time measurement")
-    ap.add_argument("--physics", action="store_true", help="also the PhysX GPU parts (whole project, network)")
+    ap.add_argument("--physics", action=argparse.BooleanOptionalAction, default=None,
+                    help="the PhysX GPU parts too (default: where ManiSkill and SAPIEN are installed, on CUDA)")
     ap.add_argument("--bundle", type=Path, default=None, help="copy the URDF into this folder and exit")
     ap.add_argument("--part", default=None, help=argparse.SUPPRESS)  # internal: run one part here
     ap.add_argument("--records", type=Path, default=None, help=argparse.SUPPRESS)
@@ -408,7 +411,9 @@ def main(argv: list[str] | None = None) -> int:
         rows += _rows(records, part, sizes, status)
         (out / "gpu_check.md").write_text(table(rows, head))
         print(f"gpu_check: {part}: {status}, {wall:.1f} s", flush=True)
-    if a.physics:
+    physics = a.physics if a.physics is not None else (
+        a.device == "cuda" and all(importlib.util.find_spec(m) is not None for m in ("mani_skill", "sapien")))
+    if physics:
         py, run_dir = sys.executable, out / "seed_paper"
         physics = {"physx gpu tests": [py, "-m", "pytest", "-q", "-m", "gpu", "tests"],
                    "seed paper (200 x 10) on PhysX GPU": [py, "-m", "realize", "device=cuda", "experiment=seed_paper",
