@@ -290,7 +290,10 @@ def _rows(records: Path, name: str, sizes: list[int], status: str) -> list[dict[
     by_n: dict[int, dict[str, Any]] = {}
     if records.exists():
         for line in records.read_text().splitlines():
-            r = json.loads(line)
+            try:
+                r = json.loads(line)
+            except json.JSONDecodeError:  # a line cut short by the kill at a limit
+                continue
             if r["part"] == name:
                 by_n.setdefault(r["n"], {}).update(r)
     rows = []
@@ -405,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict[str, Any]] = []
     for part in a.parts.split(","):
         limit = min(PARTS[part][0] * a.limit_scale, deadline - time.monotonic())
+        if limit < 1.0:
+            rows.append({"part": part, "n": sizes[0], "result": f"not run: the {a.budget:.0f} s --budget was spent"})
+            continue
         cmd = [sys.executable, str(Path(__file__).resolve()), "--part", part, "--device", a.device,
                "--sizes", a.sizes, "--records", str(records), "--timing", str(a.timing), "--urdf", urdf]
         status, wall = _run_child(cmd, out / f"{part}.log", limit)
