@@ -44,7 +44,7 @@ def test_gpu_check_runs_on_the_cpu_without_the_simulator(tmp_path: Path) -> None
     shutil.copyfile(source_urdf(load_robot_spec("fetch_omni").urdf), urdf)
     out = tmp_path / "out"
     t0 = time.monotonic()
-    p = subprocess.run([sys.executable, str(SCRIPT), "--device", "cpu", "--sizes", "4,16", "--timing", "0.05",
+    p = subprocess.run([sys.executable, str(SCRIPT), "--device", "cpu", "--sizes", "8", "--timing", "0.05",
                         "--urdf", str(urdf), "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=120,
                        env={"PYTHONPATH": f"{site}:{REPO}", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)})
     wall = time.monotonic() - t0
@@ -52,9 +52,9 @@ def test_gpu_check_runs_on_the_cpu_without_the_simulator(tmp_path: Path) -> None
         f"\n--- {log.name}\n{log.read_text()[-1500:]}" for log in out.glob("*.log"))
     rows = [json.loads(ln) for ln in (out / "rows.jsonl").read_text().splitlines()]
     done = {(r["part"], r["n"]) for r in rows if r["stage"] == "done" and r["ok"]}
-    assert done == {(part, n) for part in _script().PARTS for n in (4, 16)}
+    assert done == {(part, n) for part in _script().PARTS for n in (8,)}
     md = (out / "gpu_check.md").read_text()
-    assert md.count("| ok |") == 12 and "MISMATCH" not in md
+    assert md.count("| ok |") == 6 and "MISMATCH" not in md
     assert {f.name for f in out.glob("*.log")} == {f"{part}.log" for part in _script().PARTS}
     assert wall < 60, f"{wall:.0f} s"
 
