@@ -9,13 +9,12 @@ only do that when a change is *meant* to change results, and say so in the commi
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
-REPO = Path(__file__).resolve().parent.parent
+from helpers import REPO, realize_cli
+
 FIXTURE = REPO / "tests" / "fixtures" / "golden_runs.json"
 _QUIET = ["device=cpu", "logging.rerun=false", "logging.progress=false"]
 
@@ -36,9 +35,7 @@ KEYS = ("feasible", "best_cost", "success_per_iter", "best_cost_per_iter", "best
 
 def run_golden(name: str, run_dir: Path) -> dict[str, Any]:
     """Run ``GOLDEN_RUNS[name]`` into ``run_dir``; the compared numbers of its result.json."""
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    args = [sys.executable, "-m", "realize", *GOLDEN_RUNS[name], *_QUIET, f"hydra.run.dir={run_dir}"]
-    p = subprocess.run(args, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
+    p = realize_cli(*GOLDEN_RUNS[name], *_QUIET, f"hydra.run.dir={run_dir}", cwd=REPO, timeout=900)
     if p.returncode != 0:
         raise RuntimeError(f"golden run {name} failed ({p.returncode}):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}")
     doc = json.loads((run_dir / "result.json").read_text())

@@ -9,7 +9,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -17,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hydra import compose, initialize_config_dir
 
 import realize.scene
+from helpers import TINY, cfg_of, expect_config_error, plain, realize_cli, tiny
 from realize.cli import preflight
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
@@ -31,61 +30,6 @@ from realize.run_dir.history import History, load_history
 from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE
 from realize.run_dir.result_doc import ResultDoc
 from realize.sweep_summary import COLUMNS, write_summary
-
-REPO = CONFIG_DIR.parent
-PY = sys.executable
-# 4 plans, 2 elites, short horizon: every plan gets through at least the first move_to
-TINY_D = {
-    "ce.n_envs": 4,
-    "ce.n_elite": 2,
-    "ce.iterations": 2,
-    "controller.max_time_s": 6,
-    "logging.progress": "false",
-    "logging.rerun": "false",
-}
-TINY = [f"{k}={v}" for k, v in TINY_D.items()]
-
-
-def tiny(**changes: object) -> list[str]:
-    """TINY with some keys changed (``ce__iterations=1`` -> ``ce.iterations=1``)."""
-    d = dict(TINY_D)
-    d.update({k.replace("__", "."): v for k, v in changes.items()})
-    return [f"{k}={v}" for k, v in d.items()]
-
-
-def tiny_with(extra: list[str]) -> list[str]:
-    """TINY with ``extra`` overrides replacing TINY's value of the same key."""
-    keys = {e.split("=", 1)[0].lstrip("+~") for e in extra}
-    return [o for o in TINY if o.split("=", 1)[0] not in keys] + extra
-
-
-def cfg_of(overrides: list[str], hydra_cfg: bool = False):
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test"):
-        return compose(config_name="config", overrides=overrides, return_hydra_config=hydra_cfg)
-
-
-def plain(overrides: list[str]) -> dict:
-    from omegaconf import OmegaConf
-
-    d = OmegaConf.to_container(cfg_of(overrides), resolve=True)
-    assert isinstance(d, dict)
-    return d
-
-
-def realize_cmd(*args: str, cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    return subprocess.run([PY, "-m", "realize", *args], cwd=cwd, env=env, capture_output=True, text=True,
-                          timeout=timeout)
-
-
-@pytest.fixture
-def no_sim(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Fail the test if anything builds a simulator."""
-
-    def boom(*a, **k):
-        raise AssertionError("a simulator was built for an invalid config")
-
-    monkeypatch.setattr(realize.scene, "BatchedScene", boom)
 
 
 # --------------------------------------------------------------------------------------------
@@ -209,18 +153,6 @@ BAD = [
 ]
 
 
-def expect_config_error(overrides: list[str], needles: list[str], run_dir: Path) -> tuple[str, dict]:
-    """Run the tiny config with ``overrides``: it must fail with a one-line ConfigError holding
-    every needle; returns the message and the result.json written for it."""
-    with pytest.raises(ConfigError) as ei:
-        run(cfg_of(tiny_with(overrides)), run_dir)
-    msg = str(ei.value)
-    assert "\n" not in msg
-    for n in needles:
-        assert n in msg, f"{n!r} not in {msg!r}"
-    return msg, json.loads((run_dir / RESULT_FILE).read_text())
-
-
 @pytest.mark.parametrize("overrides, needles", BAD, ids=[" ".join(o) for o, _ in BAD])
 def test_bad_config_fails_before_simulation(overrides: list[str], needles: list[str], tmp_path: Path,
                                              no_sim: None) -> None:
@@ -295,7 +227,7 @@ def test_preflight_errors(args: list[str], needles: list[str]) -> None:
 def test_cli_bad_input_exit_code_and_one_line(tmp_path: Path) -> None:
     for args, needle in ((["experiment=foo"], "experiment=foo"),
                          (["ce.n_envs=4", "ce.n_elite=9", f"hydra.run.dir={tmp_path / 'r'}"], "ce.n_elite = 9")):
-        p = realize_cmd(*args, cwd=tmp_path, timeout=120)
+        p = realize_cli(*args, cwd=tmp_path, timeout=120)
         assert p.returncode == 2, p.stderr
         err = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
         assert len(err) == 1 and needle in err[0], p.stderr
@@ -422,9 +354,8 @@ def test_resume_refuses_changed_settings(uninterrupted: Path, no_sim: None) -> N
 
 def test_sigint_subprocess_then_resume(tmp_path: Path, uninterrupted: Path) -> None:
     run_dir = tmp_path / "run"
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    p = subprocess.Popen([PY, "-m", "realize", *RESUME, f"hydra.run.dir={run_dir}"], cwd=tmp_path, env=env,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = realize_cli(*RESUME, f"hydra.run.dir={run_dir}", cwd=tmp_path, background=True, stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE)
     deadline = time.time() + 180
     while time.time() < deadline and p.poll() is None:
         try:
@@ -439,7 +370,7 @@ def test_sigint_subprocess_then_resume(tmp_path: Path, uninterrupted: Path) -> N
     if res["iterations_done"] < 3:  # the signal arrived during the run
         assert p.returncode == 130, err
         assert res["interrupted"] is True and res["status"] == "interrupted"
-        r = realize_cmd(f"resume={run_dir}", "logging.progress=false", cwd=tmp_path)
+        r = realize_cli(f"resume={run_dir}", "logging.progress=false", cwd=tmp_path, timeout=240)
         assert r.returncode == 0, r.stderr
     _compare(uninterrupted, run_dir)
 
@@ -453,8 +384,8 @@ def _read_summary(path: Path) -> list[dict[str, str]]:
 
 def test_multirun_2x2_basic_launcher_summary(tmp_path: Path) -> None:
     sweep = tmp_path / "sweep"
-    p = realize_cmd("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,2"), "seed=0,1",
-                    f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    p = realize_cli("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,2"), "seed=0,1",
+                    f"hydra.sweep.dir={sweep}", cwd=tmp_path, timeout=240)
     assert p.returncode == 0, p.stderr[-3000:]
     rows = _read_summary(sweep / "summary.csv")
     assert len(rows) == 4 and {r["status"] for r in rows} == {"done"}
@@ -475,8 +406,8 @@ def test_multirun_2x2_basic_launcher_summary(tmp_path: Path) -> None:
 
 def test_sweep_with_a_failing_job(tmp_path: Path) -> None:
     sweep = tmp_path / "sweep"
-    p = realize_cmd("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,9,2"),
-                    f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    p = realize_cli("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,9,2"),
+                    f"hydra.sweep.dir={sweep}", cwd=tmp_path, timeout=240)
     assert p.returncode != 0  # the sweep reports the failure ...
     assert "ce.n_elite = 9" in p.stderr and "Traceback" not in p.stderr
     rows = _read_summary(sweep / "summary.csv")  # ... and every job is in the table
@@ -486,24 +417,21 @@ def test_sweep_with_a_failing_job(tmp_path: Path) -> None:
     assert (sweep / status["9"]["run_dir"] / "error.txt").is_file()
 
 
-def test_joblib_launcher_sweep(tmp_path: Path) -> None:
+def _two_seeds_done(tmp_path: Path, *launcher: str) -> None:
     sweep = tmp_path / "sweep"
-    p = realize_cmd("-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
-                    *tiny(ce__iterations=1, controller__max_time_s=3), "seed=0,1", f"hydra.sweep.dir={sweep}",
-                    cwd=tmp_path)
+    p = realize_cli("-m", *launcher, *tiny(ce__iterations=1, controller__max_time_s=3), "seed=0,1",
+                    f"hydra.sweep.dir={sweep}", cwd=tmp_path, timeout=240)
     assert p.returncode == 0, p.stderr[-3000:]
     rows = _read_summary(sweep / "summary.csv")
     assert len(rows) == 2 and {r["status"] for r in rows} == {"done"}
+
+
+def test_joblib_launcher_sweep(tmp_path: Path) -> None:
+    _two_seeds_done(tmp_path, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
 
 
 def test_submitit_local_sweep(tmp_path: Path) -> None:
-    sweep = tmp_path / "sweep"
-    p = realize_cmd("-m", "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5",
-                    *tiny(ce__iterations=1, controller__max_time_s=3), "seed=0,1", f"hydra.sweep.dir={sweep}",
-                    cwd=tmp_path)
-    assert p.returncode == 0, p.stderr[-3000:]
-    rows = _read_summary(sweep / "summary.csv")
-    assert len(rows) == 2 and {r["status"] for r in rows} == {"done"}
+    _two_seeds_done(tmp_path, "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5")
 
 
 # --------------------------------------------------------------------------------------------

@@ -84,7 +84,7 @@ SEED0_BEST = [-0.99539, 0.92603, -0.03445, 1.18966, 0.88812, -0.96596, -1.06226,
 
 @pytest.mark.slow
 def test_the_cube_stays_in_hand_past_the_wall_only_with_the_carry_footprint() -> None:
-    from _compose import compose_config
+    from helpers import compose_config
 
     from realize.realization.rollout import PlanRealizer
     from realize.run_config import build_run_spec

@@ -3,16 +3,13 @@ Hydra (whose advice, ``+secne=wall``, the run would then refuse)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
+from helpers import realize_cli
 from realize.cli import CONFIG_GROUPS
 from realize.cli_keys import check_override_keys, closest
 from realize.config import ConfigError
-from realize.paths import CONFIG_DIR
 
 
 def _check(args: list[str]) -> None:
@@ -46,8 +43,7 @@ def test_nothing_close_lists_what_is_there() -> None:
 
 
 def test_the_command_answers_in_one_line() -> None:
-    p = subprocess.run([sys.executable, "-m", "realize", "secne=wall"], capture_output=True, text=True,
-                       cwd=CONFIG_DIR.parent, timeout=120)
+    p = realize_cli("secne=wall", timeout=120)
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert p.returncode == 2 and lines == [lines[-1]] and "did you mean 'scene'" in lines[-1], p.stderr
     assert "+secne" not in p.stderr

@@ -12,8 +12,7 @@ import torch
 from realize.realization.context import StepContext
 from realize.realizers import open_realization
 from realize.run_config import build_run_spec
-from _compose import blas_batch_invariant
-from test_rollout import GOOD, SEED_TASK, compose_config
+from helpers import GOOD, SEED_TASK, blas_batch_invariant, compose_config
 
 N, BAD = 8, 3
 

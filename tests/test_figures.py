@@ -4,7 +4,6 @@ CE run in the app's file format (tests/_synthetic.py), and the figure inputs of 
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 import os
 from pathlib import Path
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 
 from _synthetic import PARAMS, run_synthetic, write_run_dir
+from helpers import load_script
 from realize.figures.fig2 import fig2
 from realize.figures.fig3 import fig3, sampling_distributions
 from realize.figures.fig4 import fig4, find_run_dirs
@@ -35,14 +35,6 @@ def _png_ok(path: Path) -> None:
 def _rows(path: Path) -> list[dict[str, str]]:
     with path.open() as f:
         return list(csv.DictReader(f))
-
-
-def _script(name: str):
-    spec = importlib.util.spec_from_file_location(f"script_{name}", REPO / "scripts" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    assert spec.loader is not None
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.fixture(scope="module")
@@ -178,13 +170,13 @@ def test_history_written_by_the_history_writer_loads(synthetic, tmp_path):
 
 
 def test_scripts_fig2_fig3(run_dir, tmp_path, capsys):
-    assert _script("fig2").main([str(run_dir), "--iterations", "0", "2", "--out", str(tmp_path / "a.png")]) == 0
+    assert load_script("fig2").main([str(run_dir), "--iterations", "0", "2", "--out", str(tmp_path / "a.png")]) == 0
     _png_ok(tmp_path / "a.png")
     assert (tmp_path / "a.csv").stat().st_size > 0
-    assert _script("fig3").main([str(run_dir), "--out", str(tmp_path / "b.png")]) == 0
+    assert load_script("fig3").main([str(run_dir), "--out", str(tmp_path / "b.png")]) == 0
     _png_ok(tmp_path / "b.png")
     assert (tmp_path / "b.csv").stat().st_size > 0
-    assert _script("fig2").main([str(tmp_path / "missing")]) == 1
+    assert load_script("fig2").main([str(tmp_path / "missing")]) == 1
     assert "error:" in capsys.readouterr().err
 
 
@@ -192,7 +184,7 @@ def test_script_fig4_launches_runs_then_plots(tmp_path, monkeypatch):
     """``--runs N`` launches N app processes (here a stand-in app) with seeds 0..N-1, keeps
     finished runs on a second call, and plots; ``--run-dirs`` only plots."""
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(TESTS), str(REPO), os.environ.get("PYTHONPATH", "")]))
-    fig4 = _script("fig4")
+    fig4 = load_script("fig4")
     root = tmp_path / "runs"
     args = ["--runs", "2", "--root", str(root), "--module", "_fake_app", "--override", "ce.iterations=2"]
     assert fig4.main(args) == 0

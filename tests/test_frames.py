@@ -11,7 +11,7 @@ from realize.geometry import GeometryCfg, build_geometry
 from realize.param_layout import region_from_dict
 from realize.realization.actions import TEMPLATES
 from realize.task import task_from_dict
-from tests._compose import compose_config
+from helpers import compose_config
 
 WORLD_SEED_TASK = {  # the seed paper's regions as the task config wrote them before frames
     "Table1": {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25},

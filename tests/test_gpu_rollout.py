@@ -11,7 +11,7 @@ import torch
 from realize.realizers import open_realization
 from realize.run_config import build_run_spec
 
-from test_rollout import GOOD, SEED_TASK, SIDE, FAR_SIDE, compose_config
+from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, compose_config
 
 pytestmark = [pytest.mark.gpu,
               pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (PhysX GPU backend)")]

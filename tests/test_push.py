@@ -19,9 +19,7 @@ import numpy as np
 import pytest
 import torch
 
-from _compose import blas_batch_invariant
-from _compose import compose_config as _compose
-from _compose import torch_single_thread  # noqa: F401  (fixture)
+from helpers import blas_batch_invariant, compose_config as _compose
 from realize.config import ConfigError
 from realize.realization.goals import cube_in_container
 from realize.realization.result import RolloutResult
@@ -37,7 +35,7 @@ VECTORS = torch.tensor([TOWARDS_BOX, SIDEWAYS], dtype=torch.float64)
 
 
 def compose_config(*overrides: str, experiment: str = "move_and_push") -> dict[str, Any]:
-    return _compose(f"experiment={experiment}", *overrides, job_name="test_push")
+    return _compose(f"experiment={experiment}", *overrides)
 
 
 pytestmark = pytest.mark.usefixtures("torch_single_thread")

@@ -17,7 +17,7 @@ from realize.realizers import open_realization
 from realize.run_config import build_run_spec
 from realize.scene_state import SceneState, load_state
 from realize.task_suffix import task_suffix
-from _compose import compose_config, torch_single_thread  # noqa: F401  (fixture)
+from helpers import compose_config
 
 FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"
 # that run's best parameters of move_to(Table2), place(Cube_p), move_to(Exit)

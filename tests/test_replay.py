@@ -13,10 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
 
-from realize.paths import CONFIG_DIR
+from helpers import GOOD, compose_config, load_script
 from realize.replay import ReplayError, build_replay_spec, replay, saved_plan
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
@@ -24,22 +22,13 @@ from realize.run_config import build_run_spec
 from realize.scene import BatchedScene, EnvOptions, SimSettings
 from realize.validation import validate
 
-# a plan of the seed task that reaches the goal with the default configs
-FEASIBLE_Z = [-0.85, 1.2, 0.0, 1.2, 0.8925, -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
+FEASIBLE_Z = GOOD  # a plan of the seed task that reaches the goal with the default configs
 SAVED_COST = 491.0  # what a one-copy CPU rollout of FEASIBLE_Z gave when these tests were written
 SIM = SimSettings(backend="cpu")
 
 
-def _config(overrides: list[str]) -> dict:
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test_replay"):
-        cfg = compose(config_name="config", overrides=overrides)
-    d = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(d, dict)
-    return d
-
-
 def _write_run(run_dir: Path, overrides: list[str] = (), z: list[float] = FEASIBLE_Z) -> Path:
-    config = _config(list(overrides))
+    config = compose_config(*overrides, cpu=False)
     spec = build_run_spec(config)
     run_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_json(run_dir / RESULT_FILE, {
@@ -69,17 +58,7 @@ def test_bad_run_dirs(tmp_path: Path) -> None:
     with pytest.raises(ReplayError, match="best_z"):
         saved_plan(tmp_path)
     for script in ("replay", "validate"):  # the command lines say so and exit 2
-        assert _script(script).main([str(tmp_path)]) == 2
-
-
-def _script(name: str):
-    import importlib.util
-
-    path = CONFIG_DIR.parent / "scripts" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"_script_{name}", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+        assert load_script(script).main([str(tmp_path)]) == 2
 
 
 def test_replay_reaches_the_goal(run_dir: Path) -> None:
@@ -156,7 +135,7 @@ def test_push_scene_gets_its_camera_and_noise(tmp_path: Path) -> None:
     that task too (they used to be patched into the pick-and-place task's registry entry only)."""
     import imageio.v2 as imageio
 
-    spec = build_run_spec(_config(["experiment=move_and_push"]))
+    spec = build_run_spec(compose_config("experiment=move_and_push", cpu=False))
     z = spec.task.layout.sample_uniform(1, torch.Generator().manual_seed(0))[0].tolist()
     d = _write_run(tmp_path / "push", ["experiment=move_and_push", "controller.max_time_s=0.5"], z=z)
     rep = validate(d, replicas=2, seed=1, friction_range=None, cube_xy_noise=0.004, robot_xy_noise=0.01, write=False)

@@ -28,35 +28,18 @@ import pytest
 import torch
 import yaml
 
-from _compose import blas_batch_invariant
-from _compose import compose_config as _compose
-from _compose import torch_single_thread  # noqa: F401  (fixture)
+from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, blas_batch_invariant, compose_config
 from realize.config import ConfigError
-from realize.paths import CONFIG_DIR
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
 from realize.run_config import RunSpec, build_run_spec
 from realize.task_plans import build_task, load_task_file
 from realize.scene import BatchedScene
 
-SEED_TASK = CONFIG_DIR / "task" / "pick_place.yaml"
-# columns: Table1.x, Table1.y, Cube_g.x, Cube_g.y, Cube_g.z, Table2.x, Table2.y,
-#          Cube_p.x, Cube_p.y, Cube_p.z, Exit.x, Exit.y
-GOOD = [-0.85, 1.2, 0.0, 1.2, 0.8925, -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
-_S, _C = math.sin(0.5), math.cos(0.5)
-# a second feasible plan: base off-axis, grasp tilted 0.5 rad towards the robot, another exit point
-SIDE = [-0.9, 1.1, -0.15 * _S, 1.2, 0.7425 + 0.15 * _C, -0.8, -1.0, 0.0, -1.2, 0.8975, 2.5, 0.3]
-# an infeasible one: base in front of table 1 (y = 0.2), grasp from the far side (polar 1 rad)
-FAR_SIDE = [0.0, 0.2, 0.0, 1.2 + 0.15 * math.sin(1.0), 0.7425 + 0.15 * math.cos(1.0),
-            -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
-VECTORS = torch.tensor([GOOD, SIDE, FAR_SIDE])
+VECTORS = torch.tensor([GOOD, SIDE, FAR_SIDE])  # two feasible plans of the seed task, one infeasible
 
 
 # ---------------------------------------------------------------------------------- fixtures
-
-
-def compose_config(*overrides: str) -> dict[str, Any]:
-    return _compose(*overrides, job_name="test_rollout")
 
 
 pytestmark = pytest.mark.usefixtures("torch_single_thread")

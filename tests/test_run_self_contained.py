@@ -8,15 +8,13 @@ would judge the saved plan against the moved Exit and fail its goal.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 import yaml
-from hydra import compose, initialize_config_dir
 
-from realize.paths import CONFIG_DIR
+from helpers import compose_config, load_script
 from realize.run import run
 from realize.run_config import build_run_spec
 from realize.run_dir.names import RESULT_FILE
@@ -33,27 +31,13 @@ TASK = {
 TINY = ["ce.n_envs=3", "ce.n_elite=1", "ce.iterations=1", "logging.progress=false", "logging.rerun=false"]
 
 
-def _compose(overrides: list[str]):
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="test_self_contained"):
-        return compose(config_name="config", overrides=overrides)
-
-
-def _replay_script():
-    path = CONFIG_DIR.parent / "scripts" / "replay.py"
-    spec = importlib.util.spec_from_file_location("_replay_script", path)
-    mod = importlib.util.module_from_spec(spec)
-    assert spec.loader is not None
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.fixture(scope="module")
 def edited_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """A run of TASK from a file, and the file then edited (Exit moved, another name)."""
     tmp = tmp_path_factory.mktemp("self_contained")
     task_file = tmp / "my_task.yaml"
     task_file.write_text(yaml.safe_dump(TASK))
-    outcome = run(_compose(TINY + [f"task_file={task_file}"]), tmp / "run")
+    outcome = run(compose_config(*TINY, f"task_file={task_file}", cpu=False, plain=False), tmp / "run")
     assert outcome.feasible, "the test needs a feasible run to replay"
     edited = dict(TASK, name="edited", params=dict(TASK["params"], Exit={"type": "box", "low": [-2.6, -0.4],
                                                                          "high": [-1.8, 0.4]}))
@@ -79,7 +63,7 @@ def test_replay_after_the_file_changed_gets_the_runs_cost(edited_run: tuple[Path
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     run_dir, task_file = edited_run
     saved = json.loads((run_dir / RESULT_FILE).read_text())["best_cost"]
-    code = _replay_script().main([str(run_dir), "--json"] + (["--exact"] if exact else []))
+    code = load_script("replay").main([str(run_dir), "--json"] + (["--exact"] if exact else []))
     rep = json.loads(capsys.readouterr().out)
     assert code == 0 and rep["feasible"]
     assert rep["cost"] == saved and rep["matches"] is True  # bit for bit, as the run had it

@@ -19,7 +19,7 @@ from realize.scene_state import SceneState, load_state, save_state
 FETCH = load_robot_spec("fetch_omni")
 STATE_JOINTS = [n for n in FETCH.rest if n not in FETCH.base.joints]  # every active joint but the base's
 from realize.task_suffix import check_suffix_start, suffix_columns, task_suffix
-from _compose import compose_config
+from helpers import compose_config
 
 FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"
 MOVED = ["scene.tables.1.center=[0.3,-1.2]"]  # Table2 and Cube_p follow table 2 (frame: table2)

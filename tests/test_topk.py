@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 import realize.pddl
+from helpers import cfg_of, expect_config_error, plain, tiny_with
 from realize.paths import CONFIG_DIR
 from realize.replay import build_replay_spec, saved_plan
 from realize.run import run
@@ -22,7 +23,6 @@ from realize.run_dir.checkpoint import load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.run_dir.result_doc import ResultDoc
-from test_app import cfg_of, expect_config_error, no_sim, plain, tiny_with  # noqa: F401  (no_sim is a fixture)
 
 TOPK = ["task.planner.enabled=true", "task.planner.top_k=2"]
 SEED_PLAN = "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"

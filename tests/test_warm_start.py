@@ -18,7 +18,7 @@ from realize.regions import Box
 from realize.run_config import build_run_spec
 from realize.searcher import EvalResult
 from realize.warm_start import load_warm_start, merge_modes
-from tests._compose import compose_config
+from helpers import compose_config
 
 F64 = torch.float64
 

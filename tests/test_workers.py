@@ -14,7 +14,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -22,7 +21,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from _compose import compose_config
+from helpers import KEYS, RUN16, compose_config, realize_cli, realize_result
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.run_config import build_run_spec
@@ -30,10 +29,7 @@ from realize.workers.blocks import deal_rows, group_shards, join_results, shard_
 from realize.workers.errors import WorkerFailed
 from realize.workers.settings import WorkersSettings, physx_threads, worker_count
 
-REPO = Path(__file__).resolve().parents[1]
-# the issue's must-show run (slow), and a smaller one of the same kind for every CI run
-RUN16 = ["ce.n_envs=16", "ce.n_elite=4", "ce.iterations=2", "seed=3", "sim.shard_rows=8",
-         "logging.progress=false", "logging.rerun=false"]
+# RUN16: the issue's must-show run (slow); RUN8: a smaller one of the same kind for every CI run
 RUN8 = ["ce.n_envs=8", "ce.n_elite=2", "ce.iterations=2", "seed=3", "sim.shard_rows=4", "controller.max_time_s=12",
         "logging.progress=false", "logging.rerun=false"]
 
@@ -108,26 +104,14 @@ def test_config_edge_refuses_more_workers_than_shards() -> None:
 
 
 # ------------------------------------------------------------------------------ same numbers
-def _realize(*args: str, run_dir: Path, timeout: float = 600) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    p = subprocess.run([sys.executable, "-m", "realize", *args, f"hydra.run.dir={run_dir}"], cwd=run_dir.parent,
-                       env=env, capture_output=True, text=True, timeout=timeout)
-    assert p.returncode == 0, p.stderr[-3000:]
-    return json.loads((run_dir / "result.json").read_text())
-
-
-KEYS = ("best_cost", "success_per_iter", "best_cost_per_iter", "best_z", "n_feasible_per_iter", "final_mean",
-        "final_std")
-
-
 @pytest.fixture(scope="module")
 def one_process(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    return _realize(*RUN16, "workers.n=1", run_dir=tmp_path_factory.mktemp("w1") / "run")
+    return realize_result(*RUN16, "workers.n=1", run_dir=tmp_path_factory.mktemp("w1") / "run")
 
 
 def test_two_worker_processes_give_the_numbers_of_one_process(tmp_path: Path) -> None:
-    one = _realize(*RUN8, "workers.n=1", run_dir=tmp_path / "one")
-    two = _realize(*RUN8, "workers.n=2", "workers.backend=process", run_dir=tmp_path / "two")
+    one = realize_result(*RUN8, "workers.n=1", run_dir=tmp_path / "one")
+    two = realize_result(*RUN8, "workers.n=2", "workers.backend=process", run_dir=tmp_path / "two")
     assert one["workers"] == 1 and two["workers"] == 2
     for k in KEYS:
         assert two[k] == one[k], k
@@ -136,7 +120,7 @@ def test_two_worker_processes_give_the_numbers_of_one_process(tmp_path: Path) ->
 
 @pytest.mark.slow
 def test_the_issue_run_gives_the_same_numbers_with_two_worker_processes(one_process: dict, tmp_path: Path) -> None:
-    two = _realize(*RUN16, "workers.n=2", "workers.backend=process", run_dir=tmp_path / "run")
+    two = realize_result(*RUN16, "workers.n=2", "workers.backend=process", run_dir=tmp_path / "run")
     assert one_process["workers"] == 1 and two["workers"] == 2
     for k in KEYS:
         assert two[k] == one_process[k], k
@@ -155,7 +139,7 @@ def test_a_run_resumed_with_other_workers_gives_the_same_numbers(one_process: di
     cfg = OmegaConf.create(compose_config(*RUN16, "workers.n=2"))
     out = run(cfg, tmp_path / "run", after_iteration=stop)
     assert out.status == "interrupted" and out.iterations_done == 1
-    done = _realize(f"resume={tmp_path / 'run'}", "workers.n=1", run_dir=tmp_path / "run")
+    done = realize_result(f"resume={tmp_path / 'run'}", "workers.n=1", run_dir=tmp_path / "run")
     assert done["segments"] == 2 and done["workers"] == 1
     for k in KEYS:
         assert done[k] == one_process[k], k
@@ -165,8 +149,8 @@ def test_a_run_resumed_with_other_workers_gives_the_same_numbers(one_process: di
 def test_top_k_halving_gives_the_same_numbers_with_workers(tmp_path: Path) -> None:
     top_k = ["experiment=carry_or_push", "task.planner.top_k=2", "ce.n_envs=8", "ce.n_elite=2", "ce.iterations=3",
              "seed=0", "sim.shard_rows=4", "logging.progress=false", "logging.rerun=false"]
-    one = _realize(*top_k, "workers.n=1", run_dir=tmp_path / "one")
-    two = _realize(*top_k, "workers.n=2", run_dir=tmp_path / "two")
+    one = realize_result(*top_k, "workers.n=1", run_dir=tmp_path / "one")
+    two = realize_result(*top_k, "workers.n=2", run_dir=tmp_path / "two")
     assert two["workers"] == 2
     for k in ("best_cost", "success_per_iter", "best_z", "winner"):
         assert two[k] == one[k], k
@@ -256,10 +240,8 @@ def _alive(pid: int) -> bool:
 
 def _start_run(tmp_path: Path) -> tuple[subprocess.Popen, list[int], Path]:
     run_dir = tmp_path / "run"
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    p = subprocess.Popen([sys.executable, "-m", "realize", *RUN16, "ce.iterations=5", "workers.n=2",
-                          f"hydra.run.dir={run_dir}"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE, text=True)
+    p = realize_cli(*RUN16, "ce.iterations=5", "workers.n=2", f"hydra.run.dir={run_dir}", cwd=tmp_path,
+                    background=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     log = run_dir / "workers" / "worker-1.log"
     deadline = time.monotonic() + 240
     while not (log.is_file() and "rollout of" in log.read_text()):

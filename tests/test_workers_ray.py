@@ -28,7 +28,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from _compose import compose_config
+from helpers import KEYS, RUN16, compose_config, realize_cli, realize_result
 from realize.run_config import build_run_spec
 from realize.workers.errors import WorkerFailed
 
@@ -42,10 +42,6 @@ except ImportError:  # pragma: no cover - setup.sh installs the ray extra
 needs_ray = pytest.mark.skipif(ray is None, reason="Ray is not installed (pip install -e '.[ray]')")
 
 REPO = Path(__file__).resolve().parents[1]
-RUN16 = ["ce.n_envs=16", "ce.n_elite=4", "ce.iterations=2", "seed=3", "sim.shard_rows=8",
-         "logging.progress=false", "logging.rerun=false"]
-KEYS = ("best_cost", "success_per_iter", "best_cost_per_iter", "best_z", "n_feasible_per_iter", "final_mean",
-        "final_std")
 
 
 # ------------------------------------------------------------------------------ process table
@@ -112,12 +108,8 @@ def test_actor_cpus_fit_the_nodes() -> None:
 
 # ------------------------------------------------------------------------------ same numbers
 def _realize(*args: str, run_dir: Path, timeout: float = 600, env: dict[str, str] | None = None) -> tuple[dict, float]:
-    env = dict(os.environ, **(env or {}), PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "realize", *args, f"hydra.run.dir={run_dir}"], cwd=run_dir.parent,
-                       env=env, capture_output=True, text=True, timeout=timeout)
-    assert p.returncode == 0, p.stderr[-3000:]
-    return json.loads((run_dir / "result.json").read_text()), time.perf_counter() - t0
+    return realize_result(*args, run_dir=run_dir, timeout=timeout, env=env), time.perf_counter() - t0
 
 
 @needs_ray
@@ -229,10 +221,9 @@ def test_close_leaves_no_ray_process(pool_and_batch) -> None:
 # ------------------------------------------------------------------------------ Ctrl-C, kill
 def _start_run(tmp_path: Path) -> tuple[subprocess.Popen, dict[int, str], str]:
     """A ray-backed run, once both actors roll out: the process, its process tree, its Ray session."""
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    p = subprocess.Popen([sys.executable, "-m", "realize", *RUN16, "ce.iterations=5", "workers.n=2",
-                          "workers.backend=ray", f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path, env=env,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    p = realize_cli(*RUN16, "ce.iterations=5", "workers.n=2", "workers.backend=ray",
+                    f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path, background=True, stdout=subprocess.DEVNULL,
+                    stderr=subprocess.PIPE, start_new_session=True)
     deadline = time.monotonic() + 300
     while True:
         tree = _descendants(p.pid)

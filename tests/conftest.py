@@ -1,0 +1,29 @@
+"""Fixtures shared by the test files (helpers that are not fixtures: ``helpers.py``)."""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def torch_single_thread() -> Iterator[None]:
+    """Torch beside PhysX on a small machine: one intra-op thread (as BatchedScene uses)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture
+def no_sim(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail the test if anything builds a simulator."""
+    import realize.scene
+
+    def boom(*a, **k):
+        raise AssertionError("a simulator was built for an invalid config")
+
+    monkeypatch.setattr(realize.scene, "BatchedScene", boom)

@@ -1,0 +1,161 @@
+"""What several test files share (a plain module: pytest does not collect it; fixtures are in
+``conftest.py``): the app's composed config, the ``realize`` command in a subprocess, the tiny
+run of the command tests, the seed task's known plans, the scripts as modules."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+# ------------------------------------------------------------------------------ config, command
+def compose_config(*overrides: str, cpu: bool = True, plain: bool = True, hydra_cfg: bool = False,
+                   job_name: str = "tests") -> Any:
+    """The app's config (``configs/config.yaml`` + defaults + ``overrides``), ``device=cpu``
+    first unless ``cpu=False``: resolved plain data without Hydra's node, or with ``plain=False``
+    the DictConfig (``hydra_cfg``: with Hydra's node)."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from realize.paths import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name=job_name):
+        cfg = compose(config_name="config", overrides=[*(["device=cpu"] if cpu else []), *overrides],
+                      return_hydra_config=hydra_cfg)
+    if not plain:
+        return cfg
+    d = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(d, dict)
+    d.pop("hydra", None)
+    return d
+
+
+def realize_cli(*args: str, cwd: Path = REPO, timeout: float | None = None, env: dict[str, str] | None = None,
+                background: bool = False, **popen: Any) -> Any:
+    """``python -m realize ARGS`` as a user runs it, this checkout first on PYTHONPATH, ``env``
+    added to the environment: the CompletedProcess (text output captured) after at most
+    ``timeout`` s, or with ``background=True`` the running Popen (``popen``: stdout, stderr, ...)."""
+    env = dict(os.environ, **(env or {}), PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    cmd = [sys.executable, "-m", "realize", *args]
+    if background:
+        return subprocess.Popen(cmd, cwd=cwd, env=env, text=True, **popen)
+    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def realize_result(*args: str, run_dir: Path, timeout: float = 600, env: dict[str, str] | None = None) -> dict:
+    """A run of the command into ``run_dir`` (started in its parent) that must succeed: its result.json."""
+    p = realize_cli(*args, f"hydra.run.dir={run_dir}", cwd=run_dir.parent, timeout=timeout, env=env)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return json.loads((run_dir / "result.json").read_text())
+
+
+def load_script(name: str) -> Any:
+    """``scripts/NAME.py`` as a module (its ``main``, ...)."""
+    spec = importlib.util.spec_from_file_location(f"_script_{name}", REPO / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+# ------------------------------------------------------------------------------ the tiny run
+# 4 plans, 2 elites, short horizon: every plan gets through at least the first move_to
+TINY_D = {
+    "ce.n_envs": 4,
+    "ce.n_elite": 2,
+    "ce.iterations": 2,
+    "controller.max_time_s": 6,
+    "logging.progress": "false",
+    "logging.rerun": "false",
+}
+TINY = [f"{k}={v}" for k, v in TINY_D.items()]
+
+
+def tiny(**changes: object) -> list[str]:
+    """TINY with some keys changed (``ce__iterations=1`` -> ``ce.iterations=1``)."""
+    d = dict(TINY_D)
+    d.update({k.replace("__", "."): v for k, v in changes.items()})
+    return [f"{k}={v}" for k, v in d.items()]
+
+
+def tiny_with(extra: list[str]) -> list[str]:
+    """TINY with ``extra`` overrides replacing TINY's value of the same key."""
+    keys = {e.split("=", 1)[0].lstrip("+~") for e in extra}
+    return [o for o in TINY if o.split("=", 1)[0] not in keys] + extra
+
+
+def cfg_of(overrides: list[str], hydra_cfg: bool = False) -> Any:
+    """The config as the command composes it (its device default): a DictConfig."""
+    return compose_config(*overrides, cpu=False, plain=False, hydra_cfg=hydra_cfg, job_name="test")
+
+
+def plain(overrides: list[str]) -> dict:
+    """``cfg_of`` as plain data."""
+    return compose_config(*overrides, cpu=False, job_name="test")
+
+
+def expect_config_error(overrides: list[str], needles: list[str], run_dir: Path) -> tuple[str, dict]:
+    """Run the tiny config with ``overrides``: it must fail with a one-line ConfigError holding
+    every needle; returns the message and the result.json written for it."""
+    from realize.config import ConfigError
+    from realize.run import run
+    from realize.run_dir.names import RESULT_FILE
+
+    with pytest.raises(ConfigError) as ei:
+        run(cfg_of(tiny_with(overrides)), run_dir)
+    msg = str(ei.value)
+    assert "\n" not in msg
+    for n in needles:
+        assert n in msg, f"{n!r} not in {msg!r}"
+    return msg, json.loads((run_dir / RESULT_FILE).read_text())
+
+
+# ------------------------------------------------------------------------------ worker runs
+# the workers' must-show run, and the result keys that must not depend on where rollouts ran
+RUN16 = ["ce.n_envs=16", "ce.n_elite=4", "ce.iterations=2", "seed=3", "sim.shard_rows=8",
+         "logging.progress=false", "logging.rerun=false"]
+KEYS = ("best_cost", "success_per_iter", "best_cost_per_iter", "best_z", "n_feasible_per_iter", "final_mean",
+        "final_std")
+
+
+# ------------------------------------------------------------------------------ the seed task's plans
+SEED_TASK = REPO / "configs" / "task" / "pick_place.yaml"
+# columns: Table1.x, Table1.y, Cube_g.x, Cube_g.y, Cube_g.z, Table2.x, Table2.y,
+#          Cube_p.x, Cube_p.y, Cube_p.z, Exit.x, Exit.y
+GOOD = [-0.85, 1.2, 0.0, 1.2, 0.8925, -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
+_S, _C = math.sin(0.5), math.cos(0.5)
+# a second feasible plan: base off-axis, grasp tilted 0.5 rad towards the robot, another exit point
+SIDE = [-0.9, 1.1, -0.15 * _S, 1.2, 0.7425 + 0.15 * _C, -0.8, -1.0, 0.0, -1.2, 0.8975, 2.5, 0.3]
+# an infeasible one: base in front of table 1 (y = 0.2), grasp from the far side (polar 1 rad)
+FAR_SIDE = [0.0, 0.2, 0.0, 1.2 + 0.15 * math.sin(1.0), 0.7425 + 0.15 * math.cos(1.0),
+            -0.85, -1.2, 0.0, -1.2, 0.8975, 2.2, 0.0]
+
+
+def blas_batch_invariant() -> bool:
+    """Whether this machine's batched matrix products give a row the same bits whatever the
+    other rows of the batch are. Intel CPUs with MKL were seen to; an AMD EPYC with MKL does not
+    (float32 (k, 11, 11) products differ in the last bit between k = 8 and k = 7). Where it
+    does not hold, a plan's controller output depends on which other plans share its control
+    step's batch, so 'batched equals per sample' and 'one plan's fault leaves the others'
+    costs untouched' can only hold up to the chaos that rounding seeds in a grasp."""
+    import torch
+
+    g = torch.Generator().manual_seed(0)
+    for dtype in (torch.float32, torch.float64):
+        a = torch.randn(8, 11, 11, generator=g, dtype=dtype)
+        b = torch.randn(8, 11, 11, generator=g, dtype=dtype)
+        full = a @ b
+        keep = [0, 1, 2, 4, 5, 6, 7]
+        if not torch.equal((a[keep] @ b[keep])[-1], full[7]) or not torch.equal((a[7:] @ b[7:])[0], full[7]):
+            return False
+    return True
