@@ -1,7 +1,9 @@
 """``scripts/gpu_check.py`` runs on the CPU (``--device cpu``, small N) as it would on an offline
 CUDA machine: every part in its own process, nothing of ManiSkill, SAPIEN, Hydra or rerun
-imported (a ``sitecustomize`` refuses them), the table and rows written to ``--out``; and a part
-stopped by its limit keeps its finished rows plus one saying where it stopped.
+imported (a ``sitecustomize`` refuses them) and no package beyond those torch, numpy, scipy and
+PyYAML import themselves (the ``sitecustomize`` records every process's modules), the table and
+rows written to ``--out``; and a part stopped by its limit keeps its finished rows plus one
+saying where it stopped.
 What it doesn't: touch a GPU (the check itself does that, on a CUDA machine).
 """
 
@@ -20,13 +22,18 @@ from realize.robot.urdf import source_urdf
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "scripts" / "gpu_check.py"
-BLOCKER = '''import importlib.abc, sys
+BLOCKER = '''import atexit, importlib.abc, os, sys
 class _NoSimulator(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
         if name.split(".")[0] in ("mani_skill", "sapien", "gymnasium", "hydra", "omegaconf", "rerun"):
             raise ImportError(f"gpu_check imported {name}: the CUDA machine does not have it")
 sys.meta_path.insert(0, _NoSimulator())
+def _record():
+    with open(os.path.join(os.environ["MODULES_DIR"], f"{os.getpid()}.txt"), "w") as f:
+        f.write("\\n".join(sorted({m.split(".")[0] for m in sys.modules})))
+atexit.register(_record)
 '''
+PREINSTALLED = "import torch, numpy, yaml, scipy.sparse, scipy.sparse.csgraph"  # on the CUDA machine
 
 
 def _script():
@@ -36,17 +43,26 @@ def _script():
     return mod
 
 
+def _imported(modules: Path) -> set[str]:
+    names = set().union(*(set(f.read_text().split()) for f in modules.glob("*.txt")))
+    return {m for m in names if m not in sys.stdlib_module_names and not m.startswith("_")}
+
+
 def test_gpu_check_runs_on_the_cpu_without_the_simulator(tmp_path: Path) -> None:
-    site = tmp_path / "site"
-    site.mkdir()
+    site, modules, baseline = tmp_path / "site", tmp_path / "modules", tmp_path / "baseline"
+    for d in (site, modules, baseline):
+        d.mkdir()
     (site / "sitecustomize.py").write_text(BLOCKER)
+    env = {"PYTHONPATH": f"{site}:{REPO}", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    subprocess.run([sys.executable, "-c", PREINSTALLED], env={**env, "MODULES_DIR": str(baseline)}, check=True,
+                   timeout=60)
     urdf = tmp_path / "fetch.urdf"  # carried as a file, as to a machine without ManiSkill
     shutil.copyfile(source_urdf(load_robot_spec("fetch_omni").urdf), urdf)
     out = tmp_path / "out"
     t0 = time.monotonic()
     p = subprocess.run([sys.executable, str(SCRIPT), "--device", "cpu", "--sizes", "8", "--timing", "0.05",
                         "--urdf", str(urdf), "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=120,
-                       env={"PYTHONPATH": f"{site}:{REPO}", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)})
+                       env={**env, "MODULES_DIR": str(modules)})
     wall = time.monotonic() - t0
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:] + "".join(
         f"\n--- {log.name}\n{log.read_text()[-1500:]}" for log in out.glob("*.log"))
@@ -57,6 +73,8 @@ def test_gpu_check_runs_on_the_cpu_without_the_simulator(tmp_path: Path) -> None
     assert md.count("| ok |") == 6 and "MISMATCH" not in md
     assert {f.name for f in out.glob("*.log")} == {f"{part}.log" for part in _script().PARTS}
     assert wall < 60, f"{wall:.0f} s"
+    assert len(list(modules.glob("*.txt"))) == 1 + len(_script().PARTS)  # the driver and one process a part
+    assert _imported(modules) - _imported(baseline) == {"realize"}
 
 
 def test_a_part_stopped_at_its_limit_says_how_far_it_got(tmp_path: Path) -> None:
