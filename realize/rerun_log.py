@@ -9,7 +9,10 @@ What it does: ``RerunLogger`` writes a recording (no viewer needed) and, per CE 
   successful samples, sample counts, evaluation time; and a text line with failure reasons;
 * through ``realize.rerun_scene``, the top-down scene (the paper's Fig. 2: obstacles, regions,
   exit, cube, start) once, and per iteration the sampled parameters, the base trajectories of all
-  samples coloured by success and the iteration's best plan.
+  samples coloured by success and the iteration's best plan;
+* through ``realize.rerun_3d`` (given the plan), the world in 3-D under ``/world3d``: its boxes,
+  the robot's links, cube and current action along each iteration's best plan on the
+  ``control_step`` timeline, every sample's parameters in 3-D with its failure reason.
 The recording gets the default blueprint of ``realize.rerun_paths`` (where the entity paths and
 the scalar series are defined). Logged coordinates are world (x, y) in metres; the roots
 ``/world`` and ``/distributions`` carry a y-flip transform so that rerun's 2-D views (which draw
@@ -43,12 +46,14 @@ from realize.rerun_paths import (
     entity,
     param_path,
 )
+from realize.rerun_3d import Scene3D
 from realize.rerun_scene import log_static_scene, log_trajectories, log_world_samples
 from realize.topdown import ellipse_params, iteration_colors, param_xy, planar_params, success_colors, to_numpy
 
 if TYPE_CHECKING:  # avoid importing the simulator stack just for a type
     from realize.ce.state import IterationRecord
     from realize.realization.result import RolloutResult
+    from realize.robot.spec import RobotSpec
 
 __all__ = ["RerunLogger"]
 
@@ -62,7 +67,8 @@ class RerunLogger:
     the largest iteration seen). ``max_traj_points`` caps the time samples per logged trajectory
     (evenly strided, the last kept); ``max_trajectories`` caps how many of an iteration's
     trajectories are logged (all successful ones first, then failures by rank; ``None``: all).
-    Usable as a context manager.
+    ``plan`` (the action names, in order) turns on the 3-D view (``realize.rerun_3d``) with
+    ``control_freq`` (Hz) and the ``robot`` to draw. Usable as a context manager.
     """
 
     def __init__(
@@ -79,6 +85,9 @@ class RerunLogger:
         max_trajectories: int | None = None,
         y_up: bool = True,
         blueprint: bool = True,
+        plan: list[str] | None = None,
+        control_freq: float = 20.0,
+        robot: RobotSpec | None = None,
     ) -> None:
         if padding < 0:
             raise ValueError(f"padding must be >= 0, got {padding}")
@@ -97,7 +106,10 @@ class RerunLogger:
         self._history: dict[str, list[tuple[int, np.ndarray, np.ndarray]]] = {p: [] for p in self.params}
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self.rec.save(self.path, default_blueprint=self.blueprint() if blueprint else None)
+        self.scene3d = None if plan is None else Scene3D(self.rec, layout, geometry, plan, control_freq, robot)
         self._log_static(y_up)
+        if self.scene3d is not None:
+            self.scene3d.log_static()
 
     # ---- context manager -----------------------------------------------------------------
 
@@ -147,6 +159,8 @@ class RerunLogger:
         rec = self.rec
         it = int(record.iteration)
         rec.set_time(TIMELINE, sequence=it)
+        if self.scene3d is not None:  # everything of iteration k also sits at control_step k * STEP_STRIDE
+            self.scene3d.set_iteration(it)
 
         Z = to_numpy(record.Z, np.float64)
         cost = to_numpy(record.cost, np.float64)
@@ -171,6 +185,9 @@ class RerunLogger:
         log_world_samples(rec, self.layout, Z, colors, best)
         log_trajectories(rec, rollout, feasible, best, cost, self.max_traj_points, self.max_trajectories)
         self._log_text(record, rollout)
+        if self.scene3d is not None:
+            self.scene3d.log_samples(it, Z, colors, None if rollout is None else rollout.failure)
+            self.scene3d.log_best_plan(it, rollout, best)
 
     @staticmethod
     def _best_index(elite: np.ndarray, cost: np.ndarray, feasible: np.ndarray, best_idx: int = -1) -> int:

@@ -5,7 +5,8 @@ What it does: the ``ce_iteration`` timeline (:data:`TIMELINE`), the entity-path 
 the scalar series logged per iteration (:data:`SCALAR_PATHS`: path -> ``IterationRecord``
 attribute, series name, colour), helpers that build entity paths (:func:`entity`,
 :func:`param_path`), and the default blueprint (:func:`blueprint`: top-down scene | cost and
-success plots | one distribution view per parameter).
+success plots | one distribution view per parameter; the 3-D view of ``/world3d`` under the
+top-down scene).
 
 What it doesn't: log anything (``realize.rerun_log``, ``realize.rerun_scene``) or read a
 recording back (``realize.rerun_read``).
@@ -17,12 +18,13 @@ from collections.abc import Sequence
 
 import rerun.blueprint as rrb
 
-__all__ = ["TIMELINE", "ENTITY_WORLD", "ENTITY_DIST", "ENTITY_STATS", "ENTITY_LOG", "SCALAR_PATHS",
+__all__ = ["TIMELINE", "ENTITY_WORLD", "ENTITY_WORLD_3D", "ENTITY_DIST", "ENTITY_STATS", "ENTITY_LOG", "SCALAR_PATHS",
            "entity", "param_path", "blueprint"]
 
 TIMELINE = "ce_iteration"
 
 ENTITY_WORLD = "world"
+ENTITY_WORLD_3D = "world3d"  # realize.rerun_3d
 ENTITY_DIST = "distributions"
 ENTITY_STATS = "stats"
 ENTITY_LOG = "log"
@@ -78,7 +80,10 @@ def blueprint(params: Sequence[str]) -> rrb.Blueprint:
         rrb.TextLogView(name="Log", origin=f"/{ENTITY_LOG}"),
         row_shares=[2, 2, 1],
     )
-    scene = rrb.Spatial2DView(name="Top-down scene", origin="/", contents=[f"+ /{ENTITY_WORLD}/**"])
+    scene = rrb.Vertical(
+        rrb.Spatial2DView(name="Top-down scene", origin="/", contents=[f"+ /{ENTITY_WORLD}/**"]),
+        rrb.Spatial3DView(name="3-D: best plan per iteration (timeline control_step)", origin=f"/{ENTITY_WORLD_3D}"),
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
             scene,

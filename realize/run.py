@@ -241,7 +241,9 @@ class _Assembly:
         if spec.logging.rerun:
             plans = {k: (self.run_dir / recording_name(spec.logging.rrd, k, len(histories[k])), t.layout)
                      for k, t in zip(self.keys, self.tasks)}
-            sinks.append(RerunSink(plans, spec.geometry, padding, spec.ce.iterations, record=spec.logging.record))
+            actions = {k: [str(a) for a in t.plan] for k, t in zip(self.keys, self.tasks)}
+            sinks.append(RerunSink(plans, spec.geometry, padding, spec.ce.iterations, record=spec.logging.record,
+                                   actions=actions, control_freq=spec.sim.control_freq, robot=spec.robot))
         if not spec.halving:  # the figures' readers assume one parameter layout
             sinks.append(TrajectorySink(self.rd, spec.task.layout, spec.geometry, padding, record=spec.logging.record))
         sinks.append(ProgressSink(spec.ce.iterations, self.start, "CE top-k" if spec.halving else "CE",

@@ -2,7 +2,8 @@
 
 What it does: ``RolloutResult`` (one row per plan; ``to_eval`` adapts it to the cross-entropy
 optimizer's ``EvalResult``) and ``TrajectoryRecorder``, which samples base, TCP and cube
-positions every ``record_every`` control steps and stores them into a result.
+positions, the whole-body joints and each plan's current action every ``record_every`` control
+steps and stores them into a result.
 What it doesn't: simulate (``realize.realization.rollout``) or write files (the run directory's
 sinks do).
 """
@@ -37,6 +38,8 @@ class RolloutResult:
     traj_base: Tensor | None = None  # (N, T, 2)
     traj_ee: Tensor | None = None  # (N, T, 3)
     traj_cube: Tensor | None = None  # (N, T, 3)
+    traj_q: Tensor | None = None  # (N, T, n_dof) whole-body joints (the rerun recording's robot in 3-D)
+    traj_action: Tensor | None = None  # (N, T) the action each plan was in (its index in the plan)
     wall_time_s: float = 0.0
     sim_steps: int = 0
     horizon_cost: float = math.nan  # cost of a plan cut by the horizon: max steps + final cost
@@ -62,14 +65,20 @@ class TrajectoryRecorder:
         self.base: list[Tensor] = []
         self.ee: list[Tensor] = []
         self.cube: list[Tensor] = []
+        self.q: list[Tensor] = []
+        self.action: list[Tensor] = []
 
-    def sample(self, step: int, ctx: StepContext) -> None:
-        """Record the state just read by ``ctx`` if ``step`` is a recording step."""
+    def sample(self, step: int, ctx: StepContext, action: Tensor | None = None) -> None:
+        """Record the state just read by ``ctx`` (and each plan's current ``action``) if ``step``
+        is a recording step."""
         if step % self.every == 0:
             self.t.append(step * ctx.dt)
             self.base.append(ctx.base[:, BASE_XY].clone())
             self.ee.append(ctx.tcp.clone())
             self.cube.append(ctx.cube[:, :3].clone())
+            self.q.append(ctx.q.clone())
+            if action is not None:
+                self.action.append(action.clone())
 
     def store(self, res: RolloutResult, m: int) -> None:
         """Put the first ``m`` copies' trajectories into ``res`` (nothing if none was recorded)."""
@@ -79,3 +88,6 @@ class TrajectoryRecorder:
         res.traj_base = torch.stack(self.base, dim=1)[:m].cpu()
         res.traj_ee = torch.stack(self.ee, dim=1)[:m].cpu()
         res.traj_cube = torch.stack(self.cube, dim=1)[:m].cpu()
+        res.traj_q = torch.stack(self.q, dim=1)[:m].cpu()
+        if len(self.action) == len(self.t):
+            res.traj_action = torch.stack(self.action, dim=1)[:m].cpu()

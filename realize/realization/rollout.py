@@ -171,7 +171,7 @@ class Rollout:
         self.ctx.read()
         self.settle_left[self.settle_left > 0] -= 1
         if self.recorder is not None:
-            self.recorder.sample(self.step, self.ctx)
+            self.recorder.sample(self.step, self.ctx, self.action)
 
     def check_faults(self) -> None:
         """A diverged plan (or one the fabric flagged invalid) stops; the others go on."""

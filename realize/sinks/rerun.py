@@ -3,7 +3,9 @@
 What it does: ``RerunSink`` opens a ``realize.rerun_log.RerunLogger`` for a plan when its first
 iteration arrives (``logging.rrd``, ``<stem>_c{i}.rrd`` per candidate of a top-k run; a resumed
 run's plan that already has iterations gets ``<name>.from-it{k}.rrd``) and logs every
-iteration with the distribution its batch was drawn from (mixture weights included). Not
+iteration with the distribution its batch was drawn from (mixture weights included), and the
+run in 3-D when given the plans' actions (``realize.rerun_3d``: the robot along each iteration's
+best plan on the ``control_step`` timeline). Not
 critical: if it fails, the run goes on without recordings (``realize.sinks.base.SinkSet``).
 What it doesn't: define what is drawn (``realize.rerun_log``).
 """
@@ -41,8 +43,12 @@ class RerunSink:
     critical = False
 
     def __init__(self, plans: Mapping[int | None, tuple[Path, ParamLayout]], geometry: Any, padding: float,
-                 n_iterations: int, record: bool = True) -> None:
+                 n_iterations: int, record: bool = True, *, actions: Mapping[int | None, list[str]] | None = None,
+                 control_freq: float = 20.0, robot: Any = None) -> None:
         self.plans = dict(plans)
+        # the 3-D view (realize.rerun_3d): each plan's action names, the control rate, the robot
+        self.actions = dict(actions or {})
+        self.control_freq, self.robot = control_freq, robot
         self.wants_trajectories = record  # the scene view shows sample trajectories when recorded
         self.geometry, self.padding, self.n_iterations = geometry, padding, n_iterations
         self.loggers: dict[int | None, Any] = {}
@@ -59,7 +65,8 @@ class RerunSink:
         if lg is None:
             path, layout = self.plans[key]
             lg = self.loggers[key] = self._logger_cls(path, layout, self.geometry, padding=self.padding,
-                                                      n_iterations=self.n_iterations)
+                                                      n_iterations=self.n_iterations, plan=self.actions.get(key),
+                                                      control_freq=self.control_freq, robot=self.robot)
         lg.log_iteration(it.record, it.rollout, it.batch.mean, it.batch.std, it.batch.weights)
 
     def close(self, status: str | None, error: str | None) -> None:

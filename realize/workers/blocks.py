@@ -95,10 +95,10 @@ def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]]) -> list[list[T
 
 
 def _pad_frames(t: Tensor | None, frames: int) -> Tensor | None:
-    """(M, T, k) -> (M, frames, k), the last frame repeated (a finished block holds still)."""
+    """(M, T, ...) -> (M, frames, ...), the last frame repeated (a finished block holds still)."""
     if t is None or t.shape[1] == frames:
         return t
-    return torch.cat([t, t[:, -1:].expand(-1, frames - t.shape[1], -1)], dim=1)
+    return torch.cat([t, t[:, -1:].expand(-1, frames - t.shape[1], *t.shape[2:])], dim=1)
 
 
 def join_results(parts: Sequence[RolloutResult]) -> RolloutResult:
@@ -118,6 +118,7 @@ def join_results(parts: Sequence[RolloutResult]) -> RolloutResult:
         longest = max(recorded, key=lambda p: len(p.traj_t))
         frames = len(longest.traj_t)
         res.traj_t = longest.traj_t
-        for name in ("traj_base", "traj_ee", "traj_cube"):
-            setattr(res, name, torch.cat([_pad_frames(getattr(p, name), frames) for p in parts]))
+        for name in ("traj_base", "traj_ee", "traj_cube", "traj_q", "traj_action"):
+            if all(getattr(p, name) is not None for p in parts):
+                setattr(res, name, torch.cat([_pad_frames(getattr(p, name), frames) for p in parts]))
     return res
