@@ -12,16 +12,17 @@ import math
 import pytest
 import torch
 
-from envs.fetch_omni import REST_QPOS
 from realize.config import ConfigError
-from realize.controllers.body import DOF
 from realize.controllers.fabric_jets import distance_jets
 from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.obstacles import BoxDistance
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.fetch_joints import whole_body_qpos_from_full
 from realize.geometry import GeometryCfg, build_geometry
 from realize.realization.config import RolloutConfig
+from realize.robot.spec import load_robot_spec
+
+ROBOT = load_robot_spec("fetch_omni")
+DOF = ROBOT.n_dof
 
 F64 = torch.float64
 
@@ -52,7 +53,7 @@ def _near_box_points(boxes: torch.Tensor, n: int, k: int, g: torch.Generator) ->
 
 
 def _rest_q(n: int) -> torch.Tensor:
-    return whole_body_qpos_from_full(torch.tensor(REST_QPOS, dtype=F64)).expand(n, -1).clone()
+    return torch.tensor(ROBOT.rest_q(), dtype=F64).expand(n, -1).clone()
 
 
 def _states_near_table1(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
