@@ -17,11 +17,11 @@ import pytest
 import torch
 
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
+from realize.geometry import GeometryCfg, build_geometry
 from realize.robot.spec import load_robot_spec
 
 ROBOT = load_robot_spec("fetch_omni")
 DOF = ROBOT.n_dof
-from realize.geometry import GeometryCfg, build_geometry
 
 N = 96
 
