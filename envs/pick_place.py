@@ -268,6 +268,8 @@ class RealizePickPlaceEnv(BaseEnv):
         names = list(self.agents[0].robot.active_joints_map.keys())
         rest = [self.robot_spec.rest_value(n) for n in names]
         ix, iy, iyaw = (names.index(j) for j in self.robot_spec.base.joints)
+        held = list(self.robot_spec.held)
+        held_targets = torch.tensor([[float(v) for v in self.robot_spec.held.values()]])
         with torch.device(self.device):
             b = len(env_idx)
             for c, (agent, cube) in enumerate(zip(self.agents, self.cubes)):
@@ -290,6 +292,8 @@ class RealizePickPlaceEnv(BaseEnv):
                 agent.robot.set_pose(Pose.create_from_pq(root, torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)))
                 agent.reset(qpos)
                 agent.robot.set_qvel(torch.zeros_like(qpos))
+                if held:  # held joints (a head) go to their held values, wherever the rest pose starts them
+                    agent.robot.set_joint_drive_targets(held_targets.repeat(b, 1), [agent.robot.active_joints_map[n] for n in held])
                 z = torch.full((b, 1), g.cube_pos[2])
                 cube.set_pose(Pose.create_from_pq(torch.cat([cube_xy, z], dim=1), cube_q))
                 cube.set_linear_velocity(torch.zeros(b, 3))

@@ -75,7 +75,7 @@ class _PoseMap:
         self.body_radii = radii
         ee = kin.ee_link
         self._ee = ee
-        L, kw = axis_length, dict(dtype=kin.tcp_offset.dtype, device=kin.device)
+        L = axis_length
         self._offsets = torch.stack([
             kin.tcp_offset,
             kin.tcp_offset - L * kin.approach_local,  # behind the TCP on the approach axis

@@ -155,7 +155,7 @@ class RobotSpec(Settings):
     visual_mesh_ext: dict[str, str] | None = None  # e.g. {".dae": ".glb"}: a derived URDF reads shipped files
     base: BaseSpec = field(default_factory=BaseSpec)
     upper: UpperSpec = field(default_factory=lambda: UpperSpec(("torso_lift_joint",), (Drive(("torso_lift_joint",)),)))
-    held: dict[str, float] = field(default_factory=dict)  # joint -> value: not in q, held by a stiff drive
+    held: dict[str, float] = field(default_factory=dict)  # joint -> value: not in q, its drive's target (rest may start it elsewhere)
     held_drive: Drive = field(default_factory=Drive)
     gripper: GripperSpec = field(default_factory=lambda: GripperSpec(("finger",)))
     tcp: TcpSpec = field(default_factory=TcpSpec)
