@@ -141,6 +141,12 @@ def test_replan_errors(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="needs the cube in hand"):
         empty = save_state(SceneState(base=(0.0, 0.0, 0.0), cube_position=(0.0, 1.2, 0.7425)), tmp_path / "e.json")
         build_run_spec(_replan(run, state=empty))
+    with pytest.raises(ConfigError, match=r"replan.state .*unknown joint\(s\) \['knee_joint'\] of robot 'fetch_omni'"):
+        d = json.loads(FIXTURE.read_text())
+        d["joints"]["knee_joint"] = 0.1
+        bad = tmp_path / "knee.json"
+        bad.write_text(json.dumps(d))
+        build_run_spec(_replan(run, state=bad))  # refused at the config edge, before anything is simulated
     with pytest.raises(ConfigError, match="replan_from = .*not a directory"):
         _replan(tmp_path / "missing")
     with pytest.raises(ConfigError, match="replan_from is not"):
