@@ -70,3 +70,30 @@ def test_replay_after_the_file_changed_gets_the_runs_cost(edited_run: tuple[Path
     assert any(str(task_file) in n and "changed" in n for n in rep["notes"])
     if exact:
         assert rep["exact"]["iteration"] == 0 and rep["exact"]["shard_stop"] == 3
+
+
+def test_resume_and_replan_config_use_the_runs_copy(tmp_path: Path) -> None:
+    """Interrupted after iteration 0 of 2, the file edited, resumed: the run ends as an
+    uninterrupted run of the original file does (its own copy), and a replan's config starts
+    from that copy too."""
+    from realize.replan import replan_config
+
+    task_file = tmp_path / "t.yaml"
+    task_file.write_text(yaml.safe_dump(TASK))
+    over = [o for o in TINY if not o.startswith("ce.iterations")] + ["ce.iterations=2", f"task_file={task_file}"]
+    ref = run(compose_config(*over, cpu=False, plain=False), tmp_path / "ref")
+
+    def stop(i: int) -> None:
+        if i == 0:
+            raise KeyboardInterrupt
+
+    cut = tmp_path / "cut"
+    assert run(compose_config(*over, cpu=False, plain=False), cut, after_iteration=stop).interrupted
+    task_file.write_text(yaml.safe_dump(dict(TASK, goal={}, plan=["move_to(Exit)"])))
+    done = run(compose_config("logging.progress=false", f"resume={cut}", cpu=False, plain=False),
+               tmp_path / "elsewhere")
+    a, b = (json.loads((d / RESULT_FILE).read_text()) for d in (ref.run_dir, cut))
+    assert done.iterations_done == 2 and (a["best_cost"], a["best_z"]) == (b["best_cost"], b["best_z"])
+    assert b["config"]["task"]["plan"] == TASK["plan"]
+    cfg = replan_config({"replan_from": str(cut), "replan": {}}, [])
+    assert cfg["task"] == b["config"]["task"] and cfg["task_file"] is None
