@@ -188,6 +188,9 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
                           "actions, numbered from 0")
     origin = TaskOrigin.from_json(spec.config.get("task_origin"))
     notes = [n for n in [None if origin is None else origin.note()] if n is not None]
+    if run.config.get("task_file") is not None:  # a run from before run directories kept their task
+        notes.append(f"the run's result.json names task_file {run.config['task_file']!r} but keeps no copy of it; "
+                     "its task was read from that file as it is now")
     shard = None
     if exact:
         try:

@@ -97,3 +97,18 @@ def test_resume_and_replan_config_use_the_runs_copy(tmp_path: Path) -> None:
     assert b["config"]["task"]["plan"] == TASK["plan"]
     cfg = replan_config({"replan_from": str(cut), "replan": {}}, [])
     assert cfg["task"] == b["config"]["task"] and cfg["task_file"] is None
+
+
+def test_an_old_run_without_a_copy_says_it_read_the_live_file(edited_run: tuple[Path, Path], tmp_path: Path) -> None:
+    """A run directory written before runs kept their task names the file only: replay reads
+    the file as it is now, and says so."""
+    from realize.replay import replay
+
+    run_dir, task_file = edited_run
+    old = tmp_path / "old"
+    old.mkdir()
+    d = json.loads((run_dir / RESULT_FILE).read_text())
+    d["config"] = dict(d["config"], task_file=str(task_file), task_origin=None, task={})
+    (old / RESULT_FILE).write_text(json.dumps(d))
+    rep = replay(old)
+    assert any("keeps no copy" in n for n in rep.notes) and not rep.feasible  # the edited file moved Exit
