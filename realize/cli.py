@@ -62,6 +62,9 @@ def preflight(args: list[str]) -> list[str]:
     flags = [a for a in args if a.startswith("-")]
     plain = [a for a in args if not a.startswith("-")]
     if any(f not in ("-m", "--multirun") for f in flags):
+        if any(f in ("--cfg", "-c") for f in flags) and any(a.startswith("task_file=") for a in plain):
+            print("note: --cfg shows the task group; task_file replaces it when the run starts (result.json's "
+                  "config.task then holds the file's content)", file=sys.stderr, flush=True)
         return args  # --cfg, --config-dir, --help, ...: Hydra's own business (and its own checks)
     multirun = bool(flags)
     parser = OverridesParser.create()

@@ -47,3 +47,10 @@ def test_the_command_answers_in_one_line() -> None:
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert p.returncode == 2 and lines == [lines[-1]] and "did you mean 'scene'" in lines[-1], p.stderr
     assert "+secne" not in p.stderr
+
+
+def test_cfg_with_a_task_file_says_what_it_shows(capsys: pytest.CaptureFixture[str]) -> None:
+    from realize.cli import preflight
+
+    assert preflight(["--cfg", "job", "task_file=x.yaml"]) == ["--cfg", "job", "task_file=x.yaml"]
+    assert "task_file replaces it" in capsys.readouterr().err
