@@ -9,9 +9,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from realize.robot.spec import load_robot_spec
 from realize.scene import BatchedScene, SimSettings
-from realize.scene.physics import FINGER_LINKS
 from realize.scene_state import load_state
+
+FINGER_LINKS = load_robot_spec("fetch_omni").gripper.finger_links
 
 SIM = SimSettings(backend="cpu")
 
