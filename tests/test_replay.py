@@ -111,25 +111,6 @@ def test_validation_writes_result_json(run_dir: Path) -> None:
     assert rep.success_share > 0  # seed 3 gave 3 of 4 when written; the key matters here
 
 
-def test_video_is_written_and_shows_the_scene(tmp_path: Path) -> None:
-    import imageio.v2 as imageio
-
-    # a 3 s horizon: the rollout is cut (infeasible) but the video covers the start of the plan
-    d = _write_run(tmp_path / "short", ["controller.max_time_s=3"])
-    out = tmp_path / "v" / "best.mp4"
-    rep = replay(d, out, fps=10, every=3, width=160, height=120, hold_s=0.5)
-    v = rep.video
-    assert v is not None and out.is_file() and v.bytes == out.stat().st_size > 1000
-    assert (v.width, v.height) == (160, 120)
-    assert v.frames == 1 + 60 // 3 + 5 and v.seconds == pytest.approx(v.frames / 10)
-    reader = imageio.get_reader(str(out))
-    frames = np.stack(list(reader.iter_data()))  # list(reader) trips on its unknown length
-    reader.close()
-    assert frames.shape == (v.frames, 120, 160, 3)
-    assert frames.std(axis=(1, 2, 3)).min() > 10  # not blank
-    assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5  # the robot moved
-
-
 def test_push_scene_gets_its_camera_and_noise(tmp_path: Path) -> None:
     """scene=push builds RealizeMoveAndPush-v1: the video camera and the validation noise reach
     that task too (they used to be patched into the pick-and-place task's registry entry only)."""
@@ -156,13 +137,20 @@ def test_video_follows_the_action_and_labels_every_frame(tmp_path: Path) -> None
 
     from realize.video import Caption
 
-    d = _write_run(tmp_path / "grasp", ["controller.max_time_s=11"])  # through the start of the grasp
-    out = tmp_path / "grasp.mp4"
-    v = replay(d, out, fps=10, every=10, hold_s=0.0).video
-    assert v is not None and (v.width, v.height) == (960, 720)
+    # an 11 s horizon: the rollout is cut (infeasible) but the video covers the start of the grasp
+    d = _write_run(tmp_path / "grasp", ["controller.max_time_s=11"])
+    out = tmp_path / "v" / "grasp.mp4"
+    rep = replay(d, out, fps=10, every=10, hold_s=0.5)
+    v = rep.video
+    assert v is not None and out.is_file() and v.bytes == out.stat().st_size > 1000
+    assert (v.width, v.height) == (960, 720)
+    assert v.frames == 1 + 220 // 10 + 5 and v.seconds == pytest.approx(v.frames / 10)
     reader = imageio.get_reader(str(out))
-    frames = np.stack(list(reader.iter_data())).astype(int)
+    frames = np.stack(list(reader.iter_data())).astype(int)  # list(reader) trips on its unknown length
     reader.close()
+    assert frames.shape == (v.frames, 720, 960, 3)
+    assert frames.std(axis=(1, 2, 3)).min() > 10  # not blank
+    assert np.abs(frames[0] - frames[-1]).mean() > 0.5  # the robot moved
     band = frames[:, :30]
     assert (band.mean(axis=(1, 2, 3)) < 80).all() and ((band > 200).all(axis=-1).sum(axis=(1, 2)) > 50).all()
     red = (frames[..., 0] > 150) & (frames[..., 1] < 90) & (frames[..., 2] < 90)
