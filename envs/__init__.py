@@ -4,7 +4,7 @@ What it does: registers ``RealizePickPlace-v1`` (``plain``/``wall``/``ramp`` wor
 ``RealizeMoveAndPush-v1`` (the ``push`` world) and every robot of ``configs/robot/`` (one agent class
 built from a robot spec, ``envs.robot_agent``), and maps a world
 variant to the task that builds it (``env_id_for``).
-What it doesn't: hold world geometry (``realize.geometry``) or batch copies for the realizer
+What it doesn't: hold world geometry (``realize.world.geometry``) or batch copies for the realizer
 (``realize.scene``).
 """
 
@@ -16,5 +16,5 @@ robot_agent.register_known_robots()
 
 
 def env_id_for(variant: str) -> str:
-    """The ManiSkill task id that builds a scene variant (``realize.geometry.VARIANTS``)."""
+    """The ManiSkill task id that builds a scene variant (``realize.world.geometry.VARIANTS``)."""
     return MOVE_AND_PUSH_ID if variant in RealizeMoveAndPushEnv.VARIANTS else ENV_ID

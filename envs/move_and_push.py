@@ -6,7 +6,7 @@ small cube resting on its top; an open box (floor and four low walls, open top) 
 floor nearby. The cube must end up in the box. The intended way is to drive to the right side of
 the stick and push its upper part over towards the box, so that the cube falls in; the cube can
 also be picked off the stick top and placed into the box. Tables, if the scene config lists any,
-are plain obstacles. All geometry comes from a ``realize.geometry.GeometryCfg`` with
+are plain obstacles. All geometry comes from a ``realize.world.geometry.GeometryCfg`` with
 ``variant="push"`` (the Hydra ``scene=push`` config), the ``geometry`` kwarg; without it the task
 builds its default push world (stick, cube and box of ``GeometryCfg``'s defaults, no tables). A
 geometry of another variant is refused before anything is built.
@@ -33,8 +33,8 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from envs.pick_place import RealizePickPlaceEnv
-from realize.geometry import GeometryCfg
-from realize.realization.goals import cube_in_container
+from realize.world.geometry import GeometryCfg
+from realize.tasks.goals import cube_in_container
 
 ENV_ID = "RealizeMoveAndPush-v1"
 
@@ -89,7 +89,7 @@ class RealizeMoveAndPushEnv(RealizePickPlaceEnv):
                     cube.set_pose(Pose.create_from_pq(p, cube.pose.q[env_idx]))
 
     def evaluate(self) -> dict:
-        """Goal for every copy (tiled or not), by ``realize.realization.goals.cube_in_container``:
+        """Goal for every copy (tiled or not), by ``realize.tasks.goals.cube_in_container``:
         the cube rests inside the first container."""
         off = torch.as_tensor(self.offsets, dtype=torch.float32, device=self.device)
         p = torch.cat([c.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, c in enumerate(self.cubes)])

@@ -6,7 +6,7 @@ arm and a parallel gripper; ``robot_uids``: any robot of ``configs/robot/``, def
 carry the cube to ``table2`` and then drive into the exit (rest) area. Between the tables there
 is room to drive; variants add a wall between them (``variant="wall"``) or a ramp from
 table 1's side down onto table 2 (``variant="ramp"``) down which a released cube can slide.
-All geometry comes from a ``realize.geometry.GeometryCfg`` (the Hydra ``scene`` config group),
+All geometry comes from a ``realize.world.geometry.GeometryCfg`` (the Hydra ``scene`` config group),
 the ``geometry`` kwarg (a ``GeometryCfg`` or a mapping of its keys; default: the plain world).
 This task builds the ``plain``, ``wall`` and ``ramp`` variants; ``push`` is
 ``RealizeMoveAndPush-v1``'s (``envs.env_id_for`` maps a variant to its task).
@@ -44,8 +44,8 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConf
 
 from envs import robot_agent
 from realize.config import ConfigError
-from realize.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
-from realize.realization.goals import base_in_rectangle, cube_on_table
+from realize.world.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
+from realize.tasks.goals import base_in_rectangle, cube_on_table
 from realize.robot.spec import RobotSpec
 
 ENV_ID = "RealizePickPlace-v1"
@@ -302,7 +302,7 @@ class RealizePickPlaceEnv(BaseEnv):
     # ------------------------------------------------------------------ success
     def evaluate(self) -> dict:
         """Goal of the seed task for every copy (tiled or not), by the predicates of
-        ``realize.realization.goals``: the cube rests on table 2 and the base is in the exit."""
+        ``realize.tasks.goals``: the cube rests on table 2 and the base is in the exit."""
         g = self.geometry
         off = torch.as_tensor(self.offsets, dtype=torch.float32, device=self.device)
         p = torch.cat([c.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, c in enumerate(self.cubes)])

@@ -34,7 +34,7 @@ from typing import Any, Callable
 import torch
 import yaml
 
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 from realize.controllers.astar import astar_world
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import pid_init, pid_step
@@ -46,7 +46,7 @@ from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene, SimSettings
-from realize.task import task_from_dict
+from realize.tasks.spec import task_from_dict
 
 TASK_FILE = Path(__file__).resolve().parents[1] / "configs" / "task" / "pick_place.yaml"
 

@@ -56,8 +56,8 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from _compose import compose_config  # noqa: E402
 
-from realize.realizers import open_realization  # noqa: E402
-from realize.run_config import build_run_spec  # noqa: E402
+from realize.app.realizers import open_realization  # noqa: E402
+from realize.app.run_config import build_run_spec  # noqa: E402
 
 BATCH_FILE = REPO / "scripts" / "bench_data" / "late_batch.json"
 PHASES = ("physics", "fabric", "astar", "pid", "state_reads", "target_writes", "contact_forces", "reset")

@@ -85,7 +85,7 @@ class Parts:
     def __init__(self, urdf: str | None) -> None:
         import torch
 
-        from realize.geometry import GeometryCfg, build_geometry
+        from realize.world.geometry import GeometryCfg, build_geometry
         from realize.realization.config import RolloutConfig
         from realize.robot.spec import load_robot_spec
 
@@ -211,11 +211,11 @@ class Parts:
         return {"n": n}
 
     def run_ce(self, x: dict[str, Any], dev: Any) -> tuple:
-        from realize.ce.config import CEConfig
-        from realize.ce.optimizer import CrossEntropyOptimizer
-        from realize.param_layout import ParamLayout
-        from realize.regions import Box
-        from realize.searcher import EvalResult
+        from realize.search.ce.config import CEConfig
+        from realize.search.ce.optimizer import CrossEntropyOptimizer
+        from realize.tasks.param_layout import ParamLayout
+        from realize.tasks.regions import Box
+        from realize.search.protocol import EvalResult
 
         t, n = self.torch, x["n"]
         layout = ParamLayout({"p": Box([-5.0] * 10, [5.0] * 10)})

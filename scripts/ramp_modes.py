@@ -30,7 +30,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
+from realize.world.geometry import GeometryCfg, SceneGeometry, build_geometry  # noqa: E402
 from realize.run_dir.directory import RunDir  # noqa: E402
 from realize.run_dir.names import RESULT_FILE  # noqa: E402
 from realize.run_dir.result_doc import FailureDoc, ResultDoc  # noqa: E402

@@ -9,7 +9,7 @@ controllers from that config, re-simulates the plan and prints its cost next to 
 best_cost. With --video it renders every --every-th control step of copy 0 into an MP4 (on CPU
 through lavapipe): a camera that follows the robot and what the current action works on, the
 action and control step written on every frame. With --state-at K --state-out FILE it writes the scene state at the moment
-action K (0-based) begins, right after action K-1 succeeded (realize/scene_state.py), the state
+action K (0-based) begins, right after action K-1 succeeded (realize/world/state.py), the state
 `realize replan_from=RUN_DIR replan.action=K replan.state=FILE` starts from. With --exact it
 re-runs the shard of copies the run simulated its best sample in (that iteration's samples from
 history.npz), which gives the run's cost bit for bit on CPU; alone in one copy the cost may be a
@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.replay import ReplayError, replay  # noqa: E402
+from realize.app.replay import ReplayError, replay  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
 

@@ -2,10 +2,10 @@
 
 What it does: composes the app's config (``configs/config.yaml`` with its default groups, the task
 read from ``--task-file``, default ``configs/task/pick_place.yaml``) through the same edge the
-``realize`` command uses (``realize.run_config.build_run_spec``), draws ``--n`` parameter vectors
+``realize`` command uses (``realize.app.run_config.build_run_spec``), draws ``--n`` parameter vectors
 uniformly over the task's regions exactly as the cross-entropy search draws iteration 0 (one CPU
 ``torch.Generator`` seeded with ``--seed``, the CE dtype), realizes them all at once in one
-batched scene (``realize.realizers.open_realization``, as a run does) and prints where they fail: failure reasons, per-action success shares (of all
+batched scene (``realize.app.realizers.open_realization``, as a run does) and prints where they fail: failure reasons, per-action success shares (of all
 plans and of the plans that reached the action), and, for grasps, success against the angle
 between the base position and the grasp approach around the cube.
 It ends with two lines::
@@ -13,7 +13,7 @@ It ends with two lines::
     iteration0_success: X     (share of feasible plans, 0..1)
     rollout_wall_s: Y         (seconds spent in the rollout, scene build excluded)
 
-What it doesn't: refit anything (that is ``realize`` / ``realize.ce``).
+What it doesn't: refit anything (that is ``realize`` / ``realize.search.ce``).
 
 Usage::
 
@@ -43,8 +43,8 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 
 from realize.config import ConfigError  # noqa: E402
 from realize.paths import CONFIG_DIR  # noqa: E402
-from realize.realizers import open_realization  # noqa: E402
-from realize.run_config import RunSpec, build_run_spec  # noqa: E402
+from realize.app.realizers import open_realization  # noqa: E402
+from realize.app.run_config import RunSpec, build_run_spec  # noqa: E402
 
 
 def load_spec(task_file: str, seed: int, device: str, overrides: Sequence[str] = ()) -> RunSpec:

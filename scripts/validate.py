@@ -19,8 +19,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.replay import ReplayError  # noqa: E402
-from realize.validation import validate  # noqa: E402
+from realize.app.replay import ReplayError  # noqa: E402
+from realize.app.validation import validate  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
 

@@ -16,15 +16,15 @@ from pathlib import Path
 
 import torch
 
-from realize.ce.config import CEConfig
-from realize.ce.optimizer import CrossEntropyOptimizer
-from realize.ce.state import IterationRecord
-from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
-from realize.param_layout import ParamLayout
+from realize.search.ce.config import CEConfig
+from realize.search.ce.optimizer import CrossEntropyOptimizer
+from realize.search.ce.state import IterationRecord
+from realize.world.geometry import GeometryCfg, SceneGeometry, build_geometry
+from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
 from realize.run_dir.result_doc import ResultDoc
-from realize.searcher import EvalResult
+from realize.search.protocol import EvalResult
 
 PARAMS = {
     "Table1": {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25},

@@ -108,7 +108,7 @@ def expect_config_error(overrides: list[str], needles: list[str], run_dir: Path)
     """Run the tiny config with ``overrides``: it must fail with a one-line ConfigError holding
     every needle; returns the message and the result.json written for it."""
     from realize.config import ConfigError
-    from realize.run import run
+    from realize.app.run import run
     from realize.run_dir.names import RESULT_FILE
 
     with pytest.raises(ConfigError) as ei:

@@ -19,17 +19,17 @@ import yaml
 
 import realize.scene
 from helpers import TINY, cfg_of, expect_config_error, plain, realize_cli, tiny
-from realize.cli import preflight
+from realize.app.cli import preflight
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
-from realize.run import run
-from realize.run_config import build_run_spec
+from realize.app.run import run
+from realize.app.run_config import build_run_spec
 from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History, load_history
 from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE
 from realize.run_dir.result_doc import ResultDoc
-from realize.sweep_summary import COLUMNS, write_summary
+from realize.app.sweep_summary import COLUMNS, write_summary
 
 
 # --------------------------------------------------------------------------------------------
@@ -115,7 +115,7 @@ def test_sim_yaml_keys_are_sim_settings_fields() -> None:
 def test_launchers_resolve(launcher: str, target: str) -> None:
     cfg = cfg_of([f"hydra/launcher={launcher}"], hydra_cfg=True)
     assert cfg.hydra.launcher._target_.endswith(target)
-    assert any(cb._target_ == "realize.sweep_summary.SweepSummary" for cb in cfg.hydra.callbacks.values())
+    assert any(cb._target_ == "realize.app.sweep_summary.SweepSummary" for cb in cfg.hydra.callbacks.values())
 
 
 # --------------------------------------------------------------------------------------------
@@ -267,7 +267,7 @@ def test_tiny_run_writes_results(tmp_path: Path) -> None:
     assert ck.iteration == 2 and len(ck.records) == 2
     rrd = tmp_path / "realize.rrd"
     assert rrd.is_file() and rrd.stat().st_size > 0
-    from realize.rerun_read import read_rrd_summary
+    from realize.recording.read import read_rrd_summary
 
     rr = read_rrd_summary(rrd)
     assert rr["iterations"] == [0, 1]

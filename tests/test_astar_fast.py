@@ -23,7 +23,7 @@ from realize.controllers.astar_search import SQRT2, _heuristic, _TIE, octile
 from realize.controllers.grid_cache import clear_grid_cache, grid_cached
 from realize.controllers.occupancy import cell_in_grid, cell_to_world, grid_from_bounds, occupancy_from_boxes, world_to_cell
 from realize.controllers.waypoints import _compact, path_to_waypoints
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 
 
 def scene_grid(variant: str):

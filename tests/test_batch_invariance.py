@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 from realize.robot.spec import load_robot_spec
 
 ROBOT = load_robot_spec("fetch_omni")

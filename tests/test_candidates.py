@@ -1,4 +1,4 @@
-"""Successive halving over candidate plans (realize.candidates) on fake evaluators: the halving
+"""Successive halving over candidate plans (realize.search.candidates) on fake evaluators: the halving
 schedule, the budget rule and its errors, ranking (feasible before infeasible, progress share),
 bookkeeping of dropped rounds and spent samples. No simulator."""
 
@@ -9,15 +9,15 @@ import math
 import pytest
 import torch
 
-from realize.budget import plan_budget
-from realize.candidates import SEED_STRIDE, CandidateSpec, SuccessiveHalving, candidate_key
-from realize.ce.config import CEConfig
-from realize.ce.optimizer import CrossEntropyOptimizer
-from realize.ce.state import CEState
+from realize.search.budget import plan_budget
+from realize.search.candidates import SEED_STRIDE, CandidateSpec, SuccessiveHalving, candidate_key
+from realize.search.ce.config import CEConfig
+from realize.search.ce.optimizer import CrossEntropyOptimizer
+from realize.search.ce.state import CEState
 from realize.config import ConfigError
-from realize.param_layout import ParamLayout
-from realize.regions import Box
-from realize.searcher import EvalResult
+from realize.tasks.param_layout import ParamLayout
+from realize.tasks.regions import Box
+from realize.search.protocol import EvalResult
 
 F64 = torch.float64
 

@@ -1,4 +1,4 @@
-"""Tests for the cross-entropy search (realize.ce) on toy cost functions (no simulator)."""
+"""Tests for the cross-entropy search (realize.search.ce) on toy cost functions (no simulator)."""
 
 from __future__ import annotations
 
@@ -8,15 +8,15 @@ import math
 import pytest
 import torch
 
-from realize.ce.config import CEConfig
-from realize.ce.mixture import kmeans, mode_counts
-from realize.ce.optimizer import CrossEntropyOptimizer, optimize
-from realize.ce.ranking import knn_mean, rank_samples
-from realize.ce.state import CEState
-from realize.hemisphere import Hemisphere
-from realize.param_layout import ParamLayout
-from realize.regions import Annulus, Box, Fixed
-from realize.searcher import EvalResult
+from realize.search.ce.config import CEConfig
+from realize.search.ce.mixture import kmeans, mode_counts
+from realize.search.ce.optimizer import CrossEntropyOptimizer, optimize
+from realize.search.ce.ranking import knn_mean, rank_samples
+from realize.search.ce.state import CEState
+from realize.tasks.hemisphere import Hemisphere
+from realize.tasks.param_layout import ParamLayout
+from realize.tasks.regions import Annulus, Box, Fixed
+from realize.search.protocol import EvalResult
 
 F64 = torch.float64
 

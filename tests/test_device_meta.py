@@ -19,7 +19,7 @@ import torch
 
 DOF = 11  # the default robot's whole-body joints (fetch_omni: base 3 + torso + 7 arm)
 from realize.controllers.whole_body import WholeBodyFabric
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 from realize.robot.jacobians import prefix_ends
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext

@@ -16,7 +16,7 @@ from helpers import load_script
 from realize.figures.fig2 import fig2
 from realize.figures.fig3 import fig3, sampling_distributions
 from realize.figures.fig4 import fig4, find_run_dirs
-from realize.param_layout import ParamLayout
+from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
 from realize.run_dir.names import SCENE_FILE

@@ -1,4 +1,4 @@
-"""Regions in object frames (realize/frames.py): they follow their object through the scene config."""
+"""Regions in object frames (realize/tasks/frames.py): they follow their object through the scene config."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import pytest
 import torch
 
 from realize.config import ConfigError
-from realize.frames import Frame, move_points, object_frames, place_region
-from realize.geometry import GeometryCfg, build_geometry
-from realize.param_layout import region_from_dict
+from realize.tasks.frames import Frame, move_points, object_frames, place_region
+from realize.world.geometry import GeometryCfg, build_geometry
+from realize.tasks.param_layout import region_from_dict
 from realize.realization.actions import TEMPLATES
-from realize.task import task_from_dict
+from realize.tasks.spec import task_from_dict
 from helpers import compose_config
 
 WORLD_SEED_TASK = {  # the seed paper's regions as the task config wrote them before frames
@@ -23,7 +23,7 @@ WORLD_SEED_TASK = {  # the seed paper's regions as the task config wrote them be
 
 
 def _task(*overrides: str):
-    from realize.run_config import build_run_spec
+    from realize.app.run_config import build_run_spec
 
     return build_run_spec(compose_config(*overrides)).task
 

@@ -1,4 +1,4 @@
-"""The goal predicates of ``realize.realization.goals``, and the ManiSkill tasks' ``evaluate()``
+"""The goal predicates of ``realize.tasks.goals``, and the ManiSkill tasks' ``evaluate()``
 built on them: every copy of a tiled scene is read, not copy 0 only.
 
 * unit checks of each predicate and of ``goal_reached`` (conditions AND-ed, distances summed);
@@ -14,8 +14,8 @@ import math
 import pytest
 import torch
 
-from realize.geometry import GeometryCfg, build_geometry
-from realize.realization.goals import (
+from realize.world.geometry import GeometryCfg, build_geometry
+from realize.tasks.goals import (
     HEIGHT_TOL,
     base_in_rectangle,
     base_rectangle_distance,
@@ -24,9 +24,9 @@ from realize.realization.goals import (
     cube_on_table_distance,
     goal_reached,
 )
-from realize.regions import Box as BoxRegion
+from realize.tasks.regions import Box as BoxRegion
 from realize.scene import BatchedScene, SimSettings
-from realize.task import GoalSpec
+from realize.tasks.spec import GoalSpec
 
 
 def _on_top(geometry, table: str, dx: float = 0.0, dz: float = 0.0) -> list[float]:

@@ -36,7 +36,7 @@ from mani_skill.envs.tasks.mobile_manipulation.open_cabinet_drawer import OpenCa
 import realize.scene.backends as backends
 from envs.pick_place import RealizePickPlaceEnv, gpu_memory_config
 from realize.config import ConfigError
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 from realize import physx_gpu
 from realize.scene.gpu import GpuBackend
 
@@ -281,7 +281,7 @@ def test_realize_device_cuda_without_the_library_exits_in_one_line(tmp_path: Pat
     home = tmp_path / "home"
     home.mkdir()
     driver = ("import sys, torch; torch.cuda.is_available = lambda: True\n"
-              "from realize.cli import main; main(sys.argv[1:])\n")
+              "from realize.app.cli import main; main(sys.argv[1:])\n")
     t0 = time.monotonic()
     p = subprocess.run([sys.executable, "-c", driver, "device=cuda", f"hydra.run.dir={tmp_path / 'run'}"],
                        cwd=REPO, capture_output=True, text=True, timeout=60,
@@ -297,8 +297,8 @@ def test_realize_device_cuda_without_the_library_exits_in_one_line(tmp_path: Pat
 # ------------------------------------------------------------------ device: auto and cuda (#27 item 5)
 
 def test_auto_picks_the_cpu_where_torch_reports_cuda(monkeypatch: pytest.MonkeyPatch) -> None:
-    from realize.ce.config import CEConfig
-    from realize.run_config import resolve_placement
+    from realize.search.ce.config import CEConfig
+    from realize.app.run_config import resolve_placement
     from realize.scene.settings import SimSettings
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)

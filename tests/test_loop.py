@@ -1,4 +1,4 @@
-"""The one search loop (realize.loop) and its sinks' failure rule (realize.sinks.base), on a fake
+"""The one search loop (realize.app.loop) and its sinks' failure rule (realize.sinks.base), on a fake
 scene: either searcher runs through the same loop, sinks see every iteration in order, a failing
 non-critical sink is dropped while the search goes on, a failing critical sink fails the run
 clearly, and an interrupt ends the run as ``interrupted``. No simulator."""
@@ -12,14 +12,14 @@ from pathlib import Path
 import pytest
 import torch
 
-from realize.budget import plan_budget
-from realize.candidates import CandidateSpec, SuccessiveHalving
-from realize.ce.config import CEConfig
-from realize.ce.optimizer import CrossEntropyOptimizer
-from realize.loop import search_loop
-from realize.param_layout import ParamLayout
-from realize.regions import Box
-from realize.searcher import EvalResult, Searcher
+from realize.search.budget import plan_budget
+from realize.search.candidates import CandidateSpec, SuccessiveHalving
+from realize.search.ce.config import CEConfig
+from realize.search.ce.optimizer import CrossEntropyOptimizer
+from realize.app.loop import search_loop
+from realize.tasks.param_layout import ParamLayout
+from realize.tasks.regions import Box
+from realize.search.protocol import EvalResult, Searcher
 from realize.sinks.base import Iteration, SinkError, SinkSet
 
 F64 = torch.float64

@@ -21,14 +21,14 @@ from typing import Callable
 import pytest
 import torch
 
-from realize.geometry import SceneGeometry
+from realize.world.geometry import SceneGeometry
 from realize.realization.actions import TEMPLATES
 from realize.realization.config import RolloutConfig
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.regions import Annulus
+from realize.tasks.regions import Annulus
 from realize.scene import BatchedScene, SimSettings
-from realize.task import task_from_dict
+from realize.tasks.spec import task_from_dict
 
 TABLE1 = {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25}  # the seed task's
 TABLE2 = {"type": "annulus", "center": [0.0, -1.2], "r_min": 0.75, "r_max": 1.25}

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import unified_planning.shortcuts as ups
 
-from realize.pddl import PlannedAction, PlanningError, plan_from_pddl
+from realize.tasks.pddl import PlannedAction, PlanningError, plan_from_pddl
 
 PDDL_DIR = Path(__file__).resolve().parents[1] / "configs" / "pddl"
 SEED_DOMAIN = PDDL_DIR / "pick_place_domain.pddl"

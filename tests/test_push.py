@@ -21,11 +21,11 @@ import torch
 
 from helpers import blas_batch_invariant, compose_config as _compose
 from realize.config import ConfigError
-from realize.realization.goals import cube_in_container
+from realize.tasks.goals import cube_in_container
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.run_config import RunSpec, build_run_spec
-from realize.task_plans import build_task
+from realize.app.run_config import RunSpec, build_run_spec
+from realize.app.task_plans import build_task
 from realize.scene import BatchedScene
 
 # columns: PushSide.x, PushSide.y, Stick_p.x, Stick_p.y, Stick_p.z

@@ -36,7 +36,7 @@ from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene, SimSettings, quat_to_matrix
-from realize.task import task_from_dict
+from realize.tasks.spec import task_from_dict
 
 TASK_FILE = Path(__file__).resolve().parents[1] / "configs" / "task" / "pick_place.yaml"
 REACH_TOL = 0.02  # m

@@ -1,4 +1,4 @@
-"""Tests for realize.regions: uniformity, contains/project properties, orientation, validation."""
+"""Tests for realize.tasks.regions: uniformity, contains/project properties, orientation, validation."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import pytest
 import torch
 
 from realize.config import ConfigError
-from realize.hemisphere import Hemisphere
-from realize.param_layout import ParamLayout, region_from_dict
-from realize.regions import Annulus, Box, Fixed, Region
+from realize.tasks.hemisphere import Hemisphere
+from realize.tasks.param_layout import ParamLayout, region_from_dict
+from realize.tasks.regions import Annulus, Box, Fixed, Region
 
 F64 = torch.float64
 N_UNIF = 20000

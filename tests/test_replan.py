@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from realize.realizers import open_realization
-from realize.run_config import build_run_spec
-from realize.scene_state import SceneState, load_state
-from realize.task_suffix import task_suffix
+from realize.app.realizers import open_realization
+from realize.app.run_config import build_run_spec
+from realize.world.state import SceneState, load_state
+from realize.tasks.suffix import task_suffix
 from helpers import compose_config
 
 FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"
@@ -122,14 +122,14 @@ def test_replan_run_writes_where_it_started(tmp_path: Path, torch_single_thread:
     """``realize replan_from=RUN replan.action=2 replan.state=FILE`` with table 2 moved: one
     iteration of two plans over the remaining parameters (a short horizon), result.json says
     where it started."""
-    from realize.cli import preflight
+    from realize.app.cli import preflight
     from realize.config import ConfigError
-    from realize.run import run
+    from realize.app.run import run
     from realize.run_dir.jsonio import atomic_write_json, read_json
 
     earlier = tmp_path / "earlier"
     earlier.mkdir()
-    from realize.run_config import build_run_spec
+    from realize.app.run_config import build_run_spec
 
     whole = build_run_spec(compose_config()).task
     D = whole.layout.dim

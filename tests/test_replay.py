@@ -15,12 +15,12 @@ import pytest
 import torch
 
 from helpers import GOOD, compose_config, load_script
-from realize.replay import ReplayError, build_replay_spec, replay, saved_plan
+from realize.app.replay import ReplayError, build_replay_spec, replay, saved_plan
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
-from realize.run_config import build_run_spec
+from realize.app.run_config import build_run_spec
 from realize.scene import BatchedScene, EnvOptions, SimSettings
-from realize.validation import validate
+from realize.app.validation import validate
 
 FEASIBLE_Z = GOOD  # a plan of the seed task that reaches the goal with the default configs
 SAVED_COST = 491.0  # what a one-copy CPU rollout of FEASIBLE_Z gave when these tests were written
@@ -135,7 +135,7 @@ def test_video_follows_the_action_and_labels_every_frame(tmp_path: Path) -> None
     every frame (the caption's text itself: ``Caption.text``)."""
     import imageio.v2 as imageio
 
-    from realize.video import Caption
+    from realize.app.video import Caption
 
     # an 11 s horizon: the rollout is cut (infeasible) but the video covers the start of the grasp
     d = _write_run(tmp_path / "grasp", ["controller.max_time_s=11"])

@@ -10,10 +10,10 @@ from hydra import compose, initialize_config_dir
 from scipy.spatial.transform import Rotation
 
 from realize.paths import CONFIG_DIR
-from realize.rerun_3d import STEP_STRIDE
-from realize.rerun_read import read_rrd_3d
-from realize.rerun_robot import MAX_MESH_BYTES, link_meshes, matrix_to_quat_xyzw
-from realize.run import run
+from realize.recording.world3d import STEP_STRIDE
+from realize.recording.read import read_rrd_3d
+from realize.recording.robot import MAX_MESH_BYTES, link_meshes, matrix_to_quat_xyzw
+from realize.app.run import run
 from realize.run_dir.directory import RunDir
 
 # 3 plans, 2 iterations, 8 s: the base drives to table 1 and the arm starts to reach

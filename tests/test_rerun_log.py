@@ -1,4 +1,4 @@
-"""Tests for realize.rerun_log (real rerun writing and reading back) and realize.topdown."""
+"""Tests for realize.recording.log (real rerun writing and reading back) and realize.tasks.topdown."""
 
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ import pytest
 import torch
 
 from _synthetic import make_geometry, make_layout, run_synthetic
-from realize.geometry import Box as ObstacleBox
-from realize.geometry import GeometryCfg, build_geometry
-from realize.hemisphere import Hemisphere
-from realize.rerun_log import RerunLogger
-from realize.rerun_paths import SCALAR_PATHS
-from realize.rerun_read import read_rrd_summary
-from realize.topdown import (
+from realize.world.geometry import Box as ObstacleBox
+from realize.world.geometry import GeometryCfg, build_geometry
+from realize.tasks.hemisphere import Hemisphere
+from realize.recording.log import RerunLogger
+from realize.recording.paths import SCALAR_PATHS
+from realize.recording.read import read_rrd_summary
+from realize.tasks.topdown import (
     decimate_time,
     fill_nan_forward,
     padded_outline,

@@ -32,8 +32,8 @@ from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, blas_batch_invariant, compo
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.run_config import RunSpec, build_run_spec
-from realize.task_plans import build_task, load_task_file
+from realize.app.run_config import RunSpec, build_run_spec
+from realize.app.task_plans import build_task, load_task_file
 from realize.scene import BatchedScene
 
 VECTORS = torch.tensor([GOOD, SIDE, FAR_SIDE])  # two feasible plans of the seed task, one infeasible
@@ -390,7 +390,7 @@ def test_wrong_z_shape(spec: RunSpec, scene3: BatchedScene, shape: tuple[int, ..
 def test_place_takes_a_box_of_release_points_grasp_does_not() -> None:
     from realize.realization.actions.grasp import Grasp
     from realize.realization.actions.place import Place
-    from realize.regions import Box as BoxRegion
+    from realize.tasks.regions import Box as BoxRegion
 
     box3 = BoxRegion([-0.1, -1.4, 0.76], [0.1, -0.1, 1.15])
     assert Place.accepts(box3) and not Grasp.accepts(box3)

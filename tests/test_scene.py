@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from realize.config import ConfigError
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 from realize.scene import BatchedScene, SimSettings
 
 SIM = SimSettings(backend="cpu")

@@ -11,7 +11,7 @@ import torch
 
 from realize.robot.spec import load_robot_spec
 from realize.scene import BatchedScene, SimSettings
-from realize.scene_state import load_state
+from realize.world.state import load_state
 
 FINGER_LINKS = load_robot_spec("fetch_omni").gripper.finger_links
 

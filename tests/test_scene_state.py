@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from realize.config import ConfigError
-from realize.replan import replan_config
-from realize.run_config import build_run_spec
+from realize.app.replan import replan_config
+from realize.app.run_config import build_run_spec
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
 from realize.robot.spec import load_robot_spec
-from realize.scene_state import SceneState, load_state, save_state
+from realize.world.state import SceneState, load_state, save_state
 
 FETCH = load_robot_spec("fetch_omni")
 STATE_JOINTS = [n for n in FETCH.rest if n not in FETCH.base.joints]  # every active joint but the base's
-from realize.task_suffix import check_suffix_start, suffix_columns, task_suffix
+from realize.tasks.suffix import check_suffix_start, suffix_columns, task_suffix
 from helpers import compose_config
 
 FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"

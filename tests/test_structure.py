@@ -127,3 +127,34 @@ def test_no_robot_joint_or_link_named_outside_the_robot_package() -> None:
             if found:
                 hits.append(f"{n}:{i + 1} {found}")
     assert not hits, "robot joints/links named outside realize/robot/ and envs/robot_agent.py:\n" + "\n".join(hits)
+
+
+def _package(module: str) -> str:
+    """The layer a module belongs to: ``envs``, or ``realize.<package>`` (a top-level module is its own)."""
+    parts = module.split(".")
+    return "envs" if parts[0] == "envs" else ".".join(parts[:2])
+
+
+def test_no_import_cycle_between_packages() -> None:
+    """The packages are layers: no import runs back up between them (robot, world, tasks, run_dir,
+    search, controllers, scene, realization, recording, sinks, figures, app; envs above the scene,
+    which asks gym for its tasks by id and never imports envs)."""
+    mods = _modules()
+    g = nx.DiGraph()
+    for n, p in mods.items():
+        for m in _imports(n, p, set(mods)):
+            a, b = _package(n), _package(m)
+            if a != b:
+                g.add_edge(a, b)
+    cycles = [sorted(c) for c in nx.strongly_connected_components(g) if len(c) > 1]
+    assert not cycles, f"import cycles between packages: {cycles}"
+    assert not any(_package(m) == "envs" for n, p in mods.items() if n.startswith("realize")
+                   for m in _imports(n, p, set(mods))), "realize imports envs"
+
+
+def test_scene_task_ids_agree_with_envs() -> None:
+    import envs
+    from realize.scene.physics import task_id
+    from realize.world.geometry import VARIANTS
+
+    assert all(task_id(v) == envs.env_id_for(v) for v in VARIANTS)

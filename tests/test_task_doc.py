@@ -7,10 +7,10 @@ import re
 
 import yaml
 
-from realize.geometry import GeometryCfg, build_geometry
-from realize.param_layout import REGION_TYPES
+from realize.world.geometry import GeometryCfg, build_geometry
+from realize.tasks.param_layout import REGION_TYPES
 from realize.paths import CONFIG_DIR
-from realize.task_plans import build_task, load_task_file
+from realize.app.task_plans import build_task, load_task_file
 
 DOC = CONFIG_DIR.parent / "docs" / "task_files.md"
 

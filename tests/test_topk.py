@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 import yaml
 
-import realize.pddl
+import realize.tasks.pddl
 from helpers import cfg_of, expect_config_error, plain, tiny_with
 from realize.paths import CONFIG_DIR
-from realize.replay import build_replay_spec, saved_plan
-from realize.run import run
-from realize.run_config import build_run_spec
+from realize.app.replay import build_replay_spec, saved_plan
+from realize.app.run import run
+from realize.app.run_config import build_run_spec
 from realize.run_dir.checkpoint import load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
@@ -46,7 +46,7 @@ def test_bad_top_k_config_fails_before_simulation(overrides: list[str], needles:
         raise AssertionError("the planner ran for a config that fails its budget check")
 
     if "too small" in needles[0] or "schedule" in needles[0]:
-        monkeypatch.setattr(realize.pddl, "plan_from_pddl", no_planner)
+        monkeypatch.setattr(realize.tasks.pddl, "plan_from_pddl", no_planner)
     _, res = expect_config_error(overrides, needles, tmp_path)
     assert res["status"] == "failed" and res["simulated"] is False
 
@@ -75,14 +75,14 @@ def test_candidates_use_only_their_parameters(tmp_path: Path, no_sim: None) -> N
 
 
 def test_fewer_plans_than_top_k(monkeypatch: pytest.MonkeyPatch, no_sim: None) -> None:
-    real = realize.pddl.plan_from_pddl
+    real = realize.tasks.pddl.plan_from_pddl
     asked = []
 
     def one_plan(*a, top_k: int = 1, **k):
         asked.append(top_k)
         return real(*a, top_k=top_k, **k)[:1]
 
-    monkeypatch.setattr(realize.pddl, "plan_from_pddl", one_plan)
+    monkeypatch.setattr(realize.tasks.pddl, "plan_from_pddl", one_plan)
     spec = build_run_spec(plain(tiny_with(["task.planner.enabled=true", "task.planner.top_k=5",
                                            "ce.iterations=10"])))
     assert asked == [5]

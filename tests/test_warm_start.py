@@ -1,4 +1,4 @@
-"""Warm start (realize/warm_start.py, CE's WarmDistribution): where a search begins, and what it refuses."""
+"""Warm start (realize/search/warm_start.py, CE's WarmDistribution): where a search begins, and what it refuses."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ from pathlib import Path
 import pytest
 import torch
 
-from realize.ce.config import CEConfig
-from realize.ce.optimizer import CrossEntropyOptimizer, optimize
-from realize.ce.state import WarmDistribution
+from realize.search.ce.config import CEConfig
+from realize.search.ce.optimizer import CrossEntropyOptimizer, optimize
+from realize.search.ce.state import WarmDistribution
 from realize.config import ConfigError
-from realize.param_layout import ParamLayout
-from realize.regions import Box
-from realize.run_config import build_run_spec
-from realize.searcher import EvalResult
-from realize.warm_start import load_warm_start, merge_modes
+from realize.tasks.param_layout import ParamLayout
+from realize.tasks.regions import Box
+from realize.app.run_config import build_run_spec
+from realize.search.protocol import EvalResult
+from realize.search.warm_start import load_warm_start, merge_modes
 from helpers import compose_config
 
 F64 = torch.float64
@@ -145,7 +145,7 @@ def test_a_warm_start_at_the_optimum_beats_a_cold_start_of_the_same_budget():
 
 
 def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path):
-    from realize.run import run
+    from realize.app.run import run
 
     cfg = compose_config(f"warm_start={tmp_path / 'nowhere'}", "ce.n_envs=4", "ce.n_elite=2", "ce.iterations=1")
     with pytest.raises(ConfigError, match="warm_start = .*nowhere.*is not a directory"):
@@ -155,7 +155,7 @@ def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path):
 
 
 def test_a_plan_tail_starts_from_the_marginal_of_the_earlier_run(tmp_path):
-    from realize.task import task_for_plan
+    from realize.tasks.spec import task_for_plan
 
     src = _source_run(tmp_path / "src")
     spec = _spec("ce.warm_widen=1.0")

@@ -17,7 +17,7 @@ from realize.controllers.fabric_jets import distance_jets
 from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.obstacles import BoxDistance
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, build_geometry
 from realize.realization.config import RolloutConfig
 from realize.robot.spec import load_robot_spec
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from realize.geometry import SceneGeometry
+from realize.world.geometry import SceneGeometry
 from realize.robot.chain import mat3, matvec3
 
 # columns of one obstacle-box row

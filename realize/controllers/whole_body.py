@@ -31,7 +31,7 @@ from realize.config import ConfigError, Settings, setting
 from realize.robot.layout import BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
-from realize.geometry import SceneGeometry
+from realize.world.geometry import SceneGeometry
 from realize.robot.jacobians import point_jets, prefix_ends
 from realize.robot.chain import matvec3
 from realize.robot.kinematics import RobotKinematics

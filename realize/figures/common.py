@@ -25,13 +25,13 @@ from matplotlib.patches import PathPatch, Polygon  # noqa: E402
 from matplotlib.path import Path as MplPath  # noqa: E402
 import numpy as np  # noqa: E402
 
-from realize.geometry import SceneGeometry  # noqa: E402
-from realize.param_layout import ParamLayout  # noqa: E402
-from realize.regions import Fixed  # noqa: E402
+from realize.world.geometry import SceneGeometry  # noqa: E402
+from realize.tasks.param_layout import ParamLayout  # noqa: E402
+from realize.tasks.regions import Fixed  # noqa: E402
 from realize.run_dir.directory import RunDir  # noqa: E402
 from realize.run_dir.names import SCENE_FILE  # noqa: E402
 from realize.run_dir.scene_files import SceneInfo  # noqa: E402
-from realize.topdown import obstacle_outline, padded_outline, region_outlines  # noqa: E402
+from realize.tasks.topdown import obstacle_outline, padded_outline, region_outlines  # noqa: E402
 
 __all__ = ["plt", "CYAN", "REGION_GREY", "REGION_EDGE", "DPI", "require_scene", "write_csv", "fmt", "draw_world",
            "set_world_limits"]

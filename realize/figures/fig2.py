@@ -33,7 +33,7 @@ from realize.figures.common import (
     write_csv,
 )
 from realize.run_dir.directory import RunDir
-from realize.topdown import decimate_time, fill_nan_forward, param_xy
+from realize.tasks.topdown import decimate_time, fill_nan_forward, param_xy
 
 __all__ = ["fig2"]
 

@@ -24,7 +24,7 @@ from matplotlib.patches import Ellipse
 from realize.figures.common import DPI, REGION_EDGE, fmt, plt, write_csv
 from realize.run_dir.directory import RunDir
 from realize.run_dir.names import HISTORY_FILE, SCENE_FILE
-from realize.topdown import ellipse_params, param_xy, planar_params, region_outlines
+from realize.tasks.topdown import ellipse_params, param_xy, planar_params, region_outlines
 
 __all__ = ["fig3", "sampling_distributions"]
 

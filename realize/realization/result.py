@@ -18,7 +18,7 @@ import torch
 from torch import Tensor
 
 from realize.robot.layout import BASE_XY
-from realize.searcher import EvalResult
+from realize.search.protocol import EvalResult
 from realize.realization.context import StepContext
 
 

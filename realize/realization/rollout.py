@@ -13,8 +13,8 @@ then ``settle`` (physics only, uncounted, until the last goals are due), ``cut_a
 feasibility, progress and a distance proxy for ranking infeasible plans, trajectories). A goal
 that reads the cube is read ``goal_settle_s`` after the plan's last action, so a pushed or
 dropped cube has landed. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
-What it doesn't: choose parameters (``realize.ce``), implement the actions
-(``realize.realization.actions``) or the goal predicates (``realize.realization.goals``), or
+What it doesn't: choose parameters (``realize.search.ce``), implement the actions
+(``realize.realization.actions``) or the goal predicates (``realize.tasks.goals``), or
 know any backend details (``realize.scene``).
 """
 
@@ -30,21 +30,21 @@ from torch import Tensor
 from realize.robot.layout import BASE_XY, UPPER
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.whole_body import WholeBodyFabric
-from realize.searcher import EvalResult
+from realize.search.protocol import EvalResult
 from realize.realization.actions import TEMPLATES
 from realize.realization.actions.base import Template
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
-from realize.realization.goals import goal_reached
+from realize.tasks.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
 from realize.scene import BatchedScene
-from realize.scene_state import SceneState
-from realize.task import TaskSpec
+from realize.world.state import SceneState
+from realize.tasks.spec import TaskSpec
 
 
 class RealizerSpec(Protocol):
-    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.run_config.RunSpec``)."""
+    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.app.run_config.RunSpec``)."""
 
     task: TaskSpec
     rollout: RolloutConfig

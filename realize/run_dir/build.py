@@ -3,10 +3,10 @@
 What it does:
   * ``RunInfo``: how the run was set up (segments, the iteration it resumed from, the scene's
     backend and copies, setup time); the loop fills it in as it learns it;
-  * ``result_doc(...)`` -> ``ResultDoc`` from the CE state (``realize.ce.state.CEState``,
+  * ``result_doc(...)`` -> ``ResultDoc`` from the CE state (``realize.search.ce.state.CEState``,
     or ``None`` before the first iteration), the ``IterationSummary`` list, the task
-    (``realize.task.TaskSpec``) and the run's identity (iterations, seed, config, directory);
-  * ``halving_doc(sh, top_k)`` -> ``HalvingDoc`` from a ``realize.candidates.SuccessiveHalving``;
+    (``realize.tasks.spec.TaskSpec``) and the run's identity (iterations, seed, config, directory);
+  * ``halving_doc(sh, top_k)`` -> ``HalvingDoc`` from a ``realize.search.candidates.SuccessiveHalving``;
   * ``failure_doc(message, config)`` -> ``FailureDoc``; ``package_versions()``.
 The inputs are read by attribute (duck typing, described by the protocols below), so this
 module imports neither the optimizer nor the task code.
@@ -32,7 +32,7 @@ __all__ = ["RunInfo", "SearchState", "TaskInfo", "result_doc", "halving_doc", "f
 
 
 class SearchState(Protocol):
-    """What ``result_doc`` reads of the search state (``realize.ce.state.CEState``)."""
+    """What ``result_doc`` reads of the search state (``realize.search.ce.state.CEState``)."""
 
     best_z: Any  # (D,) tensor or None
     best_cost: float
@@ -45,11 +45,11 @@ class SearchState(Protocol):
 
 
 class TaskInfo(Protocol):
-    """What ``result_doc`` reads of the task (``realize.task.TaskSpec``)."""
+    """What ``result_doc`` reads of the task (``realize.tasks.spec.TaskSpec``)."""
 
     name: str
     source: str
-    layout: Any  # realize.regions.ParamLayout
+    layout: Any  # realize.tasks.regions.ParamLayout
 
     def describe(self) -> str: ...
 
@@ -65,8 +65,8 @@ class RunInfo:
     backend: str | None = None
     n_envs: int | None = None
     setup_time_s: float | None = None
-    workers: int = 1  # rollout workers (realize.workers); never changes the numbers
-    warm_start: dict[str, Any] | None = None  # the earlier run the search started from (realize.warm_start)
+    workers: int = 1  # rollout workers (realize.app.workers); never changes the numbers
+    warm_start: dict[str, Any] | None = None  # the earlier run the search started from (realize.search.warm_start)
 
 
 def package_versions() -> dict[str, str | None]:
@@ -151,7 +151,7 @@ def result_doc(
 
 
 def halving_doc(sh: Any, top_k: int) -> HalvingDoc:
-    """The top-k part of the result from a ``realize.candidates.SuccessiveHalving`` ``sh``:
+    """The top-k part of the result from a ``realize.search.candidates.SuccessiveHalving`` ``sh``:
     its leader (the winner once decided), winner, budget, spending and every candidate's
     ``Candidate.summary()``."""
     lead, win = sh.leader, sh.winner

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from realize.param_layout import ParamLayout
+from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from realize.run_dir.history import History, load_history
 from realize.run_dir.jsonio import atomic_write_json, atomic_write_text, decode_float, read_json

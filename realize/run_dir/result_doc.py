@@ -8,7 +8,7 @@ two apart. Float fields hold real floats in memory (``inf``: no feasible cost; `
 value); ``to_json``/``from_json`` convert at the JSON boundary with the one encoding of
 ``realize.run_dir.jsonio``. ``from_json`` is lenient: any key may be missing (partial or older
 documents, stand-in apps in tests); keys it does not know are kept in ``extra`` and written
-back (e.g. ``validation``, added by ``realize.replay``).
+back (e.g. ``validation``, added by ``realize.app.replay``).
 
 JSON keys (the ones readers rely on): ``status`` (running | done | interrupted | failed),
 ``interrupted``, ``error``, ``feasible``, ``best_cost`` (null: none feasible),
@@ -19,7 +19,7 @@ JSON keys (the ones readers rely on): ``status`` (running | done | interrupted |
 ``final_mean``/``final_std``/``final_weights``, ``wall_time_s``, ``seed``, ``task`` ({name,
 source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments``,
 ``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``,
-``warm_start`` (null, or the earlier run it started from: ``realize.warm_start``);
+``warm_start`` (null, or the earlier run it started from: ``realize.search.warm_start``);
 top-k runs add ``top_k``, ``n_candidates``, ``leader``, ``winner``, ``budget``,
 ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
@@ -91,7 +91,7 @@ class PlanRef:
 @dataclass
 class HalvingDoc:
     """The top-k part of a result: the candidates, who leads/won, the budget and its use.
-    ``budget`` is ``realize.budget.HalvingBudget.to_dict()``."""
+    ``budget`` is ``realize.search.budget.HalvingBudget.to_dict()``."""
 
     top_k: int
     leader: PlanRef
@@ -186,7 +186,7 @@ class ResultDoc:
     n_envs: int | None = None
     setup_time_s: float = NAN
     workers: int = 1
-    warm_start: dict[str, Any] | None = None  # realize.warm_start.WarmStart.to_dict(): where the search began
+    warm_start: dict[str, Any] | None = None  # realize.search.warm_start.WarmStart.to_dict(): where the search began
     halving: HalvingDoc | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 

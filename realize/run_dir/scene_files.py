@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from realize.geometry import Box as ObstacleBox
-from realize.geometry import GeometryCfg, SceneGeometry, build_geometry
-from realize.param_layout import ParamLayout
+from realize.world.geometry import Box as ObstacleBox
+from realize.world.geometry import GeometryCfg, SceneGeometry, build_geometry
+from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.jsonio import atomic_write_json, atomic_write_npz, read_json
 from realize.run_dir.names import SCENE_FILE, TRAJ_PATTERN, trajectories_name
 

@@ -34,7 +34,7 @@ def _opt_int(v: Any) -> int | None:
 
 def best_params(layout: Any, z: Any) -> BestParams | None:
     """``z`` (D,) split by parameter, ``{name: {coord: value}}``; ``layout`` is a
-    ``realize.regions.ParamLayout`` (its ``slices`` and regions' ``coord_names``). ``None`` for
+    ``realize.tasks.regions.ParamLayout`` (its ``slices`` and regions' ``coord_names``). ``None`` for
     ``z is None``."""
     if z is None:
         return None

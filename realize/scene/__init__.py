@@ -12,7 +12,7 @@ Modules:
     that ask which backend runs.
 This package's namespace offers the names the rest of realize uses.
 What it doesn't: decide anything (controllers and the rollout do), or hold world geometry
-(``realize.geometry``) or the ManiSkill tasks (``envs``).
+(``realize.world.geometry``) or the ManiSkill tasks (``envs``).
 """
 
 from realize.scene.batched import BatchedScene, SceneSpec, StepHook, quat_to_matrix

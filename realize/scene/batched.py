@@ -5,7 +5,7 @@ resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, 
 ``num_envs = N`` on PhysX GPU) and is the one interface the realizer sees, whatever runs:
   * reads: base pose, whole-body joint state, end-effector pose, cube pose and velocity, whether
     the gripper holds the cube (finger contact forces), all in one copy's local frame (the frame
-    of ``realize.geometry``), so nothing above it sees tile offsets; each is read from the
+    of ``realize.world.geometry``), so nothing above it sees tile offsets; each is read from the
     simulator once per state (cached until a step, reset, freeze or cube move; ``state_changed``);
   * writes: base velocity commands, upper-joint targets, the gripper opening; ``step``
     advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
@@ -29,11 +29,11 @@ import torch
 
 from realize.config import ConfigError
 from realize.robot.layout import BASE, BASE_XY, UPPER, YAW
-from realize.geometry import GeometryCfg, SceneGeometry
+from realize.world.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
-from realize.scene_state import SceneState
+from realize.world.state import SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
 
@@ -67,7 +67,7 @@ class BatchedScene:
 
     Args:
         n_envs: number of parallel realizations (>= 1).
-        geometry: the world (a ``realize.geometry.GeometryCfg`` or a mapping of the ``scene``
+        geometry: the world (a ``realize.world.geometry.GeometryCfg`` or a mapping of the ``scene``
             group's keys; None: the defaults).
         sim: physics settings (None: the defaults).
         env: what the task is built and reset with besides (render camera, reset noise, forced

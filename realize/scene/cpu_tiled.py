@@ -26,7 +26,7 @@ import sapien
 import torch
 
 from realize.config import ConfigError
-from realize.geometry import GeometryCfg
+from realize.world.geometry import GeometryCfg
 from realize.robot.spec import RobotSpec
 from realize.scene.physics import PhysicsBackend, make_task
 from realize.scene.settings import EnvOptions, SimSettings

@@ -20,7 +20,7 @@ from __future__ import annotations
 import torch
 
 from realize.config import ConfigError
-from realize.geometry import GeometryCfg
+from realize.world.geometry import GeometryCfg
 from realize.robot.spec import RobotSpec
 from realize.scene.physics import PhysicsBackend, make_task
 from realize.scene.settings import EnvOptions, SimSettings

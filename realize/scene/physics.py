@@ -7,7 +7,8 @@ What it does:
     substeps, putting finished copies to sleep, history-free resets, teleporting every copy into
     a restored state (``set_state``), per-copy cube friction and test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
   * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
-    variant, ``envs.env_id_for``) with the physics settings and the ``EnvOptions`` (render camera,
+    variant, ``task_id``; gym imports ``envs``, which registers them, by the id's ``envs:`` prefix:
+    realize never imports ``envs``) with the physics settings and the ``EnvOptions`` (render camera,
     reset noise) as ``gym.make`` kwargs; each backend adds its own (tiles or ``num_envs``).
 What it doesn't: pick a backend (``realize.scene.backends``), or hold the backend-independent
 logic of the scene (whole-body vectors, target bookkeeping, step hooks: ``realize.scene.batched``).
@@ -22,12 +23,20 @@ import gymnasium as gym
 import torch
 from mani_skill.utils import sapien_utils
 
-import envs  # registers the tasks
-from realize.geometry import GeometryCfg
+from realize.world.geometry import GeometryCfg
 from realize.robot.spec import RobotSpec
 from realize.scene.settings import EnvOptions, SimSettings
 
-__all__ = ["PhysicsBackend", "make_task"]
+__all__ = ["PhysicsBackend", "make_task", "task_id"]
+
+
+TASK_IDS = {"push": "RealizeMoveAndPush-v1"}  # world variant -> ManiSkill task id (envs.env_id_for agrees)
+DEFAULT_TASK_ID = "RealizePickPlace-v1"  # plain, wall, ramp
+
+
+def task_id(variant: str) -> str:
+    """The ManiSkill task (``envs/``) that builds a world variant."""
+    return TASK_IDS.get(variant, DEFAULT_TASK_ID)
 
 
 def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robot: RobotSpec,
@@ -64,7 +73,7 @@ def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robo
         kwargs["cube_xy_noise"] = options.cube_xy_noise
     if options.robot_xy_noise is not None:
         kwargs["robot_xy_noise"] = options.robot_xy_noise
-    return gym.make(envs.env_id_for(geometry.variant), **backend_kwargs, **kwargs)
+    return gym.make(f"envs:{task_id(geometry.variant)}", **backend_kwargs, **kwargs)
 
 
 class PhysicsBackend(ABC):
@@ -73,7 +82,7 @@ class PhysicsBackend(ABC):
     Attributes every backend sets: ``env`` (the gym env), ``u`` (the unwrapped ManiSkill task),
     ``device`` (where its tensors live), ``n_envs``, ``robot`` (its ``RobotSpec``: the joints it
     reads and drives, the finger links, the TCP link). Poses are in a copy's local frame
-    (``realize.geometry``'s), position then wxyz quaternion, float32."""
+    (``realize.world.geometry``'s), position then wxyz quaternion, float32."""
 
     name: ClassVar[str]  # "cpu" | "gpu": what run reports and logs call the backend
     deterministic: ClassVar[bool]  # same seed, same result, bit for bit

@@ -41,7 +41,7 @@ class SimSettings(Settings):
     cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"
     torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
-    shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.workers.blocks)
+    shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.app.workers.blocks)
     # PhysX scene settings (ManiSkill's SceneConfig; defaults are ManiSkill's)
     contact_offset: float = setting(0.02, gt=0)  # m: shapes closer than the sum of their offsets get contacts
     solver: str = setting("tgs", choices=SOLVERS)  # tgs: temporal Gauss-Seidel; pgs: projected Gauss-Seidel

@@ -12,7 +12,7 @@ What it does:
     logged, dropped, and the search goes on. ``wants_trajectories``: the rollout records
     trajectories only if a sink wants them;
   * ``SinkSet``: calls the sinks in order and applies that rule, in one place.
-What it doesn't: know any file or format (the sink modules), or drive the search (``realize.loop``).
+What it doesn't: know any file or format (the sink modules), or drive the search (``realize.app.loop``).
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from realize.ce.state import IterationRecord
+from realize.search.ce.state import IterationRecord
 from realize.run_dir.summaries import IterationSummary
-from realize.searcher import Batch, SearchReport
+from realize.search.protocol import Batch, SearchReport
 
 __all__ = ["Iteration", "Sink", "SinkSet", "SinkError"]
 

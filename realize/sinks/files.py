@@ -11,7 +11,7 @@ What it does:
   * ``RunClock``: the run's wall time over all its segments.
 Every write is atomic (``realize.run_dir``).
 What it doesn't: build the result document (``realize.run_dir.build``; the caller passes a
-``make_doc``), or decide the order of sinks (``realize.run``: checkpoint, then result).
+``make_doc``), or decide the order of sinks (``realize.app.run``: checkpoint, then result).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History
 from realize.run_dir.result_doc import ResultDoc
 from realize.run_dir.summaries import IterationSummary
-from realize.searcher import SearchReport
+from realize.search.protocol import SearchReport
 from realize.sinks.base import Iteration
 
 __all__ = ["RunClock", "CheckpointSink", "ResultSink", "MakeDoc"]

@@ -1,13 +1,13 @@
 """Rerun recordings as a sink: one ``.rrd`` per plan searched, written as the run goes.
 
-What it does: ``RerunSink`` opens a ``realize.rerun_log.RerunLogger`` for a plan when its first
+What it does: ``RerunSink`` opens a ``realize.recording.log.RerunLogger`` for a plan when its first
 iteration arrives (``logging.rrd``, ``<stem>_c{i}.rrd`` per candidate of a top-k run; a resumed
 run's plan that already has iterations gets ``<name>.from-it{k}.rrd``) and logs every
 iteration with the distribution its batch was drawn from (mixture weights included), and the
-run in 3-D when given the plans' actions (``realize.rerun_3d``: the robot along each iteration's
+run in 3-D when given the plans' actions (``realize.recording.world3d``: the robot along each iteration's
 best plan on the ``control_step`` timeline). Not
 critical: if it fails, the run goes on without recordings (``realize.sinks.base.SinkSet``).
-What it doesn't: define what is drawn (``realize.rerun_log``).
+What it doesn't: define what is drawn (``realize.recording.log``).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from realize.param_layout import ParamLayout
+from realize.tasks.param_layout import ParamLayout
 from realize.sinks.base import Iteration
 
 __all__ = ["RerunSink", "recording_name"]
@@ -46,7 +46,7 @@ class RerunSink:
                  n_iterations: int, record: bool = True, *, actions: Mapping[int | None, list[str]] | None = None,
                  control_freq: float = 20.0, robot: Any = None) -> None:
         self.plans = dict(plans)
-        # the 3-D view (realize.rerun_3d): each plan's action names, the control rate, the robot
+        # the 3-D view (realize.recording.world3d): each plan's action names, the control rate, the robot
         self.actions = dict(actions or {})
         self.control_freq, self.robot = control_freq, robot
         self.wants_trajectories = record  # the scene view shows sample trajectories when recorded
@@ -55,7 +55,7 @@ class RerunSink:
         self._logger_cls: Any = None
 
     def open(self) -> None:
-        from realize.rerun_log import RerunLogger
+        from realize.recording.log import RerunLogger
 
         self._logger_cls = RerunLogger
 

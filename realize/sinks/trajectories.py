@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from realize.param_layout import ParamLayout
+from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.directory import RunDir
 from realize.sinks.base import Iteration
 

@@ -23,7 +23,7 @@ import torch
 from torch import Tensor
 
 from realize.realization.context import StepContext
-from realize.regions import Region
+from realize.tasks.regions import Region
 
 
 class Outcome(NamedTuple):

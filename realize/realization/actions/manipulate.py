@@ -15,10 +15,10 @@ import math
 import torch
 from torch import Tensor
 
-from realize.hemisphere import Hemisphere
+from realize.tasks.hemisphere import Hemisphere
 from realize.realization.actions.base import Template
 from realize.realization.context import StepContext
-from realize.regions import Region
+from realize.tasks.regions import Region
 from realize.scene import quat_to_matrix
 
 

@@ -24,7 +24,7 @@ from realize.controllers.waypoints import path_to_waypoints
 from realize.realization.actions.base import Outcome, Template
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
-from realize.regions import Annulus, Box, Fixed, Region
+from realize.tasks.regions import Annulus, Box, Fixed, Region
 
 
 def _pad_to(points: Tensor, length: int) -> Tensor:

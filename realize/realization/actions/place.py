@@ -11,12 +11,12 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from realize.hemisphere import Hemisphere
+from realize.tasks.hemisphere import Hemisphere
 from realize.realization.actions.base import Outcome
 from realize.realization.actions.manipulate import GRIP, RETREAT, Manipulate
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
-from realize.regions import Box, Region
+from realize.tasks.regions import Box, Region
 
 
 class Place(Manipulate):

@@ -17,7 +17,7 @@ from realize.robot.layout import BASE_XY, YAW
 from realize.realization.actions.base import Outcome, Template
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
-from realize.regions import Box, Fixed, Region
+from realize.tasks.regions import Box, Fixed, Region
 
 # phases of push
 PUSH_APPROACH, PUSH_THROUGH, PUSH_RETREAT = 0, 1, 2

@@ -1,0 +1,177 @@
+"""The ``realize`` command: check the command line, hand it to Hydra, run, exit with a clear code.
+
+What it does: ``main()`` (console script ``realize`` and ``python -m realize``) runs
+``preflight`` on the arguments (config group choices such as ``experiment=``, a ``resume=`` or
+``replan_from=`` directory, and, for a single run, the whole composition), then Hydra, whose
+task function calls ``realize.app.run.run``. Bad input ends with one line ``error: <message>`` on stderr and exit code 2
+(``realize.app.guard.EXIT_CONFIG``) before any simulator is built; in a sweep (``-m``) such a job is
+marked failed by Hydra (``SweepJobConfigError``) and the other jobs run. An interrupted run
+exits with 130 (SIGINT) or 143 (SIGTERM); an interrupted sweep stops.
+What it doesn't: validate the config itself (``realize.app.run_config``) or run anything
+(``realize.app.run``).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from hydra.errors import CompactHydraException
+from omegaconf import DictConfig
+
+from realize.app.cli_keys import check_override_keys
+from realize.config import ConfigError
+from realize.app.guard import EXIT_CONFIG, EXIT_FAILED
+from realize.paths import CONFIG_DIR
+from realize.app.run import run
+from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
+from realize.app.workers.errors import WorkerFailed
+
+__all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
+
+CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "experiment")
+
+
+class SweepJobConfigError(CompactHydraException):
+    """A sweep job's ``ConfigError``: Hydra marks the job failed and prints just the message."""
+
+    def __init__(self, error: ConfigError) -> None:
+        super().__init__(f"error: {error}")
+        self.error = error
+
+
+def _group_options(group: str) -> list[str]:
+    d = CONFIG_DIR / group
+    return sorted(p.stem for p in d.glob("*.yaml")) if d.is_dir() else []
+
+
+def preflight(args: list[str]) -> list[str]:
+    """Check the command line before Hydra runs; returns the (possibly extended) arguments.
+
+    Checks config group choices (``experiment=foo`` -> one-line error listing the presets), that
+    every key exists (``secne=wall`` -> "did you mean 'scene'", ``realize.app.cli_keys``) and
+    ``resume=`` (must be a run directory); a resumed single run writes its Hydra files into
+    the resumed directory. For a single run without Hydra flags it also composes the config
+    once, so composition errors become one line too.
+    """
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    flags = [a for a in args if a.startswith("-")]
+    plain = [a for a in args if not a.startswith("-")]
+    if any(f not in ("-m", "--multirun") for f in flags):
+        if any(f in ("--cfg", "-c") for f in flags) and any(a.startswith("task_file=") for a in plain):
+            print("note: --cfg shows the task group; task_file replaces it when the run starts (result.json's "
+                  "config.task then holds the file's content)", file=sys.stderr, flush=True)
+        return args  # --cfg, --config-dir, --help, ...: Hydra's own business (and its own checks)
+    multirun = bool(flags)
+    parser = OverridesParser.create()
+    parsed = []
+    for a in plain:
+        try:
+            parsed.extend(parser.parse_overrides([a]))
+        except Exception as e:
+            msg = " ".join(str(e).split()).split(" See https://")[0]
+            raise ConfigError(f"cannot parse the override {a!r}: {msg}") from None
+    resume_dir: str | None = None
+    has_run_dir = False
+    # config dirs added through hydra.searchpath may hold more group options than configs/ does
+    check_groups = not any(o.key_or_group.startswith("hydra.searchpath") for o in parsed)
+    for o in parsed:
+        key = o.key_or_group
+        if key == "hydra.run.dir":
+            has_run_dir = True
+        if o.is_delete():
+            continue
+        values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+        if check_groups and key in CONFIG_GROUPS and o.package is None:
+            options = _group_options(key)
+            for v in values:
+                if v not in options and v != "null":
+                    what = "preset" if key == "experiment" else "option"
+                    raise ConfigError(
+                        f"{key}={v}: unknown {key} {what} {v!r}; available: {', '.join(options)} "
+                        f"(files in configs/{key}/)"
+                    )
+        if key == "resume":
+            for v in values:
+                if v in ("null", "None"):
+                    continue
+                if not (Path(v) / CHECKPOINT_FILE).is_file():
+                    raise ConfigError(f"resume: {v} is not a realize run directory (no {CHECKPOINT_FILE})")
+                resume_dir = v
+        if key == "replan_from":
+            for v in values:
+                if v not in ("null", "None") and not (Path(v) / RESULT_FILE).is_file():
+                    raise ConfigError(f"replan_from: {v} is not a realize run directory (no {RESULT_FILE})")
+    if check_groups:  # secne=wall, ce.n_envz=3: one line with the closest known names
+        check_override_keys(parsed, CONFIG_GROUPS)
+    if resume_dir is not None and not multirun and not has_run_dir:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        args = args + [f"hydra.run.dir={resume_dir}", f"hydra.output_subdir=.hydra/resume-{stamp}"]
+    if not flags and not multirun:
+        _trial_compose([a for a in args if not a.startswith("-")])
+    return args
+
+
+def _trial_compose(overrides: list[str]) -> None:
+    """Compose once with Hydra's compose API; composition errors become one ``ConfigError``."""
+    from hydra import compose, initialize_config_dir
+
+    try:
+        with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="realize"):
+            compose(config_name="config", overrides=overrides)
+    except Exception as e:
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        if e.__cause__ is not None and str(e.__cause__).strip():
+            lines.append(str(e.__cause__).strip().splitlines()[0])
+        lines = [ln for ln in lines if "HYDRA_FULL_ERROR" not in ln]
+        cut = next((i for i, ln in enumerate(lines) if ln.startswith("Config search path")), len(lines))
+        raise ConfigError("; ".join(lines[:cut]) or type(e).__name__) from None
+
+
+def _hydra_task(cfg: DictConfig) -> Any:
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    hc = HydraConfig.get()
+    multirun = hc.mode == RunMode.MULTIRUN
+    out_dir = Path(hc.runtime.output_dir)
+    try:
+        outcome = run(cfg, out_dir, cli_overrides=list(hc.overrides.task))
+    except ConfigError as e:
+        if multirun:  # Hydra records the job as failed; the other jobs still run
+            raise SweepJobConfigError(e) from None
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        sys.exit(EXIT_CONFIG)
+    except WorkerFailed as e:  # the run's files (error.txt included) are written; no traceback here
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        if multirun:
+            raise
+        sys.exit(EXIT_FAILED)
+    if outcome.interrupted:
+        if multirun:
+            raise KeyboardInterrupt  # stop the sweep, as a user's Ctrl-C means
+        sys.exit(outcome.exit_code)
+    return {"feasible": outcome.feasible, "best_cost": outcome.best_cost, "run_dir": str(outcome.run_dir)}
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Console entry point: ``realize [overrides]`` / ``python -m realize [overrides]``."""
+    import hydra
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = preflight(args)
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        sys.exit(EXIT_CONFIG)
+    sys.argv = [sys.argv[0] if sys.argv else "realize"] + args
+    entry = hydra.main(config_path=str(CONFIG_DIR), config_name="config", version_base="1.3")(_hydra_task)
+    entry()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

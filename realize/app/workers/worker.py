@@ -1,0 +1,84 @@
+"""What one rollout worker holds and does, whatever runs it (this process, a local process, a
+Ray actor): the scenes of consecutive shards of a run's copies.
+
+What it does: ``ShardWorker`` builds, once, one batched scene and one plan realizer per task
+for each of its shards (``realize.app.workers.blocks``), with the given PhysX thread count;
+``rollout`` realizes one part of a batch per shard (``realize.app.workers.blocks.deal_rows``),
+shard after shard, and returns their ``RolloutResult`` joined, on the CPU. A shard's scene and controllers see only that shard's rows, so a
+row's numbers are the same in whichever worker its shard sits.
+What it doesn't: talk to the search or to other workers (``realize.app.workers.process``,
+``realize.app.workers.ray_pool``), or choose the shards (``realize.app.workers.blocks``).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from torch import Tensor
+
+from realize.realization.result import RolloutResult
+from realize.app.workers.blocks import RowBlock, join_results
+
+if TYPE_CHECKING:
+    from realize.app.run_config import RunSpec
+    from realize.tasks.spec import TaskSpec
+
+__all__ = ["ShardWorker", "worker_spec"]
+
+
+def worker_spec(spec: RunSpec, physx_threads: int | None) -> RunSpec:
+    """``spec`` with ``physx_threads`` PhysX threads per scene (None, or ``sim.cpu_workers``
+    set by the user: as it is)."""
+    if physx_threads is None or spec.sim.cpu_workers is not None:
+        return spec
+    out = copy.copy(spec)
+    out.sim = copy.copy(spec.sim)
+    out.sim.cpu_workers = physx_threads
+    return out
+
+
+class ShardWorker:
+    """The scenes of consecutive shards and a realizer per task on each (module docstring)."""
+
+    def __init__(self, spec: RunSpec, tasks: Sequence[TaskSpec], shards: Sequence[RowBlock],
+                 physx_threads: int | None = None) -> None:
+        from realize.app.realizers import open_realization
+
+        t0 = time.perf_counter()
+        self.shards = list(shards)
+        self.first, self.stop = self.shards[0].first, self.shards[-1].stop
+        wspec = worker_spec(spec, physx_threads)
+        self.scenes: list[Any] = []
+        self.realizers: list[list[Any]] = []
+        try:
+            for shard in self.shards:
+                scene, realizers = open_realization(wspec, tasks, n_envs=shard.size)
+                self.scenes.append(scene)
+                self.realizers.append(realizers)
+        except BaseException:
+            self.close()
+            raise
+        self.backend = self.scenes[0].backend
+        self.setup_time_s = time.perf_counter() - t0
+
+    def describe(self) -> str:
+        return f"rows {self.first}-{self.stop - 1} ({len(self.shards)} shard(s))"
+
+    def rollout(self, candidate: int | None, parts: Sequence[Tensor], record: bool = False) -> RolloutResult:
+        """Realize ``parts[k]`` (rows of a batch, maybe none) in shard ``k`` of this worker."""
+        if len(parts) != len(self.shards):
+            raise ValueError(f"{len(parts)} parts for {len(self.shards)} shards")
+        t0 = time.perf_counter()
+        results = [realizers[0 if candidate is None else candidate].rollout(Z, record=record)
+                   for Z, realizers in zip(parts, self.realizers) if Z.shape[0]]
+        res = join_results(results)
+        res.wall_time_s = time.perf_counter() - t0
+        return res
+
+    def close(self) -> None:
+        for scene in self.scenes:
+            scene.close()
+        self.scenes = []

@@ -1,0 +1,8 @@
+"""The search over plan parameters: the ask/tell protocol and what runs over it.
+
+Modules: ``protocol`` (``Searcher``, ``Batch``, ``EvalResult``: what the loop asks and tells),
+``ce`` (the cross-entropy optimizer, Algorithm 1), ``candidates`` and ``budget`` (successive
+halving over the k best symbolic plans), ``warm_start`` (a search begun from an earlier run's
+final distribution).
+What it doesn't: simulate (``realize.realization``) or run the loop (``realize.app.loop``).
+"""

@@ -1,0 +1,135 @@
+"""``CEConfig``: the cross-entropy settings (the ``ce`` config group), read and checked once.
+
+What it does: declares every CE setting with its bounds and choices (``realize.config``
+metadata), the cross-field rules (schedule, elites vs samples, modes vs elites, ...) and the
+sample schedule ``n_envs_at(i)``.
+What it doesn't: sample or rank (``realize.search.ce.optimizer``, ``realize.search.ce.ranking``), or know
+the run's top-level ``seed`` key (``realize.app.run_config`` puts it into ``CEConfig.seed``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import torch
+
+from realize.config import ConfigError, Settings, setting
+
+__all__ = ["CEConfig", "FALLBACKS", "SCHEDULES", "DTYPES"]
+
+FALLBACKS = ("progress", "feasible_only", "keep")
+SCHEDULES = ("constant", "linear")
+DTYPES = {"float32": torch.float32, "float64": torch.float64}
+
+
+@dataclass
+class CEConfig(Settings):
+    """Cross-entropy settings. Defaults follow the seed paper (200 samples, 10 elites, 10 its).
+
+    Fallback when fewer than ``n_elite`` samples are feasible (``fallback``):
+
+    * ``"progress"`` (default): fill the elite set with the best infeasible samples, ranked by
+      ``progress`` descending (e.g. number of actions completed), ties broken by ``distance``
+      ascending (a distance-to-success proxy), then by cost ascending. Feasible samples always
+      come first. Without progress/distance scores this ranks infeasible samples by cost.
+    * ``"feasible_only"``: refit from the feasible samples alone if there are at least
+      ``min_feasible_refit`` of them, otherwise keep the current distribution (at iteration 0
+      that means sampling uniformly again).
+    * ``"keep"``: keep the current distribution.
+
+    Sample counts (``n_envs``: samples = parallel simulated plans per iteration, and the size
+    of the batched scene): ``schedule="constant"`` uses ``n_envs`` every iteration; ``"linear"``
+    goes from ``n_envs`` at iteration 0 down to ``n_envs_end`` (<= ``n_envs``) at iteration
+    ``iterations - 1`` (rounded), as the journal version's 3000 -> 300.
+
+    Multimodal / robust options (off by default, see ``realize.search.ce.mixture`` and
+    ``realize.search.ce.ranking``): ``n_modes`` (>= 1, <= ``n_elite``) normals in a mixture;
+    ``knn_robust`` (0 = off, else the neighbourhood size, <= the samples of every iteration)
+    ranks feasible elites by their neighbourhood's mean cost; ``failure_cost`` (null or a
+    number) is what an infeasible neighbour costs there (null: the evaluator's
+    ``EvalResult.failure_cost``, e.g. the rollout's horizon in control steps).
+
+    Warm start (top-level ``warm_start=RUN_DIR``, ``realize.search.warm_start``): iteration 0 draws
+    from that run's final distribution, its std times ``warm_widen``, with a share
+    ``warm_uniform_share`` of uniform samples so that a changed world is still explored.
+
+    ``dtype``: the search's bookkeeping dtype (sampling, ranking, refits). ``keep_samples``:
+    keep each iteration's ``Z`` in its record.
+    """
+
+    config_key: ClassVar[str] = "ce"
+
+    n_envs: int = setting(200, ge=1, help="samples (= parallel simulated plans) per iteration")
+    n_elite: int = setting(10, ge=1)
+    iterations: int = setting(10, ge=1)
+    schedule: str = setting("constant", choices=SCHEDULES)
+    n_envs_end: int | None = setting(None, ge=1)
+    min_std: float = setting(1e-3, ge=0)
+    alpha: float = setting(1.0, gt=0, le=1)
+    fallback: str = setting("progress", choices=FALLBACKS)
+    min_feasible_refit: int = setting(2, ge=1)
+    converge_std: float | None = setting(None, gt=0)
+    seed: int = 0
+    uniform_share: float = setting(0.0, ge=0, lt=1)
+    rank_weighted: bool = False
+    n_modes: int = setting(1, ge=1, help="1 = a single Gaussian")
+    knn_robust: int = setting(0, ge=0, help="0 = off")
+    failure_cost: float | None = None
+    warm_widen: float = setting(2.0, ge=1, help="warm start: the earlier run's std times this")
+    warm_uniform_share: float = setting(0.2, ge=0, lt=1, help="warm start: share of iteration 0 drawn uniformly")
+    dtype: str = setting("float64", choices=tuple(DTYPES))
+    keep_samples: bool = True
+
+    def check(self, where: str) -> None:
+        if self.schedule == "linear":
+            if self.n_envs_end is None:
+                raise ConfigError(f"{where}.n_envs_end must be an integer >= 1 with schedule 'linear', got None")
+            if self.n_envs_end > self.n_envs:
+                raise ConfigError(
+                    f"{where}.n_envs_end = {self.n_envs_end} is invalid: must be <= {where}.n_envs = {self.n_envs} "
+                    f"(the schedule shrinks the batch; {where}.n_envs is the size of the batched scene)"
+                )
+            if self.n_elite > self.n_envs_end:
+                raise ConfigError(
+                    f"{where}.n_elite = {self.n_elite} is invalid: must be <= {where}.n_envs = {self.n_envs} and "
+                    f"<= {where}.n_envs_end = {self.n_envs_end} (elites are chosen among the samples of an iteration)"
+                )
+        elif self.n_envs_end is not None and self.n_envs_end != self.n_envs:
+            raise ConfigError(
+                f"{where}.n_envs_end ({self.n_envs_end}) is only used with schedule 'linear' "
+                f"(schedule is {self.schedule!r}); remove it or set {where}.schedule=linear"
+            )
+        elif self.n_elite > self.n_envs:
+            raise ConfigError(
+                f"{where}.n_elite = {self.n_elite} is invalid: must be <= {where}.n_envs = {self.n_envs} "
+                "(elites are chosen among the samples of an iteration)"
+            )
+        if self.converge_std is not None and self.converge_std <= self.min_std:
+            raise ConfigError(
+                f"{where}.converge_std ({self.converge_std}) must be > {where}.min_std ({self.min_std}), "
+                "else it can never be reached"
+            )
+        if self.n_modes > self.n_elite:
+            raise ConfigError(
+                f"{where}.n_modes ({self.n_modes}) must be <= {where}.n_elite ({self.n_elite}): "
+                "each mode is fitted to a cluster of elites"
+            )
+        n_min, i_min = min((self.n_envs_at(i), i) for i in range(self.iterations))
+        if self.knn_robust > n_min:
+            raise ConfigError(
+                f"{where}.knn_robust ({self.knn_robust}) must be <= the number of samples at every iteration "
+                f"(only {n_min} at iteration {i_min})"
+            )
+
+    def n_envs_at(self, iteration: int) -> int:
+        """Number of samples drawn at ``iteration`` (0-based) under the schedule."""
+        if self.schedule == "constant" or self.iterations == 1:
+            return self.n_envs
+        assert self.n_envs_end is not None
+        t = min(max(iteration, 0), self.iterations - 1) / (self.iterations - 1)
+        return int(round(self.n_envs + (self.n_envs_end - self.n_envs) * t))
+
+    @property
+    def torch_dtype(self) -> torch.dtype:
+        return DTYPES[self.dtype]

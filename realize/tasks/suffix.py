@@ -1,0 +1,59 @@
+"""A plan's remaining actions as a task of their own, and whether they can start from a state.
+
+What it does:
+  * ``task_suffix(task, k)``: the task of actions ``k, k+1, ...`` of ``task``'s plan (0-based),
+    with only the parameters those actions bind (plus the goal's ``base_in``), the same goal
+    and final cost; its eq. (2) cost then counts the remaining actions only;
+  * ``suffix_columns(task, k)``: which columns of the full task's sample matrix the suffix's
+    columns are (to pick a plan's remaining parameters out of a full one, e.g. a run's best);
+  * ``check_suffix_start(task, state)``: what the action templates assume about the actions
+    before them in the same rollout, checked against the state the suffix starts from. ``place``
+    begins only while the fingers hold the cube (``Place.begin``: a grasp happened before), so
+    a suffix whose first manipulation is ``place`` needs a state with ``cube_held``; ``grasp``
+    approaches with an open gripper, so a suffix whose first manipulation is ``grasp`` needs a
+    state without a held cube (it would drop it); ``push`` drives a closed gripper and needs
+    none in hand. ``move_to`` assumes nothing: it plans from where the base is and holds the
+    arm and the gripper as they are (the rollout starts the gripper command from the state).
+What it doesn't: simulate (``realize.realization``), load state files (``realize.world.state``)
+or read run directories (``realize.app.replan``).
+"""
+
+from __future__ import annotations
+
+from realize.config import ConfigError
+from realize.world.state import SceneState
+from realize.tasks.spec import TaskSpec, task_for_plan
+
+__all__ = ["task_suffix", "suffix_columns", "check_suffix_start"]
+
+
+def task_suffix(task: TaskSpec, k: int, key: str = "replan.action") -> TaskSpec:
+    """The task of ``task``'s actions ``k..`` (``key`` names the setting in errors)."""
+    n = task.n_actions
+    if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < n:
+        actions = "; ".join(f"{i}: {a}" for i, a in enumerate(task.plan))
+        raise ConfigError(f"{key} = {k!r} is invalid: the plan has {n} actions, numbered from 0 ({actions})")
+    out = task_for_plan(task, task.plan[k:])
+    out.name = task.name if k == 0 else f"{task.name}[{k}:]"
+    return out
+
+
+def suffix_columns(task: TaskSpec, k: int) -> list[int]:
+    """Column indices, in ``task``'s sample matrix, of ``task_suffix(task, k)``'s columns."""
+    sub = task_suffix(task, k).layout
+    full = task.layout
+    return [i for name in sub.names for i in range(full.slices[name].start, full.slices[name].stop)]
+
+
+def check_suffix_start(task: TaskSpec, state: SceneState, where: str = "replan") -> None:
+    """Refuse a start state the suffix's first manipulation cannot begin from (module docstring)."""
+    for i, a in enumerate(task.plan):
+        if a.template == "move_to":
+            continue
+        if a.template == "place" and not state.cube_held:
+            raise ConfigError(f"{where}: the remaining plan's action {i} is {a}, which needs the cube in hand, but "
+                              f"the state ({state.source or 'given'}) has cube_held = false")
+        if a.template in ("grasp", "push") and state.cube_held:
+            raise ConfigError(f"{where}: the remaining plan's action {i} is {a}, which starts with no cube in hand, "
+                              f"but the state ({state.source or 'given'}) has cube_held = true")
+        return
