@@ -54,7 +54,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-from _compose import compose_config  # noqa: E402
+from helpers import compose_config  # noqa: E402  (tests/helpers.py: the one config composer)
 
 from realize.app.realizers import open_realization  # noqa: E402
 from realize.app.run_config import build_run_spec  # noqa: E402
