@@ -47,7 +47,7 @@ from realize.app.replay_shard import ShardReplay, ShardReplayError, replay_shard
 from realize.app.run_config import RunSpec, build_run_spec
 from realize.app.task_plans import TaskOrigin
 from realize.app.video import Caption, FollowCamera, VideoRecorder, VideoReport, focus_points
-from realize.scene import BatchedScene, Camera, EnvOptions
+from realize.scene import Camera, EnvOptions
 from realize.world.state import SceneState, save_state
 
 __all__ = [

@@ -22,7 +22,7 @@ What it doesn't: draw the top-down views, distributions or plots (``realize.reco
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
