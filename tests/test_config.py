@@ -71,3 +71,21 @@ def test_where_prefix_and_direct_construction() -> None:
     with pytest.raises(ConfigError, match="must be a mapping"):
         Outer.from_mapping([1, 2])
     assert isinstance(ConfigError("x"), ValueError)
+
+
+@pytest.mark.parametrize("override, key", [
+    ("robot.fabric_exclude=[finger_r,no_such_sphere]", "robot.fabric_exclude"),
+    ("controller.fabric.collision_exclude=[no_such_sphere]", "controller.fabric.collision_exclude"),
+    ("robot=mobile_panda", None),  # the default exclusions are the robot's own
+])
+def test_fabric_exclusions_name_spheres_of_the_robot(override: str, key: str | None) -> None:
+    """The spheres left out of the fabric's box leaves are checked against the robot's sphere
+    file at the config edge, naming the key they came from."""
+    from helpers import compose_config
+    from realize.app.run_config import build_run_spec
+
+    if key is None:
+        assert build_run_spec(compose_config(override)).robot.name == "mobile_panda"
+        return
+    with pytest.raises(ConfigError, match=rf"^{key} = .*unknown spheres \['no_such_sphere'\] of robot 'fetch_omni'"):
+        build_run_spec(compose_config(override))

@@ -131,7 +131,8 @@ class WholeBodyFabric:
         exclude = self.robot.fabric_exclude if self.cfg.collision_exclude is None else self.cfg.collision_exclude
         unknown = [s for s in exclude if s not in names]
         if unknown:
-            raise ConfigError(f"controller.fabric.collision_exclude = {list(exclude)!r} is "
+            key = "robot.fabric_exclude" if self.cfg.collision_exclude is None else "controller.fabric.collision_exclude"
+            raise ConfigError(f"{key} = {list(exclude)!r} is "
                               f"invalid: unknown spheres {unknown} of robot {self.robot.name!r}; known: {names}")
         radii = self.kin.sphere_radii.to(device, dtype) + self.cfg.collision_margin
         box_ok = torch.tensor([s not in exclude for s in names], device=device)
