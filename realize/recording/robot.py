@@ -17,7 +17,6 @@ record joints (``realize.realization.result.TrajectoryRecorder`` does).
 
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rerun as rr
+
+from realize.robot.urdf import element_origin, mesh_path, rpy_matrix, urdf_floats
 
 if TYPE_CHECKING:
     from realize.robot.kinematics import RobotKinematics
@@ -55,13 +56,6 @@ class LinkMesh:
     scale: tuple[float, float, float]
 
 
-def _floats(text: str | None, default: tuple[float, float, float]) -> tuple[float, float, float]:
-    if not text:
-        return default
-    v = [float(x) for x in text.split()]
-    return (v[0], v[0], v[0]) if len(v) == 1 else (v[0], v[1], v[2])
-
-
 def _meshes_of(link: ET.Element, base: Path) -> list[LinkMesh]:
     """The link's visual and collision meshes in a format rerun reads."""
     out = []
@@ -69,14 +63,11 @@ def _meshes_of(link: ET.Element, base: Path) -> list[LinkMesh]:
         mesh = el.find("geometry/mesh")
         if mesh is None:
             continue
-        name = mesh.get("filename", "").replace("package://", "")
-        path = (base / name).resolve()
+        path = mesh_path(mesh.get("filename", ""), base).resolve()
         if path.suffix.lower() not in _MEDIA or not path.is_file():
             continue
-        origin = el.find("origin")
-        xyz = _floats(None if origin is None else origin.get("xyz"), (0.0, 0.0, 0.0))
-        rpy = _floats(None if origin is None else origin.get("rpy"), (0.0, 0.0, 0.0))
-        out.append(LinkMesh(link.get("name", ""), path, xyz, rpy, _floats(mesh.get("scale"), (1.0, 1.0, 1.0))))
+        xyz, rpy = element_origin(el)
+        out.append(LinkMesh(link.get("name", ""), path, xyz, rpy, urdf_floats(mesh.get("scale"), (1.0, 1.0, 1.0))))
     return out
 
 
@@ -92,14 +83,6 @@ def link_meshes(urdf: str | Path, max_bytes: int = MAX_MESH_BYTES) -> dict[str, 
         if found and found[0].path.stat().st_size <= max_bytes:
             out[found[0].link] = found[0]
     return out
-
-
-def _rpy_quat_xyzw(rpy: tuple[float, float, float]) -> list[float]:
-    """URDF roll-pitch-yaw (R = Rz(y) Ry(p) Rx(r)) as an xyzw quaternion."""
-    r, p, y = (a / 2 for a in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return [sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy]
 
 
 def matrix_to_quat_xyzw(r: np.ndarray) -> np.ndarray:
@@ -134,7 +117,7 @@ class RobotLogger:
         for link in self.links:
             m = self.meshes[link]
             self.rec.log(f"{self.path(link)}/mesh",
-                         rr.Transform3D(translation=m.xyz, quaternion=_rpy_quat_xyzw(m.rpy), scale=m.scale),
+                         rr.Transform3D(translation=m.xyz, quaternion=matrix_to_quat_xyzw(rpy_matrix(m.rpy).numpy()).tolist(), scale=m.scale),
                          static=True)
             self.rec.log(f"{self.path(link)}/mesh",
                          rr.Asset3D(contents=m.path.read_bytes(), media_type=_MEDIA[m.path.suffix.lower()],

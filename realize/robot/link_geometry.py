@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 import trimesh
 
-from realize.robot.urdf import rpy_matrix
+from realize.robot.urdf import element_origin, mesh_path, rpy_matrix, urdf_floats
 
 __all__ = ["LinkGeometry", "collision_links", "link_geometry", "origin_matrix"]
 
@@ -90,10 +90,6 @@ class LinkGeometry:
 # ----------------------------------------------------------------------------- reading the URDF
 
 
-def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
-    return default if text is None else tuple(float(v) for v in text.split())
-
-
 def origin_matrix(xyz: Sequence[float], rpy: Sequence[float]) -> np.ndarray:
     """The 4x4 transform of a URDF ``<origin>`` (rotation :func:`realize.robot.urdf.rpy_matrix`)."""
     t = np.eye(4)
@@ -108,7 +104,7 @@ _CYLINDER_SECTIONS = 64
 def _primitive_mesh(geom: ET.Element) -> trimesh.Trimesh:
     """A box, cylinder (axis z) or sphere as a mesh that contains the exact primitive."""
     if geom.tag == "box":
-        return trimesh.creation.box(extents=_floats(geom.get("size"), (0.0, 0.0, 0.0)))
+        return trimesh.creation.box(extents=urdf_floats(geom.get("size"), (0.0, 0.0, 0.0)))
     if geom.tag == "cylinder":
         # circumscribed polygon: its faces touch the true cylinder, its corners lie outside it
         radius = float(geom.get("radius", "0")) / math.cos(math.pi / _CYLINDER_SECTIONS)
@@ -133,18 +129,12 @@ def _collision_meshes(link: ET.Element, base_dir: str) -> list[trimesh.Trimesh]:
             continue
         geom = geom_el[0]
         if geom.tag == "mesh":
-            path = geom.get("filename", "")
-            if path.startswith("package://"):
-                path = path[len("package://"):]
-            mesh = trimesh.load(os.path.join(base_dir, path), force="mesh")
-            scale = _floats(geom.get("scale"), (1.0, 1.0, 1.0))
+            mesh = trimesh.load(mesh_path(geom.get("filename", ""), base_dir), force="mesh")
+            scale = urdf_floats(geom.get("scale"), (1.0, 1.0, 1.0))
             mesh.apply_transform(np.diag([*scale, 1.0]))
         else:
             mesh = _primitive_mesh(geom)
-        origin = col.find("origin")
-        xyz = _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0))
-        rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
-        mesh.apply_transform(origin_matrix(xyz, rpy))
+        mesh.apply_transform(origin_matrix(*element_origin(col)))
         meshes.append(mesh)
     return meshes
 

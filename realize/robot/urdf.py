@@ -31,7 +31,8 @@ from torch import Tensor
 from realize.config import ConfigError
 from realize.paths import REPO_ROOT
 
-__all__ = ["JointSpec", "resolve_urdf", "source_urdf", "parse_urdf_joints", "rpy_matrix", "skew", "axis_rotation"]
+__all__ = ["JointSpec", "resolve_urdf", "source_urdf", "parse_urdf_joints", "urdf_floats", "element_origin", "mesh_path",
+           "rpy_matrix", "skew", "axis_rotation"]
 
 MANI_SKILL_PREFIX = "mani_skill:"
 
@@ -91,10 +92,7 @@ def resolve_urdf(urdf: str, visual_mesh_ext: dict[str, str] | None = None) -> st
             if mesh.tag != kind:
                 continue
             for m in mesh.iter("mesh"):
-                name = m.get("filename", "")
-                if name.startswith("package://"):
-                    name = name[len("package://"):]
-                path = Path(name) if Path(name).is_absolute() else src.parent / name
+                path = mesh_path(m.get("filename", ""), src.parent)
                 if kind == "visual" and path.suffix in visual_mesh_ext:
                     path = path.with_suffix(visual_mesh_ext[path.suffix])
                 if not path.is_file():
@@ -113,10 +111,26 @@ def resolve_urdf(urdf: str, visual_mesh_ext: dict[str, str] | None = None) -> st
     return str(out)
 
 
-def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
-    if text is None:
+def urdf_floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
+    """The numbers of a URDF attribute (``xyz``, ``rpy``, ``size``, ``scale``): ``default`` where it is
+    absent or empty; one number where three are expected stands for all three (a uniform scale)."""
+    if not text or not text.strip():
         return default
-    return tuple(float(v) for v in text.split())
+    v = tuple(float(x) for x in text.split())
+    return v * 3 if len(v) == 1 and len(default) == 3 else v
+
+
+def element_origin(el: ET.Element) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """``(xyz, rpy)`` of an element's ``<origin>`` child (zeros where it has none)."""
+    origin = el.find("origin")
+    get = (lambda k: None) if origin is None else origin.get
+    return urdf_floats(get("xyz"), (0.0, 0.0, 0.0)), urdf_floats(get("rpy"), (0.0, 0.0, 0.0))
+
+
+def mesh_path(filename: str, urdf_dir: str | os.PathLike[str]) -> Path:
+    """The file a URDF ``<mesh filename>`` names (``package://`` dropped; relative to the URDF's folder)."""
+    name = filename[len("package://"):] if filename.startswith("package://") else filename
+    return Path(name) if Path(name).is_absolute() else Path(urdf_dir) / name
 
 
 def parse_urdf_joints(path: str) -> dict[str, JointSpec]:
@@ -124,7 +138,7 @@ def parse_urdf_joints(path: str) -> dict[str, JointSpec]:
     root = ET.parse(path).getroot()
     joints: dict[str, JointSpec] = {}
     for j in root.findall("joint"):
-        origin = j.find("origin")
+        xyz, rpy = element_origin(j)
         axis = j.find("axis")
         limit = j.find("limit")
         jtype = j.get("type", "fixed")
@@ -140,9 +154,9 @@ def parse_urdf_joints(path: str) -> dict[str, JointSpec]:
             type=jtype,
             parent=j.find("parent").get("link"),  # type: ignore[union-attr]
             child=j.find("child").get("link"),  # type: ignore[union-attr]
-            xyz=_floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-            rpy=_floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-            axis=_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)),  # type: ignore[arg-type]
+            xyz=xyz,  # type: ignore[arg-type]
+            rpy=rpy,  # type: ignore[arg-type]
+            axis=urdf_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)),  # type: ignore[arg-type]
             lower=lower,
             upper=upper,
             velocity=velocity,
