@@ -160,17 +160,6 @@ def read_robot(d: Any, where: str = "robot") -> RobotSpec:
     return RobotSpec.from_mapping(as_mapping(d, where), where)
 
 
-def _check_fabric_exclude(robot: RobotSpec, exclude: tuple[str, ...] | None) -> None:
-    """The spheres left out of the fabric's box leaves must be spheres of the robot (one line, at the edge)."""
-    key, names = ("robot.fabric_exclude", robot.fabric_exclude) if exclude is None else \
-        ("controller.fabric.collision_exclude", exclude)
-    known = [s.name for s in robot.spheres()]
-    unknown = [n for n in names if n not in known]
-    if unknown:
-        raise ConfigError(f"{key} = {list(names)!r} is invalid: unknown spheres {unknown} of robot "
-                          f"{robot.name!r} (its sphere file {robot.spheres_file!r} has {known})")
-
-
 def resolve_placement(device: str, sim: SimSettings, ce: CEConfig) -> Placement:
     """``device`` and ``sim.backend`` -> one ``Placement``; ``sim.backend`` is set to the result
     (the scene then has nothing left to choose)."""
@@ -270,7 +259,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)
 
     rollout = _read_rollout(d.get("controller"))
-    _check_fabric_exclude(robot, rollout.fabric.collision_exclude)
+    robot.fabric_exclusions(rollout.fabric.collision_exclude, [s.name for s in robot.spheres()])  # at the edge
     return RunSpec(
         seed=keys.seed,
         resume=keys.resume,

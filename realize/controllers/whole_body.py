@@ -27,7 +27,7 @@ from typing import ClassVar
 import torch
 from torch import Tensor
 
-from realize.config import ConfigError, Settings, setting
+from realize.config import Settings, setting
 from realize.robot.layout import BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
@@ -128,12 +128,7 @@ class WholeBodyFabric:
         self.robot = robot or load_robot_spec(DEFAULT_ROBOT)
         self.kin = RobotKinematics(self.robot, device=device, dtype=dtype)
         names = list(self.kin.sphere_names)
-        exclude = self.robot.fabric_exclude if self.cfg.collision_exclude is None else self.cfg.collision_exclude
-        unknown = [s for s in exclude if s not in names]
-        if unknown:
-            key = "robot.fabric_exclude" if self.cfg.collision_exclude is None else "controller.fabric.collision_exclude"
-            raise ConfigError(f"{key} = {list(exclude)!r} is "
-                              f"invalid: unknown spheres {unknown} of robot {self.robot.name!r}; known: {names}")
+        exclude = self.robot.fabric_exclusions(self.cfg.collision_exclude, names)
         radii = self.kin.sphere_radii.to(device, dtype) + self.cfg.collision_margin
         box_ok = torch.tensor([s not in exclude for s in names], device=device)
         floor_ok = self.kin.sphere_floor_mask.to(device=device, dtype=torch.bool)

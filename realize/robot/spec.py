@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Sequence
 
 import yaml
 
@@ -220,6 +220,18 @@ class RobotSpec(Settings):
         if unknown:
             raise ConfigError(f"{where}: joints has unknown joint(s) {unknown} of robot {self.name!r}; known: "
                               f"{list(self.state_joints)} (the base is the 'base' key)")
+
+    def fabric_exclusions(self, override: tuple[str, ...] | None, known: Sequence[str]) -> tuple[str, ...]:
+        """The spheres the fabric gives no box leaves: ``override`` (``controller.fabric.collision_exclude``)
+        or this robot's ``fabric_exclude``; a name not in ``known`` (the robot's sphere names) is a
+        one-line ``ConfigError`` naming the key it came from."""
+        key, names = ("robot.fabric_exclude", self.fabric_exclude) if override is None else \
+            ("controller.fabric.collision_exclude", override)
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise ConfigError(f"{key} = {list(names)!r} is invalid: unknown spheres {unknown} of robot "
+                              f"{self.name!r} (its sphere file {self.spheres_file!r} has {list(known)})")
+        return tuple(names)
 
     def rest_q(self) -> tuple[float, ...]:
         """The rest pose as a whole-body ``q`` (base at 0)."""

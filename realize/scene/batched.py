@@ -99,6 +99,10 @@ class BatchedScene:
         self.joint_names = names
         self.state_joints: tuple[str, ...] = tuple(n for n in names if n not in self.robot.base.joints)
         """Every active joint but the base's: what a ``SceneState`` holds by name."""
+        if set(self.state_joints) != set(self.robot.state_joints):  # the spec must name every joint it drives
+            raise ConfigError(f"robot {self.robot.name!r}: its upper, held and gripper joints "
+                              f"{sorted(self.robot.state_joints)} are not the simulated robot's other active joints "
+                              f"{sorted(self.state_joints)}")
         self._wb_idx = torch.tensor([names.index(j) for j in self.robot.whole_body_joints], device=self.device)
         self._finger_idx = torch.tensor([names.index(j) for j in self.robot.gripper.joints], device=self.device)
         self._grip_open, self._grip_closed = self.robot.gripper.open, self.robot.gripper.closed
