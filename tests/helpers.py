@@ -159,3 +159,27 @@ def blas_batch_invariant() -> bool:
         if not torch.equal((a[keep] @ b[keep])[-1], full[7]) or not torch.equal((a[7:] @ b[7:])[0], full[7]):
             return False
     return True
+
+
+# ----------------------------------------------------------------------------- kinematics
+
+
+def full_qpos(kin, q, names):
+    """``(..., len(names))``: ``q``'s joints and the kinematics model ``kin``'s fixed (held, finger)
+    values in ``names`` order (a joint vector for another implementation or the simulator)."""
+    import torch
+
+    cols = [q[..., kin.joint_names.index(n)] if n in kin.joint_names
+            else torch.full(q.shape[:-1], kin.fixed_values.get(n, 0.0), dtype=q.dtype) for n in names]
+    return torch.stack(cols, dim=-1)
+
+
+def random_q(kin, n: int, seed: int = 0):
+    """``(n, n_dof)`` random configurations of ``kin`` inside its joint limits (base within +-2 m,
+    free joints in +-pi), in its dtype."""
+    import torch
+
+    g = torch.Generator().manual_seed(seed)
+    lo = torch.nan_to_num(kin.lower, neginf=-torch.pi).clamp(min=-2.0)
+    hi = torch.nan_to_num(kin.upper, posinf=torch.pi).clamp(max=2.0)
+    return lo + (hi - lo) * torch.rand(n, kin.n_dof, generator=g, dtype=kin.dtype)

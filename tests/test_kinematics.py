@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
 
 import pytest
 import torch
@@ -14,6 +13,7 @@ from torch.func import jacfwd, jvp, vmap
 
 from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import load_robot_spec
+from helpers import full_qpos, random_q
 
 F64 = torch.float64
 FETCH = load_robot_spec("fetch_omni")
@@ -22,25 +22,6 @@ FETCH = load_robot_spec("fetch_omni")
 @pytest.fixture(scope="module")
 def kin64() -> RobotKinematics:
     return RobotKinematics(FETCH, dtype=F64)
-
-
-def full_qpos(kin: RobotKinematics, q: torch.Tensor, names: Sequence[str]) -> torch.Tensor:
-    """``(..., len(names))``: ``q``'s joints and the model's fixed (held, finger) values in ``names`` order."""
-    cols = []
-    for n in names:
-        if n in kin.joint_names:
-            cols.append(q[..., kin.joint_names.index(n)])
-        else:
-            cols.append(torch.full(q.shape[:-1], kin.fixed_values.get(n, 0.0), dtype=q.dtype))
-    return torch.stack(cols, dim=-1)
-
-
-def random_q(kin: RobotKinematics, n: int, seed: int = 0) -> torch.Tensor:
-    """Random configurations inside the limits (base within +-2 m, free joints in +-pi)."""
-    g = torch.Generator().manual_seed(seed)
-    lo = torch.nan_to_num(kin.lower, neginf=-torch.pi).clamp(min=-2.0)
-    hi = torch.nan_to_num(kin.upper, posinf=torch.pi).clamp(max=2.0)
-    return lo + (hi - lo) * torch.rand(n, kin.n_dof, generator=g, dtype=kin.dtype)
 
 
 # ----------------------------------------------------------------------------- reference FK

@@ -4,13 +4,13 @@ every collision-sphere centre, and their Jacobians agree within 1e-9."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 
 import pytest
 import torch
 
 from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import known_robots, load_robot_spec
+from helpers import full_qpos, random_q
 
 pk = pytest.importorskip("pytorch_kinematics")
 F64 = torch.float64
@@ -33,21 +33,6 @@ def float64_urdf_origins(monkeypatch: pytest.MonkeyPatch) -> None:
                               dtype=F64)
 
     monkeypatch.setattr(pk_urdf, "_convert_transform", convert)
-
-
-def full_qpos(kin: RobotKinematics, q: torch.Tensor, names: Sequence[str]) -> torch.Tensor:
-    """``(N, len(names))``: ``q``'s joints and the model's fixed (held, finger) values in ``names`` order."""
-    cols = [q[:, kin.joint_names.index(n)] if n in kin.joint_names
-            else torch.full((q.shape[0],), kin.fixed_values.get(n, 0.0), dtype=q.dtype) for n in names]
-    return torch.stack(cols, dim=-1)
-
-
-def random_q(kin: RobotKinematics, n: int, seed: int) -> torch.Tensor:
-    """Random configurations inside the joint limits (base within +-2 m, free joints in +-pi)."""
-    g = torch.Generator().manual_seed(seed)
-    lo = torch.nan_to_num(kin.lower, neginf=-torch.pi).clamp(min=-2.0)
-    hi = torch.nan_to_num(kin.upper, posinf=torch.pi).clamp(max=2.0)
-    return lo + (hi - lo) * torch.rand(n, kin.n_dof, generator=g, dtype=F64)
 
 
 def _with_efforts(urdf: bytes) -> bytes:
