@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Sequence
+from typing import ClassVar, Sequence
 
 import yaml
 
@@ -242,12 +242,6 @@ class RobotSpec(Settings):
         from realize.robot.sphere_file import load_spheres
 
         return load_spheres(self.spheres_file)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data (what a run directory stores and the ``robot`` group holds)."""
-        import dataclasses
-
-        return dataclasses.asdict(self)
 
 
 def known_robots() -> list[str]:
