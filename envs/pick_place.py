@@ -2,8 +2,9 @@
 
 **Task description.** A mobile manipulator (omnidirectional planar base, a lift or torso, an
 arm and a parallel gripper; ``robot_uids``: any robot of ``configs/robot/``, default Fetch's
-``fetch_omni``) starts in a free area. A small cube rests on ``table1``. The robot must
-carry the cube to ``table2`` and then drive into the exit (rest) area. Between the tables there
+``fetch_omni``) starts in a free area. Movable objects (``scene.objects``, by name; the seed
+world: one small cube, ``cube``) rest on ``table1``. The robot must carry them to ``table2`` and
+then drive into the exit (rest) area. Between the tables there
 is room to drive; variants add a wall between them (``variant="wall"``) or a ramp from
 table 1's side down onto table 2 (``variant="ramp"``) down which a released cube can slide.
 All geometry comes from a ``realize.world.geometry.GeometryCfg`` (the Hydra ``scene`` config group),
@@ -13,16 +14,18 @@ This task builds the ``plain``, ``wall`` and ``ramp`` variants; ``push`` is
 
 **Parallelism.** ``num_envs = N`` with the PhysX GPU backend gives ManiSkill's usual batched
 sub-scenes. On CPU, ManiSkill allows one env only, so ``n_tiles = N`` tiles N copies of the
-whole world (robot, tables, cube) in ONE PhysX CPU scene, spaced so they can never touch, and
+whole world (robot, tables, objects) in ONE PhysX CPU scene, spaced so they can never touch, and
 stepped by one call. ``realize.scene.BatchedScene`` hides which of the two is used.
 
 **Randomizations** (``reset(options=dict(randomize=...))``, off by default: plan realization
-wants the same initial state for every sample): the cube's xy offset on table 1 by up to
-``cube_xy_noise`` m and its yaw, and the robot's start xy by up to ``robot_xy_noise`` m.
+wants the same initial state for every sample): each object's xy offset by up to
+``object_xy_noise`` m and its yaw (objects standing on the floor keep their pose; an object on
+another object stays above its top), and the robot's start xy by up to ``robot_xy_noise`` m.
 
-**Success conditions** (``evaluate``): the cube rests on table 2 (its centre is above table 2's
-top footprint, within 2 cm of resting height, and nearly still) AND the base is inside the exit
-rectangle.
+**Success conditions** (``evaluate``): the ``goal`` kwarg, written as a task config's goal
+(``realize.tasks.goal_spec``; ``base_in: exit`` is the exit rectangle); by default every object
+that starts on a table rests on table 2 (its centre above table 2's top footprint, within 2 cm
+of resting height, nearly still) AND the base is inside the exit rectangle.
 """
 
 from __future__ import annotations
@@ -45,10 +48,14 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConf
 from envs import robot_agent
 from realize.config import ConfigError
 from realize.world.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
-from realize.tasks.goals import base_in_rectangle, cube_on_table
+from realize.world.objects import FLOOR, SceneObject
+from realize.tasks.goal_spec import GoalSpec, goal_from_dict
+from realize.tasks.goals import base_in_rectangle, goal_reached, object_in_container, object_on_table
+from realize.tasks.regions import Box as RegionBox
 from realize.robot.spec import RobotSpec
 
 ENV_ID = "RealizePickPlace-v1"
+EXIT = "exit"  # what a task goal's base_in names: the geometry's exit rectangle
 TILE_MARGIN = 3.0  # metres of empty floor between tiled copies
 # PhysX GPU contact buffers: ManiSkill's own Fetch task (OpenCabinetDrawer) raises them to 2**21
 # contacts and 2**19 patches; here they also grow with the copies, by this many contacts per copy
@@ -103,6 +110,23 @@ class RealizePickPlaceEnv(BaseEnv):
             )
         return cfg
 
+    @classmethod
+    def default_goal(cls, geometry: SceneGeometry) -> dict[str, Any]:
+        """The goal ``gym.make`` evaluates without a ``goal`` kwarg: every object resting on a
+        table at the start ends on table 2 (else the last table), and the base in the exit."""
+        goal_table = "table2" if any(t.name == "table2" for t in geometry.tables) else geometry.tables[-1].name
+        tables = {t.name for t in geometry.tables}
+        return {"rests_on": {o.name: goal_table for o in geometry.objects if o.rests_on in tables}, "base_in": EXIT}
+
+    def checked_goal(self, goal: GoalSpec | Mapping[str, Any] | None) -> GoalSpec:
+        """The ``goal`` kwarg as a checked ``GoalSpec`` (``realize.tasks.goal_spec``; its
+        ``base_in`` may only name ``exit``)."""
+        if isinstance(goal, GoalSpec):
+            return goal
+        d = self.default_goal(self.geometry) if goal is None else goal
+        regions = {EXIT: RegionBox(low=tuple(self.geometry.exit_low), high=tuple(self.geometry.exit_high))}
+        return goal_from_dict(d, self.geometry, regions, source=self.TASK_ID)
+
     def __init__(
         self,
         *args: Any,
@@ -113,7 +137,8 @@ class RealizePickPlaceEnv(BaseEnv):
         cpu_workers: int = 0,
         sim_freq: int = 100,
         control_freq: int = 20,
-        cube_xy_noise: float = 0.02,
+        object_xy_noise: float = 0.02,
+        goal: GoalSpec | Mapping[str, Any] | None = None,
         robot_xy_noise: float = 0.05,
         robot_uids: str = "fetch_omni",
         robot: RobotSpec | Mapping[str, Any] | None = None,
@@ -129,7 +154,8 @@ class RealizePickPlaceEnv(BaseEnv):
         self.geometry: SceneGeometry = build_geometry(gcfg)
         self.n_tiles = n_tiles
         self.offsets = tile_offsets(n_tiles, self.geometry.extent)
-        self.cube_xy_noise = cube_xy_noise
+        self.object_xy_noise = object_xy_noise
+        self.goal: GoalSpec = self.checked_goal(goal)
         self.robot_xy_noise = robot_xy_noise
         self._sim_settings = dict(
             sim_freq=sim_freq,
@@ -201,9 +227,9 @@ class RealizePickPlaceEnv(BaseEnv):
         poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
         self.scene.__dict__[robot_agent.ROBOT_COLLISIONS_KEY] = self.robot_collisions  # read where the robot is parsed
         super()._load_agent(options, poses if self.n_tiles > 1 else poses[0])
-        # The robot's joint controllers compensate gravity; the cube keeps it.
+        # The robot's joint controllers compensate gravity; the objects keep it.
         # Robots may run their own solver iteration count (PhysX solves a touching robot and
-        # cube with the larger of their counts; the cubes keep the scene's).
+        # object with the larger of their counts; the objects keep the scene's).
         for agent in self.agents:
             if self.robot_solver_position_iterations is not None:
                 for art in agent.robot._objs:
@@ -244,22 +270,47 @@ class RealizePickPlaceEnv(BaseEnv):
         self.ground.set_collision_group_bit(group=2, bit_idx=robot_agent.FLOOR_BIT, bit=1)
 
         self.obstacles: list[list] = []
-        self.cubes: list = []
+        # object_actors[name][copy]. Objects resting on a table or another object are built with
+        # their copy's fixtures; objects standing on the floor (the stick) after every copy's:
+        # PhysX solves bodies in build order, and this is the order the push world had before
+        # its objects were data (the golden runs pin it).
+        self.object_actors: dict[str, list] = {o.name: [] for o in g.objects}
+        later = [o for o in g.objects if o.rests_on == FLOOR]
         for c, off in enumerate(self.offsets):
             self.obstacles.append([self._build_box(box, off, c) for box in g.static_obstacles])
-            cb = self.scene.create_actor_builder()
-            h = g.cube_half_size
-            mat = sapien.physx.PhysxMaterial(g.cube_friction, g.cube_friction, 0.0)
-            cb.add_box_collision(half_size=[h, h, h], material=mat, density=g.cube_mass / (2 * h) ** 3)
-            cb.add_box_visual(half_size=[h, h, h], material=sapien.render.RenderMaterial(base_color=[0.85, 0.1, 0.1, 1]))
-            cb.initial_pose = sapien.Pose(p=[g.cube_pos[0] + off[0], g.cube_pos[1] + off[1], g.cube_pos[2]])
-            self.cubes.append(cb.build(name=f"cube_{c}"))
+            for o in g.objects:
+                if o.rests_on != FLOOR:
+                    self.object_actors[o.name].append(self._build_object(o, off, c))
+        for o in later:
+            for c, off in enumerate(self.offsets):
+                self.object_actors[o.name].append(self._build_object(o, off, c))
+
+    def _build_object(self, o: SceneObject, offset: np.ndarray, copy: int):
+        """One copy of a movable object at its rest pose (a cylinder's axis vertical)."""
+        b = self.scene.create_actor_builder()
+        mat = sapien.physx.PhysxMaterial(o.friction, o.friction, 0.0)
+        density = o.mass / o.volume()
+        look = sapien.render.RenderMaterial(base_color=list(o.color))
+        if o.shape == "cylinder":
+            up = sapien.Pose(q=[0.7071068, 0.0, -0.7071068, 0.0])  # SAPIEN's cylinder axis is x: turn it to z
+            b.add_cylinder_collision(up, radius=o.half_size[0], half_length=o.half_size[2], material=mat,
+                                     density=density)
+            b.add_cylinder_visual(up, radius=o.half_size[0], half_length=o.half_size[2], material=look)
+        else:
+            b.add_box_collision(half_size=list(o.half_size), material=mat, density=density)
+            b.add_box_visual(half_size=list(o.half_size), material=look)
+        b.initial_pose = sapien.Pose(p=[o.position[0] + offset[0], o.position[1] + offset[1], o.position[2]],
+                                     q=yaw_pitch_quat(o.yaw, 0.0))
+        return b.build(name=f"{o.name}_{copy}")
 
     @property
     def dynamic_actors(self) -> list:
-        """Every dynamic actor, per copy (the cubes here): ``realize.scene.BatchedScene`` takes
-        them out of the PhysX scene and back in on reset, which makes resets history-free."""
-        return list(self.cubes)
+        """Every dynamic actor (the movable objects of every copy) in build order:
+        ``realize.scene.BatchedScene`` takes them out of the PhysX scene and back in on reset,
+        which makes resets history-free."""
+        g = self.geometry
+        first = [self.object_actors[o.name][c] for c in range(self.n_tiles) for o in g.objects if o.rests_on != FLOOR]
+        return first + [a for o in g.objects if o.rests_on == FLOOR for a in self.object_actors[o.name]]
 
     # ------------------------------------------------------------------ episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
@@ -272,17 +323,20 @@ class RealizePickPlaceEnv(BaseEnv):
         held_targets = torch.tensor([[float(v) for v in self.robot_spec.held.values()]])
         with torch.device(self.device):
             b = len(env_idx)
-            for c, (agent, cube) in enumerate(zip(self.agents, self.cubes)):
+            for c, agent in enumerate(self.agents):
                 off = torch.tensor(self.offsets[c], dtype=torch.float32)
                 qpos = torch.tensor(rest, dtype=torch.float32).repeat(b, 1)
                 start = torch.tensor(g.robot_start[:2], dtype=torch.float32).repeat(b, 1)
-                cube_xy = torch.tensor(g.cube_pos[:2], dtype=torch.float32).repeat(b, 1) + off
-                cube_q = torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)
                 if randomize:
                     start = start + (torch.rand(b, 2) * 2 - 1) * self.robot_xy_noise
-                    cube_xy = cube_xy + (torch.rand(b, 2) * 2 - 1) * self.cube_xy_noise
-                    yaw = (torch.rand(b) * 2 - 1) * math.pi / 4
-                    cube_q = torch.stack([torch.cos(yaw / 2), 0 * yaw, 0 * yaw, torch.sin(yaw / 2)], dim=1)
+                poses = {}
+                for o in g.objects:  # objects on the floor (a stick) always start at their configured pose
+                    xy = torch.tensor(o.position[:2], dtype=torch.float32).repeat(b, 1) + off
+                    yaw = torch.full((b,), o.yaw)
+                    if randomize and o.rests_on != FLOOR:
+                        xy = xy + (torch.rand(b, 2) * 2 - 1) * self.object_xy_noise
+                        yaw = yaw + (torch.rand(b) * 2 - 1) * math.pi / 4
+                    poses[o.name] = (xy, yaw)
                 # The root sits at the copy's start xy with zero yaw; the planar joints hold
                 # the base pose relative to it, so joint velocities are world-frame velocities.
                 rel = start - torch.tensor(g.robot_start[:2])
@@ -294,26 +348,53 @@ class RealizePickPlaceEnv(BaseEnv):
                 agent.robot.set_qvel(torch.zeros_like(qpos))
                 if held:  # held joints (a head) go to their held values, wherever the rest pose starts them
                     agent.robot.set_joint_drive_targets(held_targets.repeat(b, 1), [agent.robot.active_joints_map[n] for n in held])
-                z = torch.full((b, 1), g.cube_pos[2])
-                cube.set_pose(Pose.create_from_pq(torch.cat([cube_xy, z], dim=1), cube_q))
-                cube.set_linear_velocity(torch.zeros(b, 3))
-                cube.set_angular_velocity(torch.zeros(b, 3))
+                for o in g.objects:
+                    xy, yaw = poses[o.name]
+                    if o.rests_on in poses and o.rests_on != FLOOR:  # keep the centre above the supporting object's top
+                        sup = g.object(o.rests_on)
+                        lo = torch.tensor([sup.position[0] - sup.half_size[0], sup.position[1] - sup.half_size[1]]) + off
+                        hi = torch.tensor([sup.position[0] + sup.half_size[0], sup.position[1] + sup.half_size[1]]) + off
+                        xy = torch.maximum(torch.minimum(xy, hi), lo)
+                    q = torch.stack([torch.cos(yaw / 2), 0 * yaw, 0 * yaw, torch.sin(yaw / 2)], dim=1)
+                    actor = self.object_actors[o.name][c]
+                    z = torch.full((b, 1), o.position[2])
+                    actor.set_pose(Pose.create_from_pq(torch.cat([xy, z], dim=1), q))
+                    actor.set_linear_velocity(torch.zeros(b, 3))
+                    actor.set_angular_velocity(torch.zeros(b, 3))
 
     # ------------------------------------------------------------------ success
-    def evaluate(self) -> dict:
-        """Goal of the seed task for every copy (tiled or not), by the predicates of
-        ``realize.tasks.goals``: the cube rests on table 2 and the base is in the exit."""
-        g = self.geometry
+    def object_states(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, m, 3) centres (each copy's local frame) and (N, m) speeds of every object, in the
+        geometry's object order."""
         off = torch.as_tensor(self.offsets, dtype=torch.float32, device=self.device)
-        p = torch.cat([c.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, c in enumerate(self.cubes)])
-        speed = torch.cat([c.linear_velocity for c in self.cubes]).norm(dim=1)
+        pos, speed = [], []
+        for o in self.geometry.objects:
+            actors = self.object_actors[o.name]
+            pos.append(torch.cat([a.pose.p - torch.cat([off[i], off.new_zeros(1)]) for i, a in enumerate(actors)]))
+            speed.append(torch.cat([a.linear_velocity for a in actors]).norm(dim=1))
+        return torch.stack(pos, dim=1), torch.stack(speed, dim=1)
+
+    def evaluate(self) -> dict:
+        """The task's goal (the ``goal`` kwarg, default ``default_goal``) for every copy (tiled
+        or not), by ``realize.tasks.goals.goal_reached``; ``exit`` names the exit rectangle."""
+        g = self.geometry
+        pos, speed = self.object_states()
         start = torch.tensor(g.robot_start[:2], dtype=torch.float32, device=self.device)
         names = list(self.agents[0].robot.active_joints_map.keys())
         xy = [names.index(j) for j in self.robot_spec.base.joints[:2]]
         base = torch.cat([a.robot.get_qpos()[:, xy] for a in self.agents]) + start
-        on_t2 = cube_on_table(p, speed, g, g.tables[1].name)
-        in_exit = base_in_rectangle(base, g.exit_low, g.exit_high)
-        return dict(success=on_t2 & in_exit, cube_on_table2=on_t2, base_in_exit=in_exit)
+        regions = {EXIT: RegionBox(low=tuple(g.exit_low), high=tuple(g.exit_high))}
+        ok, _ = goal_reached(self.goal, g, regions, pos, speed, base)
+        info = dict(success=ok)
+        for name, table in self.goal.on.items():
+            k = g.object_index(name)
+            info[f"{name}_on_{table}"] = object_on_table(pos[:, k], speed[:, k], g, name, table)
+        for name, box in self.goal.inside.items():
+            k = g.object_index(name)
+            info[f"{name}_in_{box}"] = object_in_container(pos[:, k], speed[:, k], g, box)
+        if self.goal.base_in is not None:
+            info["base_in_exit"] = base_in_rectangle(base, g.exit_low, g.exit_high)
+        return info
 
     def _get_obs_extra(self, info: dict):
         return dict()

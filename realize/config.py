@@ -10,7 +10,7 @@ What it does:
   * ``Settings``: base of config dataclasses. ``Cls.from_mapping(d, where)`` reads a mapping
     (unknown keys refused, types checked and converted: bool, int (an integral float is
     accepted), float (finite), str (non-empty), ``X | None``, ``tuple[float, ...]``, nested
-    ``Settings``), then the field metadata, then the class's own cross-field ``check(where)``.
+    ``Settings``, ``dict[str, X]`` of named entries), then the field metadata, then the class's own cross-field ``check(where)``.
     Constructing a ``Settings`` directly validates the same way (``__post_init__``), with
     ``where`` = the class's ``config_key``.
 What it doesn't: know Hydra (``realize.app.cli`` turns Hydra's objects into plain data first), or
@@ -109,6 +109,17 @@ def _convert(value: Any, hint: Any, key: str) -> Any:
         if not isinstance(value, str) or not value:
             raise ConfigError(f"{key} = {value!r} is invalid: must be a non-empty string")
         return value
+    if origin is dict:
+        args = typing.get_args(hint)
+        item = args[1] if len(args) == 2 else Any
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{key} = {value!r} is invalid: must be a mapping of name -> entry")
+        out = {}
+        for name, v in value.items():
+            if not isinstance(name, str) or not name:
+                raise ConfigError(f"{key} has a key {name!r} that is not a name")
+            out[name] = _convert(v, item, f"{key}.{name}")
+        return out
     if origin in (tuple, list):
         args = typing.get_args(hint)
         if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):

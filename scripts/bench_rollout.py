@@ -160,9 +160,9 @@ def instrument(timers: PhaseTimers, scene: Any, realizer: Any) -> list[str]:
     impl = scene._impl
     hooks = {
         "physics": [(impl, "step")],
-        "state_reads": [(impl, n) for n in ("qpos", "qvel", "ee_pose", "cube_pose", "cube_velocity", "read_state")],
+        "state_reads": [(impl, n) for n in ("qpos", "qvel", "ee_pose", "object_poses", "object_velocities", "read_state")],
         "target_writes": [(impl, "apply_targets"), (impl, "freeze")],
-        "contact_forces": [(impl, "finger_cube_forces")],
+        "contact_forces": [(impl, "finger_forces")],
         "reset": [(scene.env, "reset"), (impl, "after_reset")],
         "fabric": [(realizer.fabric, n) for n in ("step", "goal_points", "start")]
                   + [(realizer.fabric.kin, "tcp_and_axes")],

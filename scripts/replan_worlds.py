@@ -35,16 +35,16 @@ REPO = Path(__file__).resolve().parents[1]
 # name -> overrides of the seed task's scene (one copy's frame: table 1 at (0, 1.2), table 2 at
 # (0, -1.2), the robot starting at (-2, 0))
 WORLDS: dict[str, list[str]] = {
-    "cube +5 cm x": ["scene.cube_offset=[0.05,0.0]"],
-    "cube 10 cm diagonal": ["scene.cube_offset=[-0.08,0.06]"],
-    "cube 15 cm -y": ["scene.cube_offset=[0.0,-0.15]"],
+    "cube +5 cm x": ["scene.objects.cube.offset=[0.05,0.0]"],
+    "cube 10 cm diagonal": ["scene.objects.cube.offset=[-0.08,0.06]"],
+    "cube 15 cm -y": ["scene.objects.cube.offset=[0.0,-0.15]"],
     "table 2 +20 cm x": ["scene.tables.1.center=[0.2,-1.2]"],
     "table 2 -30 cm x": ["scene.tables.1.center=[-0.3,-1.2]"],
     "table 2 40 cm diagonal": ["scene.tables.1.center=[0.28,-1.48]"],
     "start +0.5 m y": ["scene.robot_start=[-2.0,0.5,0.0]"],
     "start +0.5 m x": ["scene.robot_start=[-1.5,0.0,0.0]"],
     "wall between tables": ["scene.variant=wall"],
-    "cube, table 2 and wall": ["scene.cube_offset=[0.06,-0.05]", "scene.tables.1.center=[0.3,-1.2]",
+    "cube, table 2 and wall": ["scene.objects.cube.offset=[0.06,-0.05]", "scene.tables.1.center=[0.3,-1.2]",
                                "scene.variant=wall"],
 }
 COLD = ["experiment=seed_paper"]

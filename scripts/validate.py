@@ -2,12 +2,13 @@
 and write the success share into RUN_DIR/result.json under `validation`.
 
 Usage: python scripts/validate.py RUN_DIR [--replicas 16] [--seed 0] [--friction 0.8 1.2]
-                                  [--no-randomize] [--cube-noise M] [--robot-noise M]
+                                  [--no-randomize] [--object-noise M] [--robot-noise M]
                                   [--backend cpu|gpu|auto] [--dry-run] [--json]
 
-Perturbations: the task's reset randomization (cube xy and yaw on table 1, robot start xy;
-amplitudes from the task unless --cube-noise/--robot-noise) and the cube friction scaled per
-replica by a factor drawn uniformly from --friction (CPU backend only; --friction none: off).
+Perturbations: the task's reset randomization (each object's xy and yaw where it rests, robot
+start xy; amplitudes from the task unless --object-noise/--robot-noise) and each object's
+friction scaled per replica by a factor drawn uniformly from --friction (CPU backend only;
+--friction none: off).
 """
 
 from __future__ import annotations
@@ -30,9 +31,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--replicas", type=int, default=16, help="K copies simulated at once (default 16)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the perturbations (default 0)")
     ap.add_argument("--friction", nargs="+", default=["0.8", "1.2"], metavar="LOW HIGH",
-                    help="cube friction factor range (default 0.8 1.2), or 'none'")
+                    help="object friction factor range (default 0.8 1.2), or 'none'")
     ap.add_argument("--no-randomize", action="store_true", help="no start-state randomization")
-    ap.add_argument("--cube-noise", type=float, default=None, help="cube xy noise (m), task default if unset")
+    ap.add_argument("--object-noise", type=float, default=None, help="object xy noise (m), task default if unset")
     ap.add_argument("--robot-noise", type=float, default=None, help="robot start xy noise (m)")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
     ap.add_argument("--dry-run", action="store_true", help="report only, leave result.json unchanged")
@@ -48,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         friction = (lo, hi)
     try:
         rep = validate(args.run_dir, args.replicas, args.seed, friction_range=friction,
-                       randomize=not args.no_randomize, cube_xy_noise=args.cube_noise,
+                       randomize=not args.no_randomize, object_xy_noise=args.object_noise,
                        robot_xy_noise=args.robot_noise, backend=args.backend, write=not args.dry_run)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)

@@ -15,11 +15,11 @@
     Stick_p - push_region
     loc_start loc_stick loc_push loc_box - site
     stick_top box_inside - spot
-    cube1 - cube)
+    stick cube - item)   ; named as in scene.objects
   (:init
     (robot-at loc_start)
     (hand-empty)
-    (cube-at cube1 stick_top)
+    (item-at cube stick_top)
     (road loc_start loc_stick) (road loc_start loc_push) (road loc_stick loc_box)
     (base-near StickSide loc_stick)
     (base-near PushSide loc_push)
@@ -27,5 +27,5 @@
     (reach loc_stick stick_top) (reach loc_stick box_inside) (reach loc_box box_inside)
     (grasps Cube_g stick_top)
     (place-on Cube_p box_inside)
-    (pushes Stick_p loc_push stick_top box_inside))
-  (:goal (cube-at cube1 box_inside)))
+    (pushes Stick_p stick loc_push stick_top box_inside))
+  (:goal (item-at cube box_inside)))

@@ -8,14 +8,14 @@
     Cube_g - grasp_region
     Cube_p - place_region
     loc_start loc_table1 loc_table2 loc_exit - site
-    cube1 - cube)
+    cube - item)   ; named as in scene.objects
   (:init
     (robot-at loc_start)
     (hand-empty)
-    (cube-at cube1 loc_table1)
+    (item-at cube loc_table1)
     (base-near Table1 loc_table1)
     (base-near Table2 loc_table2)
     (base-near Exit loc_exit)
-    (grasps Cube_g cube1)
-    (place-on Cube_p loc_table2))
-  (:goal (and (cube-at cube1 loc_table2) (robot-at loc_exit))))
+    (grasps Cube_g cube)
+    (place-on Cube_p cube loc_table2))
+  (:goal (and (item-at cube loc_table2) (robot-at loc_exit))))

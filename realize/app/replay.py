@@ -208,7 +208,8 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
         if overview and eye is None and target is None:
             eye, target = video_camera(spec.geometry)
         elif eye is None and target is None and not task_camera:  # the camera follows the action
-            follow = FollowCamera(focus_points(spec.task, np.asarray(run.best_z)))
+            follow = FollowCamera(focus_points(spec.task, np.asarray(run.best_z)),
+                                  objects=[a.obj for a in spec.task.plan])
             eye, target = video_camera(spec.geometry)  # the pose it starts from (moved before each frame)
         cam = Camera(width=width, height=height, eye=None if eye is None else tuple(map(float, eye)),
                      target=None if target is None else tuple(map(float, target)))

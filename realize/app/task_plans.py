@@ -182,11 +182,11 @@ def build_task_candidates(
         domain = _resolve_path(planner.domain, f"{source}:planner.domain")
         problem = _resolve_path(planner.problem, f"{source}:planner.problem")
         try:
-            plans = plan_from_pddl(domain, problem, list(TEMPLATES), task.layout.names, top_k=planner.top_k,
-                                   timeout_s=planner.timeout_s)
+            plans = plan_from_pddl(domain, problem, list(TEMPLATES), task.layout.names,
+                                   objects=geometry.object_names, top_k=planner.top_k, timeout_s=planner.timeout_s)
             if not plans:
                 raise ConfigError(f"{source}:planner: the PDDL planner found no plan for {problem}")
-            checked = [plan_from_actions(p, task.layout, TEMPLATES, f"{source}:planner[{i}]")
+            checked = [plan_from_actions(p, task.layout, TEMPLATES, f"{source}:planner[{i}]", geometry.object_names)
                        for i, p in enumerate(plans)]
         except ConfigError:
             raise

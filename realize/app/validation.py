@@ -2,14 +2,14 @@
 
 What it does: ``validate`` builds one batched scene of K copies of the run's world (the run's
 task, geometry, physics, controllers) with ``EnvOptions`` that make every reset apply the task's
-randomization (cube xy and yaw, robot start xy; noise amplitudes the task's unless given), gives
-each copy's cube its own friction (the configured value times a factor drawn from
-``friction_range``; CPU backend), realizes the best plan in all K copies, and reports the share
+randomization (each object's xy and yaw, robot start xy; noise amplitudes the task's unless
+given), gives each copy's objects their own friction (each its configured value times a factor
+drawn from ``friction_range``, object by object in the scene's order; CPU backend), realizes the best plan in all K copies, and reports the share
 that reaches the goal, the failure reasons and the cost of the successful ones.
 ``write_validation`` stores the report in ``result.json`` under ``validation`` (read, add the
 key, write back atomically).
 What it doesn't: search, replay one copy or record video (``realize.app.replay``), or perturb
-anything but the start state and the cube friction. The K replicas are not bit-identical even
+anything but the start state and the objects' friction. The K replicas are not bit-identical even
 without perturbations: each copy sits at its own tile offset (float32 rounding differs).
 """
 
@@ -38,9 +38,9 @@ class ValidationReport:
     failures: dict[str, int]  # failure reason ("<action>:<template>:<reason>") -> count
     seed: int
     friction_range: list[float] | None
-    friction: list[float]  # the cube friction of each replica
+    friction: dict[str, list[float]]  # object -> its friction in each replica
     randomize: bool
-    cube_xy_noise: float | None
+    object_xy_noise: float | None
     robot_xy_noise: float | None
     cost_mean: float | None  # over the successful replicas
     cost_std: float | None
@@ -54,14 +54,14 @@ class ValidationReport:
 
 def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
              friction_range: tuple[float, float] | None = (0.8, 1.2), randomize: bool = True,
-             cube_xy_noise: float | None = None, robot_xy_noise: float | None = None,
+             object_xy_noise: float | None = None, robot_xy_noise: float | None = None,
              backend: str = "cpu", write: bool = True) -> ValidationReport:
     """Re-simulate the best plan ``replicas`` times at once under perturbations; report the share
     that reaches the goal and (``write``) store it in ``result.json`` under ``validation``.
 
     Perturbations: the task's reset randomization with ``seed`` (noise amplitudes: the task's
-    defaults unless given) and, per replica, the cube friction times U(friction_range) drawn
-    from ``numpy.random.default_rng(seed)`` (None: friction unchanged).
+    defaults unless given) and, per replica, each object's friction times U(friction_range)
+    drawn from ``numpy.random.default_rng(seed)``, object after object (None: unchanged).
     """
     from realize.app.realizers import open_realization
 
@@ -74,24 +74,26 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     spec = build_replay_spec(run, backend)
-    options = EnvOptions(cube_xy_noise=cube_xy_noise, robot_xy_noise=robot_xy_noise, randomize_resets=randomize)
+    options = EnvOptions(object_xy_noise=object_xy_noise, robot_xy_noise=robot_xy_noise, randomize_resets=randomize)
     scene, (realizer,) = open_realization(spec, n_envs=replicas, env=options, seed=seed)
     with scene:
-        if friction_range is not None:
-            factors = np.random.default_rng(seed).uniform(lo, hi, size=replicas)
-            friction = scene.set_cube_friction(factors).tolist()
-        else:
-            friction = [float(scene.geometry.cube_friction)] * replicas
+        friction: dict[str, list[float]] = {}
+        rng = np.random.default_rng(seed)
+        for o in scene.geometry.objects:
+            if friction_range is not None:
+                friction[o.name] = scene.set_object_friction(o.name, rng.uniform(lo, hi, size=replicas)).tolist()
+            else:
+                friction[o.name] = [float(o.friction)] * replicas
         res = realizer.rollout(best_z_rows(run, replicas))
-        noise = (scene.cube_xy_noise, scene.robot_xy_noise)
+        noise = (scene.object_xy_noise, scene.robot_xy_noise)
         used_backend = scene.backend
     ok = res.feasible.numpy()
     costs = res.cost.numpy().astype(np.float64)[ok]
     report = ValidationReport(
         replicas=replicas, success_share=float(ok.mean()),
         failures=dict(sorted(Counter(f for f in res.failure if f).items())), seed=int(seed),
-        friction_range=None if friction_range is None else [lo, hi], friction=[float(v) for v in friction],
-        randomize=randomize, cube_xy_noise=noise[0] if randomize else None,
+        friction_range=None if friction_range is None else [lo, hi], friction=friction,
+        randomize=randomize, object_xy_noise=noise[0] if randomize else None,
         robot_xy_noise=noise[1] if randomize else None,
         cost_mean=float(costs.mean()) if len(costs) else None, cost_std=float(costs.std()) if len(costs) else None,
         saved_cost=run.best_cost if math.isfinite(run.best_cost) else None, backend=used_backend, wall_time_s=time.perf_counter() - t0,

@@ -7,7 +7,7 @@ What it does:
     with a ``FollowCamera`` it moves the render camera before each frame, and with a ``Caption``
     it writes a label onto it;
   * ``FollowCamera``: per frame, looks at the robot's base and the point the current action
-    works on (the cube for a grasp, the place point, a move's goal, a push point), from the
+    works on (the object for a grasp, the place point, a move's goal, a push point), from the
     side of the line between them, 1.7-1.95 m away during grasp and place (with ``FOLLOW_FOVY``
     a 4.5 cm cube is then about 25 px wide in a 960 x 720 frame); eye and target are
     smoothed from frame to frame;
@@ -73,18 +73,22 @@ def focus_points(task: TaskSpec, z: np.ndarray) -> list[tuple[str, np.ndarray]]:
 class FollowCamera:
     """The render camera's pose per frame (module docstring). ``action`` is the current one."""
 
-    def __init__(self, points: list[tuple[str, np.ndarray]], smoothing: float = 0.25) -> None:
+    def __init__(self, points: list[tuple[str, np.ndarray]], smoothing: float = 0.25,
+                 objects: list[str | None] | None = None) -> None:
         self.points = points
+        self.objects = list(objects or [])  # per action: the object it handles (None: none)
         self.smoothing = float(smoothing)
         self.action = 0
         self.eye: np.ndarray | None = None
         self.target: np.ndarray | None = None
         self.side = np.array([0.0, -1.0])  # the first view looks from -y
 
-    def pose(self, base_xy: np.ndarray, cube: np.ndarray, holding: bool) -> tuple[np.ndarray, np.ndarray]:
-        """(eye, target) for a frame with the base at ``base_xy`` and the cube at ``cube``."""
+    def pose(self, base_xy: np.ndarray, held_or_target: np.ndarray | None, holding: bool) -> tuple[np.ndarray, np.ndarray]:
+        """(eye, target) for a frame with the base at ``base_xy`` and the current action's object
+        at ``held_or_target`` (None: the action handles none)."""
         kind, point = self.points[min(self.action, len(self.points) - 1)]
-        obj = cube if kind == "manipulate" and not holding else point  # grasp: the cube; place: where it goes
+        # grasp: the object; place: where it goes
+        obj = held_or_target if kind == "manipulate" and not holding and held_or_target is not None else point
         base = np.array([base_xy[0], base_xy[1], 0.8])  # the robot's middle: base to shoulder in view
         w = 0.6 if kind == "manipulate" else 0.5
         target = w * obj + (1 - w) * base
@@ -185,9 +189,11 @@ class VideoRecorder:
         if self.caption is not None:
             self.follow.action = self.caption.action
         base = self.scene.base_pose()[0].cpu().numpy()
-        cube = self.scene.cube_pose()[0, :3].cpu().numpy().astype(np.float64)
-        holding = bool(self.scene.holds_cube()[0])
-        eye, target = self.follow.pose(base[:2], cube, holding)
+        objects = self.follow.objects
+        name = objects[min(self.follow.action, len(objects) - 1)] if objects else None
+        obj = None if name is None else self.scene.object_pose(name)[0, :3].cpu().numpy().astype(np.float64)
+        holding = name is not None and bool(self.scene.holds(name)[0])
+        eye, target = self.follow.pose(base[:2], obj, holding)
         pose = sapien_utils.look_at(eye=eye.tolist(), target=target.tolist())
         cam = _camera(self.scene)
         if self.frames == 0:

@@ -3,7 +3,7 @@
 Modules (import from them; this package file only describes them):
 
 * ``common``  matplotlib set-up (Agg backend, no display), colours, the top-down world drawing
-              (regions, tables with their padding, cube, robot start) and the CSV writer;
+              (regions, tables with their padding, objects, robot start) and the CSV writer;
 * ``fig2``    sampled plans of chosen CE iterations on the ground plane: base trajectories
               (orange tones, darker for successful plans), the sampled parameters as crosses, the
               iteration's best plan (base cyan solid, end effector cyan dashed);

@@ -2,7 +2,7 @@
 
 What it does: selects matplotlib's Agg backend (no display needed), defines the colours and
 resolution, draws the world seen from above (``draw_world``: parameter regions in light grey,
-tables/extras in black with their A* padding outline, the cube, the robot's start and heading;
+tables/extras in black with their A* padding outline, the movable objects, the robot's start and heading;
 ``set_world_limits``), fetches a run's scene or says what is missing (``require_scene``), and
 writes CSV files of plotted numbers (``write_csv``, ``fmt``: non-finite -> empty cell).
 What it doesn't: read run files itself (``realize.run_dir.directory.RunDir``) or draw a whole
@@ -71,7 +71,7 @@ def fmt(v: Any) -> Any:
 
 
 def draw_world(ax: Any, layout: ParamLayout, geometry: SceneGeometry, padding: float) -> None:
-    """Regions (light grey fill), tables/extras (black) with the padding outline, cube, start."""
+    """Regions (light grey fill), tables/extras (black) with the padding outline, objects, start."""
     for name, region in layout.regions.items():
         outlines = region_outlines(region)
         if not outlines:
@@ -90,7 +90,8 @@ def draw_world(ax: Any, layout: ParamLayout, geometry: SceneGeometry, padding: f
             p = padded_outline(b, padding)
             ax.plot(p[:, 0], p[:, 1], color="black", lw=0.8, zorder=3)
         ax.add_patch(Polygon(obstacle_outline(b)[:-1], closed=True, facecolor="black", edgecolor="black", zorder=3))
-    ax.plot(*geometry.cube_pos[:2], marker="s", ms=4, color="#e032c8", zorder=9, ls="none")
+    for o in geometry.objects:
+        ax.plot(*o.position[:2], marker="s" if o.shape == "box" else "o", ms=4, color="#e032c8", zorder=9, ls="none")
     sx, sy, syaw = geometry.robot_start
     ax.annotate("", xy=(sx + 0.35 * math.cos(syaw), sy + 0.35 * math.sin(syaw)), xytext=(sx, sy),
                 arrowprops=dict(arrowstyle="->", color="0.3", lw=1.2), zorder=9)

@@ -47,17 +47,17 @@ class RolloutConfig(Settings):
     axis_tolerance: float = setting(0.1, gt=0)  # rad, approach axis alignment at the pre-pose
     grasp_offset: float = setting(0.0, ge=0)  # m, extra back-off of the TCP target along the approach
     grasp_clearance: float = setting(0.006, ge=0)  # m, fingertips stay this far above the supporting surface
-    place_drop: float = setting(0.004, ge=0)  # m, the held cube is released this high above its place point
+    place_drop: float = setting(0.004, ge=0)  # m, the held object is released this high above its place point
     place_pre_height: float = setting(0.12, gt=0)  # m, pre-place above a release point (place with a 3-D box region)
     retreat_share: float = setting(0.6, gt=0)  # retreat done once the TCP is this share of the way back out
     grip_s: float = setting(0.5, gt=0)  # s to close / open the gripper
     approach_speed: float = setting(0.15, gt=0)  # m/s of the straight moves in to and out from the object
-    rest_speed: float = setting(0.05, gt=0)  # m/s, the cube counts as resting below this
+    rest_speed: float = setting(0.05, gt=0)  # m/s, an object counts as resting below this
     manip_timeout_s: float = setting(15.0, gt=0)
     push_pre_distance: float = setting(0.15, gt=0)  # m, push: the straight move starts this far before the push point
     push_depth: float = setting(0.1, ge=0)  # m, push: and ends this far past it
     push_speed: float = setting(0.15, gt=0)  # m/s of the straight push (faster: the fabric lags behind the sliding goal)
-    goal_settle_s: float = setting(1.5, ge=0)  # s of physics after a plan's last action before a cube goal is read (uncounted)
+    goal_settle_s: float = setting(1.5, ge=0)  # s of physics after a plan's last action before an object goal is read (uncounted)
     max_time_s: float = setting(120.0, gt=0)  # horizon of a whole plan
     record_every: int = setting(5, gt=0)  # control steps between recorded trajectory samples
     diverge_speed: float = setting(50.0, gt=0)  # joint speed that marks a plan as diverged

@@ -1,8 +1,8 @@
 """What one control step knows: the scene's reads, the controllers, and the command buffers.
 
 What it does: ``StepContext`` holds, for all N copies of the scene, the measured state of the
-current control step (whole-body joints, base pose, tool centre point and gripper axes, cube
-pose and speed, whether the fingers hold the cube), the shared controllers (the whole-body
+current control step (whole-body joints, base pose, tool centre point and gripper axes, every
+movable object's pose and speed, which objects the fingers hold), the shared controllers (the whole-body
 fabric, the A* grid and occupancy), and the commands the action templates write this step
 (base velocity, upper-joint targets, gripper). Templates that want the fabric register a goal
 for their rows (``fabric_goal``); ``run_fabric`` then runs ONE batched fabric step for all of
@@ -32,8 +32,9 @@ class StepContext:
     plans with no path on the padded one; None: no retry), ``n_envs``, ``device``, ``dt`` (control period, s).
     Measured by ``read()`` after every physics step, (N, ...) float32: ``q`` / ``qd`` (N, n_dof)
     whole-body joints (``realize.robot.layout``), ``base`` (N, 3) x, y, yaw, ``tcp`` (N, 3),
-    ``approach`` / ``closing`` (N, 3) gripper axes, ``cube`` (N, 7) pose, ``cube_speed`` (N,);
-    ``holds(rows)`` reads finger contacts on demand (once per step).
+    ``approach`` / ``closing`` (N, 3) gripper axes, ``objects`` (N, m, 7) poses and
+    ``object_speed`` (N, m) of the movable objects (``scene.object_names`` order);
+    ``holds(rows, obj)`` reads finger contacts on demand (once per step).
     Commands, reset by ``begin_step()``: ``base_cmd`` (N, 3) world-frame base velocity,
     ``arm_cmd`` / ``arm_vel_cmd`` (N, n_upper) lift/torso + arm targets, ``grip_cmd`` (N,) closed;
     ``arm_hold`` (N, n_upper) is where an arm not driven by the fabric stays.
@@ -54,8 +55,8 @@ class StepContext:
     tcp: Tensor
     approach: Tensor
     closing: Tensor
-    cube: Tensor
-    cube_speed: Tensor
+    objects: Tensor
+    object_speed: Tensor
     base_cmd: Tensor
     arm_cmd: Tensor
     arm_vel_cmd: Tensor
@@ -99,15 +100,16 @@ class StepContext:
         self.base = self.q[:, BASE]
         tcp, approach, closing = self.fabric.kin.tcp_and_axes(self.q.to(self.fabric.dtype))
         self.tcp, self.approach, self.closing = tcp.float(), approach.float(), closing.float()
-        self.cube = s.cube_pose()
-        self.cube_speed = s.cube_velocity()[:, :3].norm(dim=1)
+        self.objects = s.object_poses()
+        self.object_speed = s.object_velocities()[:, :, :3].norm(dim=2)
         self._holds = None
 
-    def holds(self, rows: Tensor) -> Tensor:
-        """(len(rows),) bool: both fingers press on the cube (read once per step)."""
+    def holds(self, rows: Tensor, obj: Tensor | int) -> Tensor:
+        """(len(rows),) bool: both fingers press on object ``obj`` (an index on the m axis, one
+        for all rows or one per row; read once per step)."""
         if self._holds is None:
-            self._holds = self.scene.holds_cube()
-        return self._holds[rows]
+            self._holds = self.scene.holding()
+        return self._holds[rows, obj]
 
     def hold_arm(self, rows: Tensor) -> None:
         """Keep the upper joints (lift/torso, arm) of ``rows`` where they are now."""

@@ -18,7 +18,7 @@ class Failure(IntEnum):
     TIMEOUT = 1
     NO_PATH = 2
     GRASP_NOT_HELD = 3
-    CUBE_DROPPED = 4
+    OBJECT_DROPPED = 4
     NOT_HOLDING = 5
     CONTROLLER_INVALID = 6
     DIVERGED = 7

@@ -1,7 +1,7 @@
 """What a rollout returns: per-plan cost, success, failure and (optionally) trajectories.
 
 What it does: ``RolloutResult`` (one row per plan; ``to_eval`` adapts it to the cross-entropy
-optimizer's ``EvalResult``) and ``TrajectoryRecorder``, which samples base, TCP and cube
+optimizer's ``EvalResult``) and ``TrajectoryRecorder``, which samples base, TCP and object
 positions, the whole-body joints and each plan's current action every ``record_every`` control
 steps and stores them into a result.
 What it doesn't: simulate (``realize.realization.rollout``) or write files (the run directory's
@@ -37,7 +37,7 @@ class RolloutResult:
     traj_t: Tensor | None = None  # (T,) seconds
     traj_base: Tensor | None = None  # (N, T, 2)
     traj_ee: Tensor | None = None  # (N, T, 3)
-    traj_cube: Tensor | None = None  # (N, T, 3)
+    traj_objects: Tensor | None = None  # (N, T, m, 3) every object's centre
     traj_q: Tensor | None = None  # (N, T, n_dof) whole-body joints (the rerun recording's robot in 3-D)
     traj_action: Tensor | None = None  # (N, T) the action each plan was in (its index in the plan)
     wall_time_s: float = 0.0
@@ -57,14 +57,14 @@ class RolloutResult:
 
 
 class TrajectoryRecorder:
-    """Base (x, y), TCP and cube positions of every copy, every ``every`` control steps."""
+    """Base (x, y), TCP and object positions of every copy, every ``every`` control steps."""
 
     def __init__(self, every: int):
         self.every = every
         self.t: list[float] = []
         self.base: list[Tensor] = []
         self.ee: list[Tensor] = []
-        self.cube: list[Tensor] = []
+        self.objects: list[Tensor] = []
         self.q: list[Tensor] = []
         self.action: list[Tensor] = []
 
@@ -75,7 +75,7 @@ class TrajectoryRecorder:
             self.t.append(step * ctx.dt)
             self.base.append(ctx.base[:, BASE_XY].clone())
             self.ee.append(ctx.tcp.clone())
-            self.cube.append(ctx.cube[:, :3].clone())
+            self.objects.append(ctx.objects[:, :, :3].clone())
             self.q.append(ctx.q.clone())
             if action is not None:
                 self.action.append(action.clone())
@@ -87,7 +87,7 @@ class TrajectoryRecorder:
         res.traj_t = torch.tensor(self.t)
         res.traj_base = torch.stack(self.base, dim=1)[:m].cpu()
         res.traj_ee = torch.stack(self.ee, dim=1)[:m].cpu()
-        res.traj_cube = torch.stack(self.cube, dim=1)[:m].cpu()
+        res.traj_objects = torch.stack(self.objects, dim=1)[:m].cpu()
         res.traj_q = torch.stack(self.q, dim=1)[:m].cpu()
         if len(self.action) == len(self.t):
             res.traj_action = torch.stack(self.action, dim=1)[:m].cpu()

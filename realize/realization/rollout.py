@@ -11,8 +11,8 @@ the phases of every control step: ``act`` (templates -> controllers -> commands)
 then ``settle`` (physics only, uncounted, until the last goals are due), ``cut_at_horizon`` and
 ``finish`` (a ``RolloutResult``: cost, per-action success, goal psi_g read from the simulator,
 feasibility, progress and a distance proxy for ranking infeasible plans, trajectories). A goal
-that reads the cube is read ``goal_settle_s`` after the plan's last action, so a pushed or
-dropped cube has landed. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
+that reads an object is read ``goal_settle_s`` after the plan's last action, so a pushed or
+dropped object has landed. ``PlanRealizer.evaluate`` adapts this to the cross-entropy optimizer.
 What it doesn't: choose parameters (``realize.search.ce``), implement the actions
 (``realize.realization.actions``) or the goal predicates (``realize.tasks.goals``), or
 know any backend details (``realize.scene``).
@@ -76,14 +76,13 @@ class Rollout:
         self.step = 0  # control steps simulated
         self.max_steps = self.ctx.steps(self.cfg.max_time_s)
         self.recorder = TrajectoryRecorder(self.cfg.record_every) if record else None
-        # psi_g of a plan is read goal_settle_s after its last action (a pushed or dropped cube
+        # psi_g of a plan is read goal_settle_s after its last action (a pushed or dropped object
         # must land first); plans that never finish are read at the end
         self.goal = torch.zeros(n, dtype=torch.bool, device=dev)
         self.goal_read = torch.zeros(n, dtype=torch.bool, device=dev)
         self.goal_dist = torch.zeros(n, device=dev)
         self.settle_left = torch.full((n,), -1, dtype=torch.long, device=dev)
-        reads_cube = task.goal.cube_on is not None or task.goal.cube_in_box is not None
-        self.settle_steps = int(round(self.cfg.goal_settle_s / self.ctx.dt)) if reads_cube else 0
+        self.settle_steps = int(round(self.cfg.goal_settle_s / self.ctx.dt)) if task.goal.reads_objects else 0
 
     # ------------------------------------------------------------------ the whole rollout
     def run(self, t0: float) -> RolloutResult:
@@ -104,7 +103,7 @@ class Rollout:
     # ------------------------------------------------------------------ phases
     def start(self) -> None:
         """Read the reset scene, hold every arm, keep the gripper as the scene starts it (closed
-        on a held cube of a restored state), begin the first action."""
+        on a held object of a restored state), begin the first action."""
         ctx = self.ctx
         ctx.read()
         ctx.arm_hold[:] = ctx.q[:, UPPER]
@@ -134,7 +133,8 @@ class Rollout:
         name = spec.params[0]
         if self.realizer.action_hook is not None:
             self.realizer.action_hook(a, rows)
-        code = self._template(a).begin(self.ctx, rows, self._padded(name, rows), self.realizer.layout.regions[name])
+        obj = -1 if spec.obj is None else self.scene.object_index(spec.obj)
+        code = self._template(a).begin(self.ctx, rows, self._padded(name, rows), self.realizer.layout.regions[name], obj)
         bad = code > 0
         if bad.any():
             r = rows[bad]
@@ -213,8 +213,8 @@ class Rollout:
 
     def _goal_now(self) -> tuple[Tensor, Tensor]:
         ctx = self.ctx
-        return goal_reached(self.task.goal, self.scene.geometry, self.realizer.layout.regions, ctx.cube[:, :3],
-                            ctx.cube_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed)
+        return goal_reached(self.task.goal, self.scene.geometry, self.realizer.layout.regions, ctx.objects[:, :, :3],
+                            ctx.object_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed)
 
     def read_due_goals(self) -> None:
         """Read psi_g of the plans whose settling time just ran out."""

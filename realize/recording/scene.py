@@ -3,7 +3,7 @@ iteration, the sampled parameters and the rollouts' trajectories.
 
 What it does (the paper's Fig. 2, in rerun):
 * :func:`log_static_scene`: obstacle footprints, padded obstacles (rounded rectangles, as the A*
-  grid inflates them), the exit box, the world bounds, the cube, the robot's start and the
+  grid inflates them), the exit box, the world bounds, the movable objects, the robot's start and the
   parameter regions projected on the floor (also under each parameter's distribution view), and
   the y-flip that makes rerun's 2-D views show +y upwards;
 * :func:`log_world_samples`: every sample's parameters coloured by success, and the iteration's
@@ -111,9 +111,9 @@ def log_static_scene(
         static=True,
     )
     rec.log(
-        entity(ENTITY_WORLD, "cube"),
-        rr.Points2D([g.cube_pos[:2]], colors=[(230, 50, 200, 255)], radii=max(g.cube_half_size, 0.03),
-                    labels=["cube"], draw_order=45.0),
+        entity(ENTITY_WORLD, "objects"),
+        rr.Points2D([o.position[:2] for o in g.objects], colors=[(230, 50, 200, 255)] * len(g.objects),
+                    radii=[max(o.radius, 0.03) for o in g.objects], labels=list(g.object_names), draw_order=45.0),
         static=True,
     )
     sx, sy, syaw = g.robot_start

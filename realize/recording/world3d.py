@@ -4,10 +4,10 @@ iteration's best plan, the samples and why they failed.
 What it does: ``Scene3D`` logs under ``/world3d`` (z up, metres, the copy's world frame)
 
 * once: every static box of the world (tables, wall, ramp, container walls; ``Boxes3D`` with
-  their yaw and pitch), the exit area, the cube where it starts and the robot's link meshes
+  their yaw and pitch), the exit area, every movable object where it starts and the robot's link meshes
   (``realize.recording.robot``);
 * per CE iteration ``k``, when the rollout recorded trajectories: the best plan's robot (every
-  link's pose from the recorded whole-body joints, ``RobotKinematics.link_poses``), its cube and
+  link's pose from the recorded whole-body joints, ``RobotKinematics.link_poses``), its objects and
   its TCP, and the action it is executing as a label at the TCP, each recorded sample on the
   ``control_step`` timeline at ``k * STEP_STRIDE + step`` (iteration 3's step 412 is 300412:
   scrubbing it plays the best plans one after another) and at ``ce_iteration = k`` (the end of
@@ -43,9 +43,8 @@ __all__ = ["Scene3D", "ENTITY_3D", "STEP_TIMELINE", "STEP_STRIDE"]
 ENTITY_3D = ENTITY_WORLD_3D
 STEP_TIMELINE = "control_step"
 STEP_STRIDE = 100_000  # control_step = iteration * STEP_STRIDE + the step within the best plan
-_CUBE_RGB = (224, 50, 200, 255)
 _EXIT_RGB = (90, 170, 90, 120)
-_SETTLE_S = 2.0  # s of a plan's frames shown after its counted steps (a goal on the cube settles 1.5 s)
+_SETTLE_S = 2.0  # s of a plan's frames shown after its counted steps (an object goal settles 1.5 s)
 
 
 def _box_quat_xyzw(b: Box) -> list[float]:
@@ -78,8 +77,9 @@ class Scene3D:
         self.rec, self.layout, self.geometry = rec, layout, geometry
         self.plan, self.control_freq = list(plan), float(control_freq)
         self.robot = None if robot is None else RobotLogger(rec, robot_model(robot), f"{ENTITY_3D}/best/robot")
-        # which parameter each action binds (its failure is labelled there)
-        self.action_param = [a.split("(", 1)[1].split(",")[0].strip(" )") if "(" in a else "" for a in self.plan]
+        # which parameter each action binds (its failure is labelled there): the last argument
+        # (an object the action handles comes first: grasp(cube, Cube_g))
+        self.action_param = [a.split("(", 1)[1].split(",")[-1].strip(" )") if "(" in a else "" for a in self.plan]
 
     def log_static(self) -> None:
         rec, g = self.rec, self.geometry
@@ -92,11 +92,12 @@ class Scene3D:
         rec.log(f"{ENTITY_3D}/exit", rr.Boxes3D(centers=[[(x0 + x1) / 2, (y0 + y1) / 2, 0.005]],
                                                 half_sizes=[[(x1 - x0) / 2, (y1 - y0) / 2, 0.005]],
                                                 colors=[_EXIT_RGB], labels=["exit"]), static=True)
-        h = g.cube_half_size
-        rec.log(f"{ENTITY_3D}/cube_start", rr.Boxes3D(centers=[g.cube_pos], half_sizes=[[h, h, h]],
-                                                      colors=[(224, 50, 200, 90)]), static=True)
-        rec.log(f"{ENTITY_3D}/best/cube", rr.Boxes3D(half_sizes=[[h, h, h]], colors=[_CUBE_RGB],
-                                                     fill_mode=rr.components.FillMode.Solid), static=True)
+        for o in g.objects:  # where each object starts (faint), and the best plan's object (solid)
+            rgb = [int(round(255 * c)) for c in o.color[:3]]
+            rec.log(f"{ENTITY_3D}/objects_start/{o.name}", rr.Boxes3D(
+                centers=[o.position], half_sizes=[o.half_size], colors=[(*rgb, 90)], labels=[o.name]), static=True)
+            rec.log(f"{ENTITY_3D}/best/objects/{o.name}", rr.Boxes3D(half_sizes=[o.half_size], colors=[(*rgb, 255)],
+                                                                     fill_mode=rr.components.FillMode.Solid), static=True)
         if self.robot is not None:
             self.robot.log_static()
 
@@ -121,7 +122,7 @@ class Scene3D:
                          rr.Points3D(xyz, colors=colors, radii=0.012, labels=labels, show_labels=False))
 
     def log_best_plan(self, it: int, rollout: RolloutResult | None, best: int) -> None:
-        """The best plan's robot, cube, TCP and current action on ``control_step``."""
+        """The best plan's robot, objects, TCP and current action on ``control_step``."""
         if rollout is None or best < 0 or rollout.traj_t is None or best >= rollout.traj_ee.shape[0]:
             return
         t = to_numpy(rollout.traj_t, np.float64)
@@ -130,10 +131,12 @@ class Scene3D:
         steps = it * STEP_STRIDE + np.round(t[:T] * self.control_freq).astype(np.int64)
         idx = [rr.TimeColumn(STEP_TIMELINE, sequence=steps), rr.TimeColumn(TIMELINE, sequence=np.full(T, it))]
         ee = to_numpy(rollout.traj_ee, np.float64)[best, :T]
-        cube = to_numpy(rollout.traj_cube, np.float64)[best, :T] if rollout.traj_cube is not None else None
+        objs = to_numpy(rollout.traj_objects, np.float64)[best, :T] if rollout.traj_objects is not None else None
         rec = self.rec
-        if cube is not None:
-            rec.send_columns(f"{ENTITY_3D}/best/cube", indexes=idx, columns=rr.Boxes3D.columns(centers=cube))
+        if objs is not None:
+            for k, o in enumerate(self.geometry.objects[:objs.shape[1]]):
+                rec.send_columns(f"{ENTITY_3D}/best/objects/{o.name}", indexes=idx,
+                                 columns=rr.Boxes3D.columns(centers=objs[:, k]))
         acts = getattr(rollout, "traj_action", None)
         if acts is not None:
             a = np.clip(to_numpy(acts, np.int64)[best, :T], 0, len(self.plan) - 1)

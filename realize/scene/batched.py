@@ -3,13 +3,14 @@
 What it does: ``BatchedScene(n_envs, geometry, sim, env=...)`` opens the backend ``sim.backend``
 resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, or ManiSkill's
 ``num_envs = N`` on PhysX GPU) and is the one interface the realizer sees, whatever runs:
-  * reads: base pose, whole-body joint state, end-effector pose, cube pose and velocity, whether
-    the gripper holds the cube (finger contact forces), all in one copy's local frame (the frame
-    of ``realize.world.geometry``), so nothing above it sees tile offsets; each is read from the
-    simulator once per state (cached until a step, reset, freeze or cube move; ``state_changed``);
+  * reads: base pose, whole-body joint state, end-effector pose, every movable object's pose
+    and velocity ((N, m, ...), ``object_names`` order, or one by name), which object the gripper
+    holds (finger contact forces), all in one copy's local frame (the frame of
+    ``realize.world.geometry``), so nothing above it sees tile offsets; each is read from the
+    simulator once per state (cached until a step, reset, freeze or object move; ``state_changed``);
   * writes: base velocity commands, upper-joint targets, the gripper opening; ``step``
     advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
-  * step hooks (``add_step_hook``: a video writer renders there), per-copy cube friction and the
+  * step hooks (``add_step_hook``: a video writer renders there), per-copy object friction and the
     ``EnvOptions`` the task is built with (render camera, reset noise, forced randomization),
     for replay and validation; ``render`` gives copy 0's frame.
 What it doesn't: decide anything (controllers compute the targets, the rollout runs actions),
@@ -21,6 +22,7 @@ Whole-body joint vector ``q`` (n_dof): base x, base y, base yaw, then the robot'
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
@@ -33,12 +35,12 @@ from realize.world.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
-from realize.world.state import SceneState
+from realize.world.state import ObjectPose, SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
 
 StepHook = Callable[[int], None]
-RESTORE_SETTLE_STEPS = 1  # control periods a restored held cube is simulated before the first read
+RESTORE_SETTLE_STEPS = 1  # control periods a restored held object is simulated before the first read
 
 
 class SceneSpec(Protocol):
@@ -92,6 +94,8 @@ class BatchedScene:
         self.deterministic: bool = self._impl.deterministic
         self.env, self.u, self.device = self._impl.env, self._impl.u, self._impl.device
         self.geometry: SceneGeometry = self.u.geometry
+        self.object_names: tuple[str, ...] = self.geometry.object_names
+        """The movable objects, in the order of the m axis of ``object_poses`` and friends."""
         self.substeps = self.sim.sim_freq // self.sim.control_freq
         self.control_dt = 1.0 / self.sim.control_freq
         self._start_xy = torch.tensor(self.geometry.robot_start[:2], dtype=torch.float32, device=self.device)
@@ -134,13 +138,12 @@ class BatchedScene:
     def reset(self, seed: int = 0, randomize: bool = False, state: SceneState | None = None) -> None:
         """Put every copy back in the task's initial state (same state for all unless randomize,
         or ``env.randomize_resets``), or, with ``state``, every copy in that state (robot joints,
-        cube pose, gripper command; at rest). Resets are history-free on a deterministic
+        object poses, gripper command; at rest). Resets are history-free on a deterministic
         backend: a rollout in a used scene equals one in a fresh scene bit for bit.
 
-        A state whose cube is held is simulated for ``RESTORE_SETTLE_STEPS`` control periods
+        A state that holds an object is simulated for ``RESTORE_SETTLE_STEPS`` control periods
         with every target holding (not counted in ``step_count``): the closed fingers then press
-        on the cube, and the contact forces that ``holds_cube`` reads exist before the first
-        action asks."""
+        on it, and the contact forces that ``holds`` reads exist before the first action asks."""
         self._frozen.zero_()
         self.env.reset(seed=seed, options=dict(randomize=randomize or self.options.randomize_resets))
         self._impl.after_reset()
@@ -154,7 +157,7 @@ class BatchedScene:
         closed = state is not None and state.gripper_closed
         self._grip_target.fill_(self._grip_closed if closed else self._grip_open)
         self._apply_targets()
-        if state is not None and state.cube_held:
+        if state is not None and state.held is not None:
             for _ in range(RESTORE_SETTLE_STEPS):
                 self._impl.step(self.substeps)
         self.state_changed()  # a caller may move things through ``u`` before the first read
@@ -172,22 +175,35 @@ class BatchedScene:
         self.robot.check_state_joints(state.joints, state.source or "state")
         for name in self.state_joints:  # joints a state leaves out take the robot's rest pose
             row[self.joint_names.index(name)] = state.joints.get(name, self.robot.rest_value(name))
-        pose = torch.tensor([*state.cube_position, *state.cube_quaternion], dtype=torch.float32)
-        self._impl.set_state(row.repeat(n, 1), pose.repeat(n, 1))
+        unknown = sorted(set(state.objects) - set(self.object_names))
+        if unknown:
+            raise ConfigError(f"{state.source or 'state'}: objects {unknown} are not in the scene; its objects: "
+                              f"{list(self.object_names)}")
+        poses = []
+        for o in self.geometry.objects:  # objects a state leaves out start at their rest pose
+            pose = state.objects.get(o.name)
+            if pose is None:
+                q = (math.cos(o.yaw / 2), 0.0, 0.0, math.sin(o.yaw / 2))
+                poses.append([*o.position, *q])
+            else:
+                poses.append([*pose.position, *pose.quaternion])
+        self._impl.set_state(row.repeat(n, 1), torch.tensor(poses, dtype=torch.float32).repeat(n, 1, 1))
 
     def capture_state(self, copy: int = 0, source: str = "") -> SceneState:
         """Copy ``copy``'s state now (velocities dropped): what ``reset(state=...)`` restores."""
         qpos = self._read("qpos", self._impl.qpos)[copy].tolist()
         base = self.base_pose()[copy].tolist()
-        cube = self.cube_pose()[copy].tolist()
+        poses = self.object_poses()[copy].tolist()
+        held = int(self.held_object()[copy])
         return SceneState(base=tuple(base), joints={n: qpos[self.joint_names.index(n)] for n in self.state_joints},
                           gripper_closed=bool(self._grip_target[copy] == self._grip_closed),
-                          cube_position=tuple(cube[:3]), cube_quaternion=tuple(cube[3:]),
-                          cube_held=bool(self.holds_cube()[copy]), source=source)
+                          objects={n: ObjectPose(tuple(p[:3]), tuple(p[3:]), where=f"objects.{n}")
+                                   for n, p in zip(self.object_names, poses)},
+                          held=self.object_names[held] if held >= 0 else None, source=source)
 
     # ------------------------------------------------------------------ reads
     # Each quantity is read from the simulator once per state: the first read after a change
-    # (step, reset, freeze, place_cube, push_cube) asks the backend, later ones get a copy.
+    # (step, reset, freeze, place_object, push_object) asks the backend, later ones get a copy.
     def state_changed(self) -> None:
         """Forget the reads of the old state. The scene calls it whenever it changes the
         simulator; a caller that changes it through ``u``/``env`` (tests teleporting a robot)
@@ -234,30 +250,55 @@ class BatchedScene:
         """(N, 7) the TCP link's (``robot.tcp.link``) position (local frame) and wxyz quaternion."""
         return self._read("ee_pose", self._impl.ee_pose).clone()
 
-    def cube_pose(self) -> torch.Tensor:
-        """(N, 7) cube position (local frame) and wxyz quaternion."""
-        return self._read("cube_pose", self._impl.cube_pose).clone()
+    def object_index(self, name: str) -> int:
+        """Position of object ``name`` on the m axis (``ConfigError`` naming the known ones)."""
+        if name not in self.object_names:
+            raise ConfigError(f"object {name!r} is not in the scene; its objects: {list(self.object_names)}")
+        return self.object_names.index(name)
 
-    def cube_velocity(self) -> torch.Tensor:
-        """(N, 6) cube linear and angular velocity."""
-        return self._read("cube_velocity", self._impl.cube_velocity).clone()
+    def object_poses(self) -> torch.Tensor:
+        """(N, m, 7) every object's position (local frame) and wxyz quaternion."""
+        return self._read("object_poses", self._impl.object_poses).clone()
 
-    def finger_cube_forces(self) -> torch.Tensor:
-        """(N, 2) magnitude of the contact force (N) between each finger and the cube."""
-        return self._read("finger_cube_forces", self._impl.finger_cube_forces).clone()
+    def object_pose(self, name: str) -> torch.Tensor:
+        """(N, 7) object ``name``'s position (local frame) and wxyz quaternion."""
+        return self._read("object_poses", self._impl.object_poses)[:, self.object_index(name)].clone()
 
-    def holds_cube(self) -> torch.Tensor:
-        """(N,) bool: both fingers press on the cube with at least ``sim.grasp_min_force``."""
-        return (self.finger_cube_forces() >= self.sim.grasp_min_force).all(dim=1)
+    def object_velocities(self) -> torch.Tensor:
+        """(N, m, 6) every object's linear and angular velocity."""
+        return self._read("object_velocities", self._impl.object_velocities).clone()
+
+    def object_velocity(self, name: str) -> torch.Tensor:
+        """(N, 6) object ``name``'s linear and angular velocity."""
+        return self._read("object_velocities", self._impl.object_velocities)[:, self.object_index(name)].clone()
+
+    def finger_forces(self) -> torch.Tensor:
+        """(N, m, 2) magnitude of the contact force (N) between each object and each finger."""
+        return self._read("finger_forces", self._impl.finger_forces).clone()
+
+    def holding(self) -> torch.Tensor:
+        """(N, m) bool: both fingers press on the object with at least ``sim.grasp_min_force``."""
+        return (self.finger_forces() >= self.sim.grasp_min_force).all(dim=2)
+
+    def holds(self, name: str) -> torch.Tensor:
+        """(N,) bool: the gripper holds object ``name`` (both fingers press on it)."""
+        return self.holding()[:, self.object_index(name)]
+
+    def held_object(self) -> torch.Tensor:
+        """(N,) int64: index (m axis) of the object the gripper holds, -1 where none (the first
+        where two are pressed at once)."""
+        h = self.holding()
+        first = h.to(torch.int8).argmax(dim=1)
+        return torch.where(h.any(dim=1), first, torch.full_like(first, -1))
 
     @property
     def frozen(self) -> torch.Tensor:
         return self._frozen.clone()
 
     @property
-    def cube_xy_noise(self) -> float:
-        """Amplitude (m) of the cube's xy noise of a randomized reset."""
-        return float(self.u.cube_xy_noise)
+    def object_xy_noise(self) -> float:
+        """Amplitude (m) of the objects' xy noise of a randomized reset."""
+        return float(self.u.object_xy_noise)
 
     @property
     def robot_xy_noise(self) -> float:
@@ -326,35 +367,37 @@ class BatchedScene:
                 hook(self.step_count)
 
     # ------------------------------------------------------------------ perturbations, what-ifs, tests
-    def cube_friction(self) -> torch.Tensor:
-        """(N, 2) static and dynamic friction of each copy's cube (float64; CPU backend)."""
-        return self._impl.cube_friction()
+    def object_friction(self, name: str) -> torch.Tensor:
+        """(N, 2) static and dynamic friction of object ``name`` in each copy (float64; CPU backend)."""
+        return self._impl.object_friction(self.object_index(name))
 
-    def set_cube_friction(self, factors: torch.Tensor | np.ndarray | Sequence[float]) -> torch.Tensor:
-        """Scale each copy's cube friction (static and dynamic) by ``factors`` (N,) from the scene's
-        configured value ``geometry.cube_friction``; returns the (N,) friction now set (float64).
+    def set_object_friction(self, name: str, factors: torch.Tensor | np.ndarray | Sequence[float]) -> torch.Tensor:
+        """Scale each copy's friction of object ``name`` (static and dynamic) by ``factors`` (N,)
+        from its configured value; returns the (N,) friction now set (float64).
 
         PhysX combines the friction of two touching shapes by averaging (its default), so the
-        friction of a cube-finger or cube-table contact moves by half the cube's change. Set once
-        per scene (a loop over the copies on CPU), not per step."""
+        friction of an object-finger or object-table contact moves by half the object's change.
+        Set once per scene (a loop over the copies on CPU), not per step."""
+        k = self.object_index(name)
         f = torch.as_tensor(np.asarray(factors, dtype=np.float64)).reshape(-1)
         if len(f) != self.n_envs:
             raise ConfigError(f"{len(f)} friction factors for {self.n_envs} copies")
         if not bool(torch.isfinite(f).all()) or bool((f <= 0).any()):
             raise ConfigError(f"friction factors must be finite and > 0, got {f.tolist()}")
-        values = float(self.geometry.cube_friction) * f
-        self._impl.set_cube_friction(values)
+        values = float(self.geometry.objects[k].friction) * f
+        self._impl.set_object_friction(k, values)
         return values
 
-    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
-        """Give one copy's cube a linear velocity (used to check that copies are independent)."""
-        self._impl.push_cube(copy, velocity)
+    def push_object(self, name: str, copy: int, velocity: tuple[float, float, float]) -> None:
+        """Give one copy's object ``name`` a linear velocity (used to check that copies are independent)."""
+        self._impl.push_object(self.object_index(name), copy, velocity)
         self.state_changed()
 
-    def place_cube(self, positions: torch.Tensor) -> None:
-        """Teleport every copy's cube to ``positions`` (N, 3) in its copy's local frame, axis-aligned
-        and at rest (tests and what-if checks: where does a cube dropped here end up?)."""
-        self._impl.place_cube(torch.as_tensor(positions, dtype=torch.float32).reshape(self.n_envs, 3).cpu())
+    def place_object(self, name: str, positions: torch.Tensor) -> None:
+        """Teleport every copy's object ``name`` to ``positions`` (N, 3) in its copy's local frame,
+        axis-aligned and at rest (tests and what-if checks: where does an object dropped here end up?)."""
+        k = self.object_index(name)
+        self._impl.place_object(k, torch.as_tensor(positions, dtype=torch.float32).reshape(self.n_envs, 3).cpu())
         self.state_changed()
 
     # ------------------------------------------------------------------ rendering

@@ -1,10 +1,10 @@
 """The CPU backend: N copies of the world tiled in ONE PhysX CPU scene, stepped by one call.
 
 What it does: ManiSkill allows one CPU env only, so the task is built with ``n_tiles = N``: N
-robots (a ManiSkill multi-agent), tables and cubes, laid out far enough apart never to touch,
+robots (a ManiSkill multi-agent), tables and movable objects, laid out far enough apart never to touch,
 with PhysX's enhanced determinism so that copies stay independent and runs repeat bit for bit.
 Reads loop over the copies' SAPIEN objects (one bound getter call per copy and quantity, no
-per-body numpy work; contacts other than finger-cube pairs are dropped before their points are
+per-body numpy work; contacts other than finger-object pairs are dropped before their points are
 read); positions are shifted back by each tile's offset into the copy's local frame. Writes set
 only the drive targets that changed since the last write (all of them after a reset), and wake
 the running robots that got nothing new, as a write would. Resets are history-free (every
@@ -80,9 +80,12 @@ class CpuTiledBackend(PhysicsBackend):
         nb, nu, nf = len(robot.base.joints), len(robot.upper.joints), len(robot.gripper.joints)
         self._cols = (slice(0, nb), slice(nb, nb + nu), slice(nb + nu, nb + 2 * nu), slice(nb + 2 * nu, nb + 2 * nu + nf))
         self._n_targets = nb + 2 * nu + nf
-        self._cube_bodies = [c._bodies[0] for c in self.u.cubes]
-        self._dynamic_bodies = [a._bodies[0] for a in self.u.dynamic_actors]  # cubes (and sticks)
-        # contact bookkeeping: physx component -> (copy index, role) with role 0/1 finger, 2 cube
+        # _object_bodies[k][c]: object k (the geometry's order) of copy c
+        self._object_bodies = [[a._bodies[0] for a in self.u.object_actors[o.name]] for o in self.u.geometry.objects]
+        self.n_objects = m = len(self._object_bodies)
+        by_copy = [self._object_bodies[k][c] for c in range(n_envs) for k in range(m)]  # copy-major
+        self._dynamic_bodies = [a._bodies[0] for a in self.u.dynamic_actors]  # every object, build order
+        # contact bookkeeping: physx component -> (copy index, role) with role 0/1 finger, 2 + k object k
         self._contact_role: dict[int, tuple[int, int]] = {}
         self._keep_alive = []  # id() keys stay valid while the wrappers live
         for c, a in enumerate(self.u.agents):
@@ -90,18 +93,19 @@ class CpuTiledBackend(PhysicsBackend):
                 link = a.robot.links_map[ln]._objs[0]
                 self._keep_alive.append(link)
                 self._contact_role[id(link)] = (c, r)
-        for c, body in enumerate(self._cube_bodies):
-            self._keep_alive.append(body)
-            self._contact_role[id(body)] = (c, 2)
+        for k, bodies in enumerate(self._object_bodies):
+            for c, body in enumerate(bodies):
+                self._keep_alive.append(body)
+                self._contact_role[id(body)] = (c, 2 + k)
         self._px = self.u.scene.px
         # bound pybind methods, looked up once: the per-step loops only call them
         self._get_qpos = [a.get_qpos for a in self._arts]
         self._get_qvel = [a.get_qvel for a in self._arts]
         self._get_ee_pose = [link.get_entity_pose for link in self._ee_links]
-        self._get_cube_pose = [b.get_entity_pose for b in self._cube_bodies]
-        self._get_cube_lin_vel = [b.get_linear_velocity for b in self._cube_bodies]
-        self._get_cube_ang_vel = [b.get_angular_velocity for b in self._cube_bodies]
-        _check_pose_layout(self._cube_bodies[0].get_entity_pose())
+        self._get_object_pose = [b.get_entity_pose for b in by_copy]
+        self._get_object_lin_vel = [b.get_linear_velocity for b in by_copy]
+        self._get_object_ang_vel = [b.get_angular_velocity for b in by_copy]
+        _check_pose_layout(by_copy[0].get_entity_pose())
         self._setters = [
             [j.set_drive_velocity_target for j in self._base_joints[c]]
             + [j.set_drive_target for j in self._arm_joints[c]]
@@ -116,7 +120,7 @@ class CpuTiledBackend(PhysicsBackend):
 
     def after_reset(self) -> None:
         """History-free reset: PhysX keeps contact caches of shape pairs that touched in the
-        previous rollout, so every dynamic actor (cube, and the push scene's stick) is taken out
+        previous rollout, so every dynamic actor (every movable object) is taken out
         of the scene and put back in (which drops its pairs). A rollout in a used scene then
         equals one in a fresh scene bit for bit."""
         self._write_all = True  # the task's reset may have set targets of its own
@@ -146,29 +150,33 @@ class CpuTiledBackend(PhysicsBackend):
         return torch.from_numpy(np.array([get() for get in self._get_qvel]))
 
     def _local_poses(self, getters: list) -> torch.Tensor:
+        """(len(getters), 7) poses, shifted into their copy's frame (getters copy-major, as many per copy)."""
         raw = torch.from_numpy(np.array([get().__getstate__() for get in getters], dtype=np.float32))
-        raw[:, :2] -= self._offsets
-        return raw
+        per = len(getters) // self.n_envs
+        raw = raw.reshape(self.n_envs, per, 7)
+        raw[:, :, :2] -= self._offsets[:, None, :]
+        return raw.reshape(-1, 7)
 
     def ee_pose(self) -> torch.Tensor:
         return self._local_poses(self._get_ee_pose)
 
-    def cube_pose(self) -> torch.Tensor:
-        return self._local_poses(self._get_cube_pose)
+    def object_poses(self) -> torch.Tensor:
+        return self._local_poses(self._get_object_pose).reshape(self.n_envs, self.n_objects, 7)
 
-    def cube_velocity(self) -> torch.Tensor:
-        out = np.empty((self.n_envs, 6), dtype=np.float32)
-        out[:, :3] = [get() for get in self._get_cube_lin_vel]
-        out[:, 3:] = [get() for get in self._get_cube_ang_vel]
-        return torch.from_numpy(out)
+    def object_velocities(self) -> torch.Tensor:
+        out = np.empty((self.n_envs * self.n_objects, 6), dtype=np.float32)
+        out[:, :3] = [get() for get in self._get_object_lin_vel]
+        out[:, 3:] = [get() for get in self._get_object_ang_vel]
+        return torch.from_numpy(out).reshape(self.n_envs, self.n_objects, 6)
 
-    def finger_cube_forces(self) -> torch.Tensor:
-        """Contacts of anything but a finger and its own copy's cube (cubes on tables, the arm on
-        the head, ...) are dropped after two dict look-ups, before any contact point is read.
-        A contact's impulse is summed and its norm taken in Python floats: the same float64
-        operations as numpy's ``zeros(3) + p0 + p1 ...`` and ``linalg.norm`` (sqrt of the dot
-        product), bit for bit, without an array per contact."""
-        impulse = [0.0] * (2 * self.n_envs)  # (copy, finger) flattened
+    def finger_forces(self) -> torch.Tensor:
+        """Contacts of anything but a finger and an object of its own copy (objects on tables or
+        on each other, the arm on the head, ...) are dropped after two dict look-ups, before any
+        contact point is read. A contact's impulse is summed and its norm taken in Python
+        floats: the same float64 operations as numpy's ``zeros(3) + p0 + p1 ...`` and
+        ``linalg.norm`` (sqrt of the dot product), bit for bit, without an array per contact."""
+        m = self.n_objects
+        impulse = [0.0] * (2 * m * self.n_envs)  # (copy, object, finger) flattened
         role = self._contact_role.get
         for contact in self._px.get_contacts():
             b0, b1 = contact.bodies
@@ -176,18 +184,18 @@ class CpuTiledBackend(PhysicsBackend):
             if r0 is None:
                 continue
             r1 = role(id(b1))
-            if r1 is None or r0[0] != r1[0] or (r0[1] == 2) == (r1[1] == 2):
-                continue  # other bodies, another copy's, or finger-finger
-            finger = r1[1] if r0[1] == 2 else r0[1]
+            if r1 is None or r0[0] != r1[0] or (r0[1] >= 2) == (r1[1] >= 2):
+                continue  # other bodies, another copy's, finger-finger or object-object
+            finger, obj = (r1[1], r0[1] - 2) if r0[1] >= 2 else (r0[1], r1[1] - 2)
             x = y = z = 0.0
             for pt in contact.points:
                 px, py, pz = pt.impulse.tolist()
                 x += px
                 y += py
                 z += pz
-            impulse[2 * r0[0] + finger] += sqrt(x * x + y * y + z * z)
+            impulse[2 * (r0[0] * m + obj) + finger] += sqrt(x * x + y * y + z * z)
         dt = 1.0 / self.sim.sim_freq
-        return torch.from_numpy(np.array(impulse).reshape(self.n_envs, 2) / dt).to(torch.float32)
+        return torch.from_numpy(np.array(impulse).reshape(self.n_envs, m, 2) / dt).to(torch.float32)
 
     # ------------------------------------------------------------------ writes
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
@@ -232,17 +240,17 @@ class CpuTiledBackend(PhysicsBackend):
             art.root.put_to_sleep()
 
     # ------------------------------------------------------------------ tests, what-ifs, perturbations
-    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
-        self._cube_bodies[copy].set_linear_velocity(np.asarray(velocity, dtype=np.float32))
+    def push_object(self, k: int, copy: int, velocity: tuple[float, float, float]) -> None:
+        self._object_bodies[k][copy].set_linear_velocity(np.asarray(velocity, dtype=np.float32))
 
-    def place_cube(self, positions: torch.Tensor) -> None:
-        for c, body in enumerate(self._cube_bodies):
+    def place_object(self, k: int, positions: torch.Tensor) -> None:
+        for c, body in enumerate(self._object_bodies[k]):
             xyz = positions[c].numpy() + np.array([*self._offsets[c].tolist(), 0.0], dtype=np.float32)
             body.entity.set_pose(sapien.Pose(xyz))
             body.set_linear_velocity(np.zeros(3, dtype=np.float32))
             body.set_angular_velocity(np.zeros(3, dtype=np.float32))
 
-    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+    def set_state(self, qpos: torch.Tensor, object_poses: torch.Tensor) -> None:
         """One physics substep in the task's initial state first: PhysX keeps the contact caches
         of the robots' own touching links (the robots stay in the scene on reset), and a state
         with the arm near the body would otherwise start from the previous rollout's caches
@@ -253,28 +261,29 @@ class CpuTiledBackend(PhysicsBackend):
         for c, art in enumerate(self._arts):
             art.set_qpos(qpos[c].numpy().astype(np.float32))
             art.set_qvel(zeros)
-        for c, body in enumerate(self._cube_bodies):
-            p = cube_pose[c, :3].numpy() + np.array([*self._offsets[c].tolist(), 0.0], dtype=np.float32)
-            body.entity.set_pose(sapien.Pose(p, cube_pose[c, 3:].numpy()))
-            body.set_linear_velocity(np.zeros(3, dtype=np.float32))
-            body.set_angular_velocity(np.zeros(3, dtype=np.float32))
+        for k, bodies in enumerate(self._object_bodies):
+            for c, body in enumerate(bodies):
+                p = object_poses[c, k, :3].numpy() + np.array([*self._offsets[c].tolist(), 0.0], dtype=np.float32)
+                body.entity.set_pose(sapien.Pose(p, object_poses[c, k, 3:].numpy()))
+                body.set_linear_velocity(np.zeros(3, dtype=np.float32))
+                body.set_angular_velocity(np.zeros(3, dtype=np.float32))
         self._write_all = True
 
-    def _cube_shapes(self) -> list:
+    def _shapes(self, k: int) -> list:
         shapes = []
-        for body in self._cube_bodies:
+        for body in self._object_bodies[k]:
             (shape,) = body.get_collision_shapes()
             shapes.append(shape)
         return shapes
 
-    def cube_friction(self) -> torch.Tensor:
-        mats = [s.get_physical_material() for s in self._cube_shapes()]
+    def object_friction(self, k: int) -> torch.Tensor:
+        mats = [s.get_physical_material() for s in self._shapes(k)]
         return torch.tensor([[m.static_friction, m.dynamic_friction] for m in mats], dtype=torch.float64)
 
-    def set_cube_friction(self, values: torch.Tensor) -> None:
+    def set_object_friction(self, k: int, values: torch.Tensor) -> None:
         """One loop over the copies (SAPIEN has no batched material API on CPU); each copy gets
         its own material."""
-        shapes = self._cube_shapes()
+        shapes = self._shapes(k)
         if len(values) != len(shapes):
             raise ConfigError(f"{len(values)} friction values for {len(shapes)} copies")
         for shape, mu in zip(shapes, values.tolist()):

@@ -5,14 +5,15 @@ camera is asked for: ManiSkill would build one per sub-scene); every read is one
 ManiSkill tensor (each sub-scene has its own frame, so poses are local already). PhysX GPU
 keeps its state in device buffers that ManiSkill's setters write and its getters read, so every
 write is applied before the next step or fetch (a fetch overwrites what was not applied): drive
-targets after the setters, the cube after ``push_cube`` / ``place_cube``; ``set_state`` applies
+targets after the setters, an object after ``push_object`` / ``place_object``; ``set_state`` applies
 joints and poses, updates the links' kinematics, then fetches (ManiSkill's own reset order);
 after the substeps the buffers are fetched once. ``realize.scene.backends`` checks SAPIEN's
 PhysX GPU library (``realize.physx_gpu``) before this backend is built.
 What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
 copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
 the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA
-(nor has ``set_state``, the restore of a saved state, which no test runs on a GPU).
+(nor has ``set_state``, the restore of a saved state, which no test runs on a GPU). Each
+movable object is one batched ManiSkill actor over the sub-scenes; reads stack them on the m axis.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ _NO_RENDER = {"render_backend": "none"}
 
 __all__ = ["GpuBackend"]
 
-_NO_FRICTION = ("per-copy cube friction needs the CPU backend: PhysX GPU fixes materials when the scene is "
+_NO_FRICTION = ("per-copy object friction needs the CPU backend: PhysX GPU fixes materials when the scene is "
                 "built (use sim.backend=cpu, or no friction range)")
 
 
@@ -49,7 +50,7 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
         agent = self.u.agents[0]
         self._robot = agent.robot
         self._agent = agent
-        self._cube = self.u.cubes[0]
+        self._objects = [self.u.object_actors[o.name][0] for o in self.u.geometry.objects]
         self._ee_link = agent.tcp
         joints = {j.name: j for j in self._robot.get_active_joints()}
         self._base_j = [joints[j] for j in robot.base.joints]
@@ -68,17 +69,17 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
     def ee_pose(self) -> torch.Tensor:
         return self._ee_link.pose.raw_pose.clone()
 
-    def cube_pose(self) -> torch.Tensor:
-        return self._cube.pose.raw_pose.clone()
+    def object_poses(self) -> torch.Tensor:
+        return torch.stack([o.pose.raw_pose for o in self._objects], dim=1).clone()
 
-    def cube_velocity(self) -> torch.Tensor:
-        return torch.cat([self._cube.linear_velocity, self._cube.angular_velocity], dim=1)
+    def object_velocities(self) -> torch.Tensor:
+        return torch.stack([torch.cat([o.linear_velocity, o.angular_velocity], dim=1) for o in self._objects], dim=1)
 
-    def finger_cube_forces(self) -> torch.Tensor:
+    def finger_forces(self) -> torch.Tensor:
         fingers = self._agent.finger_links
-        return torch.stack(
-            [self.u.scene.get_pairwise_contact_forces(f, self._cube).norm(dim=1) for f in fingers], dim=1
-        )
+        pair = self.u.scene.get_pairwise_contact_forces
+        return torch.stack([torch.stack([pair(f, o).norm(dim=1) for f in fingers], dim=1) for o in self._objects],
+                           dim=1)
 
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
                       grip: torch.Tensor, frozen: torch.Tensor) -> None:
@@ -99,34 +100,37 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
     def freeze(self, copies: list[int]) -> None:
         """Nothing to do: the zeroed base targets and held arm targets keep them still."""
 
-    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
-        v = self._cube.linear_velocity.clone()
+    def push_object(self, k: int, copy: int, velocity: tuple[float, float, float]) -> None:
+        obj = self._objects[k]
+        v = obj.linear_velocity.clone()
         v[copy] = torch.tensor(velocity, device=self.device)
-        self._cube.set_linear_velocity(v)
+        obj.set_linear_velocity(v)
         self.u.scene.px.gpu_apply_rigid_dynamic_data()
 
-    def place_cube(self, positions: torch.Tensor) -> None:
-        pose = self._cube.pose.raw_pose.clone()
+    def place_object(self, k: int, positions: torch.Tensor) -> None:
+        obj = self._objects[k]
+        pose = obj.pose.raw_pose.clone()
         pose[:, :3] = positions.to(self.device)  # every GPU sub-scene has its own frame
         pose[:, 3:] = torch.tensor([1.0, 0.0, 0.0, 0.0], device=self.device)
-        self._cube.set_pose(pose)
-        self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
-        self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        obj.set_pose(pose)
+        obj.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        obj.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
         self.u.scene.px.gpu_apply_rigid_dynamic_data()
 
-    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+    def set_state(self, qpos: torch.Tensor, object_poses: torch.Tensor) -> None:
         """ManiSkill's batched setters, then apply, update the links' kinematics and fetch."""
         self._robot.set_qpos(qpos.to(self.device))
         self._robot.set_qvel(torch.zeros_like(qpos, device=self.device))
-        self._cube.set_pose(cube_pose.to(self.device))  # every GPU sub-scene has its own frame
-        self._cube.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
-        self._cube.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+        for k, obj in enumerate(self._objects):
+            obj.set_pose(object_poses[:, k].to(self.device))  # every GPU sub-scene has its own frame
+            obj.set_linear_velocity(torch.zeros(self.n_envs, 3, device=self.device))
+            obj.set_angular_velocity(torch.zeros(self.n_envs, 3, device=self.device))
         self.u.scene._gpu_apply_all()
         self.u.scene.px.gpu_update_articulation_kinematics()  # the links' poses from the new joints
         self.u.scene._gpu_fetch_all()
 
-    def cube_friction(self) -> torch.Tensor:
+    def object_friction(self, k: int) -> torch.Tensor:
         raise ConfigError(_NO_FRICTION)
 
-    def set_cube_friction(self, values: torch.Tensor) -> None:
+    def set_object_friction(self, k: int, values: torch.Tensor) -> None:
         raise ConfigError(_NO_FRICTION)

@@ -2,10 +2,12 @@
 
 What it does:
   * ``PhysicsBackend``: the contract of a backend (``realize.scene.cpu_tiled``,
-    ``realize.scene.gpu``): raw per-copy reads in a copy's local frame (joint state, gripper and
-    cube poses, cube velocity, finger-cube contact forces), drive-target writes, physics
-    substeps, putting finished copies to sleep, history-free resets, teleporting every copy into
-    a restored state (``set_state``), per-copy cube friction and test-only cube pushes. Everything is an (N, ...) tensor on the backend's device.
+    ``realize.scene.gpu``): raw per-copy reads in a copy's local frame (joint state, the TCP
+    pose, every movable object's pose and velocity, finger-object contact forces; objects in the
+    geometry's order, the m axis), drive-target writes, physics substeps, putting finished copies
+    to sleep, history-free resets, teleporting every copy into a restored state (``set_state``),
+    per-copy object friction and test-only object pushes. Everything is an (N, ...) tensor on
+    the backend's device.
   * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
     variant, ``task_id``; gym imports ``envs``, which registers them, by the id's ``envs:`` prefix:
     realize never imports ``envs``) with the physics settings and the ``EnvOptions`` (render camera,
@@ -69,8 +71,8 @@ def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robo
             render["pose"] = sapien_utils.look_at(eye=list(map(float, cam.eye)), target=list(map(float, cam.target)))
         if render:
             kwargs["human_render_camera_configs"] = {"render_camera": render}
-    if options.cube_xy_noise is not None:
-        kwargs["cube_xy_noise"] = options.cube_xy_noise
+    if options.object_xy_noise is not None:
+        kwargs["object_xy_noise"] = options.object_xy_noise
     if options.robot_xy_noise is not None:
         kwargs["robot_xy_noise"] = options.robot_xy_noise
     return gym.make(f"envs:{task_id(geometry.variant)}", **backend_kwargs, **kwargs)
@@ -111,17 +113,17 @@ class PhysicsBackend(ABC):
         """(N, 7) pose of the robot's TCP link (``robot.tcp.link``)."""
 
     @abstractmethod
-    def cube_pose(self) -> torch.Tensor:
-        """(N, 7) cube pose."""
+    def object_poses(self) -> torch.Tensor:
+        """(N, m, 7) pose of every movable object."""
 
     @abstractmethod
-    def cube_velocity(self) -> torch.Tensor:
-        """(N, 6) cube linear and angular velocity."""
+    def object_velocities(self) -> torch.Tensor:
+        """(N, m, 6) linear and angular velocity of every movable object."""
 
     @abstractmethod
-    def finger_cube_forces(self) -> torch.Tensor:
-        """(N, 2) magnitude of the contact force (N) between each finger link
-        (``robot.gripper.finger_links``) and the cube."""
+    def finger_forces(self) -> torch.Tensor:
+        """(N, m, 2) magnitude of the contact force (N) between each object and each finger link
+        (``robot.gripper.finger_links``)."""
 
     @abstractmethod
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
@@ -139,26 +141,26 @@ class PhysicsBackend(ABC):
         already zero): sleep where the backend can, else nothing."""
 
     @abstractmethod
-    def push_cube(self, copy: int, velocity: tuple[float, float, float]) -> None:
-        """Give one copy's cube a linear velocity (tests: copies are independent)."""
+    def push_object(self, k: int, copy: int, velocity: tuple[float, float, float]) -> None:
+        """Give object ``k`` of one copy a linear velocity (tests: copies are independent)."""
 
     @abstractmethod
-    def place_cube(self, positions: torch.Tensor) -> None:
-        """Teleport every copy's cube to ``positions`` (N, 3, CPU float32), axis-aligned, at rest."""
+    def place_object(self, k: int, positions: torch.Tensor) -> None:
+        """Teleport object ``k`` of every copy to ``positions`` (N, 3, CPU float32), axis-aligned, at rest."""
 
     @abstractmethod
-    def set_state(self, qpos: torch.Tensor, cube_pose: torch.Tensor) -> None:
+    def set_state(self, qpos: torch.Tensor, object_poses: torch.Tensor) -> None:
         """Teleport every copy, after a reset: robot joints to ``qpos`` (N, J, in the order of
-        ``qpos()``, base joints relative to the task's robot start) at rest, cube to ``cube_pose``
-        (N, 7, local frame, wxyz) at rest. Both CPU float32."""
+        ``qpos()``, base joints relative to the task's robot start) at rest, every object to
+        ``object_poses`` (N, m, 7, local frame, wxyz) at rest. Both CPU float32."""
 
     @abstractmethod
-    def cube_friction(self) -> torch.Tensor:
-        """(N, 2) static and dynamic friction of each copy's cube (float64)."""
+    def object_friction(self, k: int) -> torch.Tensor:
+        """(N, 2) static and dynamic friction of object ``k`` in each copy (float64)."""
 
     @abstractmethod
-    def set_cube_friction(self, values: torch.Tensor) -> None:
-        """Give copy i's cube the friction ``values[i]`` (static = dynamic; (N,) float64)."""
+    def set_object_friction(self, k: int, values: torch.Tensor) -> None:
+        """Give object ``k`` of copy i the friction ``values[i]`` (static = dynamic; (N,) float64)."""
 
     def close(self) -> None:
         self.env.close()

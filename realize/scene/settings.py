@@ -2,7 +2,7 @@
 
 What it does:
   * ``SimSettings``: backend, physics and control rates, solver iterations, CPU threads, the
-    contact force that counts as holding the cube. Bounds and choices are field metadata
+    contact force that counts as holding an object. Bounds and choices are field metadata
     (``realize.config.setting``); ``sim_freq`` must be a multiple of ``control_freq`` (``check``).
   * ``EnvOptions``: what the ManiSkill task is built and reset with besides geometry and physics:
     the render ``Camera`` (videos), the reset noise amplitudes (validation perturbations) and
@@ -39,7 +39,7 @@ class SimSettings(Settings):
     lean_robot: bool = True  # simulate the robot without its collision.lean_drop_links (envs.robot_agent)
     robot_collisions: str = setting("all", choices=ROBOT_COLLISIONS)  # all | no_self (links never touch each other) | hand (only gripper and fingers have shapes)
     cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
-    grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the cube"
+    grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the object"
     torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
     shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.app.workers.blocks)
     # PhysX scene settings (ManiSkill's SceneConfig; defaults are ManiSkill's)
@@ -88,14 +88,14 @@ class Camera(Settings):
 class EnvOptions(Settings):
     """What the ManiSkill task is built and reset with besides geometry and physics.
 
-    ``camera``: the render camera (None: the task's). ``cube_xy_noise`` / ``robot_xy_noise``:
+    ``camera``: the render camera (None: the task's). ``object_xy_noise`` / ``robot_xy_noise``:
     reset noise amplitudes in m (None: the task's defaults). ``randomize_resets``: every
-    ``reset`` applies the task's randomization (cube xy/yaw, robot start xy), whatever the caller
-    asks (the realizer resets without it)."""
+    ``reset`` applies the task's randomization (object xy/yaw, robot start xy), whatever the
+    caller asks (the realizer resets without it)."""
 
     config_key: ClassVar[str] = "env"
 
     camera: Camera | None = None
-    cube_xy_noise: float | None = setting(None, ge=0)
+    object_xy_noise: float | None = setting(None, ge=0)
     robot_xy_noise: float | None = setting(None, ge=0)
     randomize_resets: bool = False

@@ -2,13 +2,13 @@
 
 What it does: a task's region may name a frame (``frame: cube``, ``frame: table2``; default
 ``world``). ``object_frames(scene)`` gives the origin of every frame the scene has, from its
-config: ``cube`` at the cube's centre where it rests, every table, the push variant's stick and
-its open box at the centre of their top face, ``world`` at (0, 0, 0). ``place_region`` turns a
+config: every movable object (``scene.objects``) at its centre where it rests, every table and
+the push variant's open box at the centre of their top face, ``world`` at (0, 0, 0). ``place_region`` turns a
 region written in a frame into the same region in the world frame (what the search samples and
 the controllers read), and ``move_points`` carries sample rows of a region from one placement of
 its frame to another (a warm start from a run whose cube or table stood elsewhere).
-Frames only translate: the scene config gives its tables, cube and stick no yaw, so moving an
-object moves its regions with it and nothing turns.
+Frames only translate (an object's configured yaw does not turn its regions): moving an object
+or a table in the scene config moves its regions with it.
 What it doesn't: parse the rest of a region (``realize.tasks.param_layout``) or read run directories
 (``realize.search.warm_start``).
 """
@@ -40,9 +40,10 @@ class Frame:
 
 def object_frames(scene: SceneGeometry) -> dict[str, Frame]:
     """Every frame a region of ``scene`` may name, by name."""
-    frames = {WORLD: Frame(WORLD, (0.0, 0.0, 0.0)), "cube": Frame("cube", tuple(scene.cube_pos))}
-    boxes = list(scene.tables) + list(scene.containers) + ([scene.stick] if scene.stick is not None else [])
-    for b in boxes:
+    frames = {WORLD: Frame(WORLD, (0.0, 0.0, 0.0))}
+    for o in scene.objects:
+        frames[o.name] = Frame(o.name, tuple(o.position))
+    for b in list(scene.tables) + list(scene.containers):
         frames[b.name] = Frame(b.name, (b.center[0], b.center[1], b.top_z))
     return frames
 

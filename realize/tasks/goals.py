@@ -2,13 +2,16 @@
 
 What it does: batched predicates over N copies, each with the distance to it that the CE
 fallback ranks infeasible plans by (m, 0 where it holds geometrically):
-  * ``cube_on_table``: the cube's centre above the table top's footprint, within
-    ``HEIGHT_TOL`` of its resting height, and nearly still;
-  * ``cube_in_container``: the cube's centre inside an open box's inner footprint, below its
-    wall tops, and nearly still;
+  * ``object_on_table``: a named object's centre above the table top's footprint, within
+    ``HEIGHT_TOL`` of its resting height (table top + the object's half height), nearly still;
+  * ``object_in_container``: the centre inside an open box's inner footprint, below its wall
+    tops, and nearly still;
+  * ``object_at``: the centre within a tolerance of a point (or inside a grown box), nearly still;
   * ``base_in_rectangle``: the base's (x, y) inside an axis-aligned rectangle;
-  * ``goal_reached``: a task's ``GoalSpec`` (every given condition) and the summed distance.
-Positions are in one copy's local frame: (N, 3) cube centres, (N,) cube speeds, (N, 2) bases.
+  * ``goal_reached``: a task's ``GoalSpec`` (every given condition, ``realize.tasks.goal_spec``)
+    and the summed distance.
+Positions are in one copy's local frame: (N, 3) object centres, (N,) speeds, (N, 2) bases;
+``goal_reached`` takes every object at once, (N, m, 3) and (N, m), in the scene's object order.
 What it doesn't: read the simulator (callers pass tensors), or decide when a goal is read
 (the rollout reads it ``goal_settle_s`` after a plan's last action). It imports only torch and
 light realize modules (geometry, regions, task), so the tasks in ``envs`` can import it.
@@ -22,11 +25,11 @@ import torch
 from torch import Tensor
 
 from realize.world.geometry import SceneGeometry
-from realize.tasks.regions import DEFAULT_TOL, Box, Region
-from realize.tasks.spec import GoalSpec
+from realize.tasks.goal_spec import GoalSpec
+from realize.tasks.regions import DEFAULT_TOL, Box, Fixed, Region
 
-REST_SPEED = 0.05  # m/s, the cube counts as resting at or below this (``controller.rest_speed``)
-HEIGHT_TOL = 0.02  # m, a cube on a table rests within this of its resting height
+REST_SPEED = 0.05  # m/s, an object counts as resting at or below this (``controller.rest_speed``)
+HEIGHT_TOL = 0.02  # m, an object on a table rests within this of its resting height
 
 
 def _outside_xy(p: Tensor, center: Sequence[float], half: Sequence[float]) -> Tensor:
@@ -36,28 +39,28 @@ def _outside_xy(p: Tensor, center: Sequence[float], half: Sequence[float]) -> Te
     return ((p[:, :2] - c).abs() - h).clamp(min=0.0).norm(dim=1)
 
 
-def cube_on_table(p: Tensor, speed: Tensor, geometry: SceneGeometry, table: str,
-                  rest_speed: float = REST_SPEED) -> Tensor:
-    """(N,) bool: cube centres ``p`` (N, 3) rest on table ``table`` (speeds ``speed`` (N,))."""
+def object_on_table(p: Tensor, speed: Tensor, geometry: SceneGeometry, obj: str, table: str,
+                    rest_speed: float = REST_SPEED) -> Tensor:
+    """(N,) bool: centres ``p`` (N, 3) of object ``obj`` rest on table ``table`` (speeds (N,))."""
     t = geometry.table(table)
-    top = 2 * t.half_size[2] + geometry.cube_half_size
+    top = 2 * t.half_size[2] + geometry.object(obj).half_height
     ok = ((p[:, 0] - t.center[0]).abs() <= t.half_size[0]) & ((p[:, 1] - t.center[1]).abs() <= t.half_size[1])
     ok &= (p[:, 2] - top).abs() <= HEIGHT_TOL
     ok &= speed <= rest_speed
     return ok
 
 
-def cube_on_table_distance(p: Tensor, geometry: SceneGeometry, table: str) -> Tensor:
-    """(N,) how far (m) cube centres ``p`` are from resting on table ``table``'s top."""
+def object_on_table_distance(p: Tensor, geometry: SceneGeometry, obj: str, table: str) -> Tensor:
+    """(N,) how far (m) centres ``p`` of object ``obj`` are from resting on table ``table``'s top."""
     t = geometry.table(table)
-    top = 2 * t.half_size[2] + geometry.cube_half_size
+    top = 2 * t.half_size[2] + geometry.object(obj).half_height
     dz = ((p[:, 2] - top).abs() - HEIGHT_TOL).clamp(min=0.0)
     return torch.sqrt(_outside_xy(p, t.center, t.half_size) ** 2 + dz ** 2)
 
 
-def cube_in_container(p: Tensor, speed: Tensor, geometry: SceneGeometry, name: str,
-                      rest_speed: float = REST_SPEED) -> Tensor:
-    """(N,) bool: cube centres ``p`` (N, 3) inside container ``name``'s inner footprint, below its
+def object_in_container(p: Tensor, speed: Tensor, geometry: SceneGeometry, name: str,
+                        rest_speed: float = REST_SPEED) -> Tensor:
+    """(N,) bool: centres ``p`` (N, 3) inside container ``name``'s inner footprint, below its
     wall tops, with speeds ``speed`` (N,) at most ``rest_speed``."""
     box = geometry.container(name)
     w = geometry.container_wall
@@ -66,11 +69,30 @@ def cube_in_container(p: Tensor, speed: Tensor, geometry: SceneGeometry, name: s
     return inside & (p[:, 2] <= 2 * hz) & (speed <= rest_speed)
 
 
-def cube_in_container_distance(p: Tensor, geometry: SceneGeometry, name: str) -> Tensor:
-    """(N,) how far (m) cube centres ``p`` are from container ``name``'s inside."""
+def object_in_container_distance(p: Tensor, geometry: SceneGeometry, name: str) -> Tensor:
+    """(N,) how far (m) centres ``p`` are from container ``name``'s inside."""
     box, w = geometry.container(name), geometry.container_wall
     dz = (p[:, 2] - 2 * box.half_size[2]).clamp(min=0.0)
     return torch.sqrt(_outside_xy(p, box.center, (box.half_size[0] - w, box.half_size[1] - w)) ** 2 + dz ** 2)
+
+
+def object_at_distance(p: Tensor, region: Region, tol: float) -> Tensor:
+    """(N,) how far (m) centres ``p`` (N, 3) are from within ``tol`` of a fixed point or a box
+    region (its first 2 or 3 coordinates; a 2-D region leaves the height free)."""
+    k = region.dim
+    q = p[:, :k].double()
+    if isinstance(region, Fixed):
+        c = torch.tensor(region.value[:k], dtype=q.dtype, device=q.device)
+        return ((q - c).norm(dim=1) - tol).clamp(min=0.0).to(p)
+    assert isinstance(region, Box)
+    lo = torch.tensor(region.low[:k], dtype=q.dtype, device=q.device) - tol
+    hi = torch.tensor(region.high[:k], dtype=q.dtype, device=q.device) + tol
+    return (torch.maximum(torch.minimum(q, hi), lo) - q).norm(dim=1).to(p)
+
+
+def object_at(p: Tensor, speed: Tensor, region: Region, tol: float, rest_speed: float = REST_SPEED) -> Tensor:
+    """(N,) bool: centres ``p`` rest (speed at most ``rest_speed``) within ``tol`` of ``region``."""
+    return (object_at_distance(p, region, tol) <= 0.0) & (speed <= rest_speed)
 
 
 def base_in_rectangle(xy: Tensor, low: Sequence[float], high: Sequence[float], tol: float = DEFAULT_TOL) -> Tensor:
@@ -87,24 +109,31 @@ def base_rectangle_distance(xy: Tensor, low: Sequence[float], high: Sequence[flo
     return (torch.maximum(torch.minimum(xy, hi), lo) - xy).norm(dim=1)
 
 
-def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, Region], cube: Tensor,
-                 cube_speed: Tensor, base_xy: Tensor, rest_speed: float = REST_SPEED) -> tuple[Tensor, Tensor]:
-    """psi_g per copy (N,) bool, and how far (m) each copy is from it: the cube's distance to the
-    goal table's top (or the container's inside) plus the base's distance to its goal
-    rectangle (a 2-D box region of ``regions``). The distance is the CE fallback's
-    distance-to-success for plans whose actions all succeeded but whose goal did not hold.
+def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, Region], objects: Tensor,
+                 speeds: Tensor, base_xy: Tensor, rest_speed: float = REST_SPEED) -> tuple[Tensor, Tensor]:
+    """psi_g per copy (N,) bool, and how far (m) each copy is from it: the sum over the goal's
+    conditions of each object's distance to its table top, container inside or spot, plus the
+    base's distance to its goal rectangle (a 2-D box region of ``regions``). The distance is
+    the CE fallback's distance-to-success for plans whose actions all succeeded but whose goal
+    did not hold.
 
-    ``cube`` (N, 3) positions and ``cube_speed`` (N,) (float32 on the scene's device),
-    ``base_xy`` (N, 2)."""
-    n, device = cube.shape[0], cube.device
+    ``objects`` (N, m, 3) centres and ``speeds`` (N, m) of every object of ``geometry`` in its
+    order (float32 on the scene's device), ``base_xy`` (N, 2)."""
+    n, device = objects.shape[0], objects.device
     ok = torch.ones(n, dtype=torch.bool, device=device)
     dist = torch.zeros(n, device=device)
-    if goal.cube_on is not None:
-        ok &= cube_on_table(cube, cube_speed, geometry, goal.cube_on, rest_speed)
-        dist += cube_on_table_distance(cube, geometry, goal.cube_on)
-    if goal.cube_in_box is not None:
-        ok &= cube_in_container(cube, cube_speed, geometry, goal.cube_in_box, rest_speed)
-        dist += cube_in_container_distance(cube, geometry, goal.cube_in_box)
+    for name, table in goal.on.items():
+        k = geometry.object_index(name)
+        ok &= object_on_table(objects[:, k], speeds[:, k], geometry, name, table, rest_speed)
+        dist += object_on_table_distance(objects[:, k], geometry, name, table)
+    for name, box in goal.inside.items():
+        k = geometry.object_index(name)
+        ok &= object_in_container(objects[:, k], speeds[:, k], geometry, box, rest_speed)
+        dist += object_in_container_distance(objects[:, k], geometry, box)
+    for name, spot in goal.at.items():
+        k = geometry.object_index(name)
+        ok &= object_at(objects[:, k], speeds[:, k], regions[spot.region], spot.tol, rest_speed)
+        dist += object_at_distance(objects[:, k], regions[spot.region], spot.tol)
     if goal.base_in is not None:
         region = regions[goal.base_in]
         assert isinstance(region, Box)

@@ -20,15 +20,18 @@ Mapping rule
   (PDDL lowercases every name). Every action of the domain must name a template; this is
   checked before solving, so a domain cannot yield a plan that cannot be realized.
 * If the domain declares a type named ``region``, an action argument is a template parameter
-  exactly when its object is of type ``region`` or one of its subtypes; the other arguments
-  (where the robot is parked, which cube, ...) are symbolic bookkeeping and are dropped.
-  Without a ``region`` type every argument is a template parameter.
+  exactly when its object is of type ``region`` or one of its subtypes. Of the other arguments,
+  the first whose object is named like a movable object of the scene (``scene.objects``,
+  compared case-insensitively) is the object the action handles (``grasp(cube, Cube_g)``); the
+  rest (where the robot is parked, spots, ...) are symbolic bookkeeping and are dropped.
+  Without a ``region`` type every argument that names no scene object is a template parameter.
 * Template parameters keep their PDDL order and are mapped back, case-insensitively, to the
   spelling of the task's symbolic parameter names (``cube_g`` -> ``Cube_g``). An argument that
   names no parameter is an error.
 
 Example: ``move_to(table1, loc_start, loc_table1)`` with ``table1`` of type ``base_region``
-becomes ``PlannedAction("move_to", ("Table1",))``.
+becomes ``PlannedAction("move_to", ("Table1",))``; ``grasp(cube_g, cube_a, loc_table1)`` in a
+scene with an object ``cube_a`` becomes ``PlannedAction("grasp", ("Cube_g",), "cube_a")``.
 
 Not done here: template arities and parameter/region compatibility are checked by the caller
 that owns the templates; temporal, numeric and non-deterministic planning are out of scope;
@@ -66,13 +69,15 @@ class PlanningError(ValueError):
 
 @dataclass(frozen=True)
 class PlannedAction:
-    """One symbolic action: a template name bound to symbolic parameter names."""
+    """One symbolic action: a template name bound to symbolic parameter names, and the scene
+    object it handles (None: none named)."""
 
     template: str
     params: tuple[str, ...]
+    obj: str | None = None
 
     def __str__(self) -> str:
-        return f"{self.template}({', '.join(self.params)})"
+        return f"{self.template}({', '.join(((self.obj,) if self.obj else ()) + self.params)})"
 
 
 MAX_TIE_PLANS = 64  # at most this many plans are asked for to complete the k-th length class
@@ -84,14 +89,15 @@ def plan_from_pddl(
     templates: Collection[str],
     params: Collection[str],
     *,
+    objects: Collection[str] = (),
     top_k: int = 1,
     timeout_s: float = 30,
 ) -> list[list[PlannedAction]]:
     """Plan with PDDL and return up to ``top_k`` symbolic plans, cheapest first.
 
     ``templates`` are the action template names the code can execute and ``params`` the task's
-    symbolic parameter names; both are matched case-insensitively and returned in the task's
-    spelling. With ``top_k == 1`` the single plan is optimal (Fast Downward); with more, SymK's
+    symbolic parameter names, ``objects`` the scene's movable objects; all are matched
+    case-insensitively and returned in the task's spelling. With ``top_k == 1`` the single plan is optimal (Fast Downward); with more, SymK's
     top-k search returns the k best distinct plans (fewer if fewer exist).
     """
     domain, problem = Path(domain), Path(problem)
@@ -102,6 +108,7 @@ def plan_from_pddl(
             raise PlanningError(f"PDDL {kind} file not found: {path}")
     template_of = _casefold_index(templates, "template")
     param_of = _casefold_index(params, "symbolic parameter")
+    object_of = _casefold_index(objects, "scene object")
 
     task = _parse(domain, problem)
     for action in task.actions:
@@ -124,7 +131,7 @@ def plan_from_pddl(
     plans: list[list[PlannedAction]] = []
     for raw in raw_plans:
         plan = [
-            _map_action(ai, template_of, param_of, region, problem) for ai in raw.actions
+            _map_action(ai, template_of, param_of, object_of, region, problem) for ai in raw.actions
         ]
         if plan not in plans:  # distinct PDDL plans can share a skeleton
             plans.append(plan)
@@ -263,12 +270,18 @@ def _is_region(obj_type, region) -> bool:
 
 
 def _map_action(
-    ai: ActionInstance, template_of: dict[str, str], param_of: dict[str, str], region, problem: Path
+    ai: ActionInstance, template_of: dict[str, str], param_of: dict[str, str], object_of: dict[str, str],
+    region, problem: Path
 ) -> PlannedAction:
     name = ai.action.name
     bound: list[str] = []
+    handled: str | None = None
     for arg in ai.actual_parameters:
         obj = arg.object()
+        scene_object = object_of.get(obj.name.casefold())
+        if scene_object is not None and (region is None or not _is_region(obj.type, region)):
+            handled = handled or scene_object
+            continue
         if not _is_region(obj.type, region):
             continue
         try:
@@ -279,4 +292,4 @@ def _map_action(
                 f"{name}({', '.join(str(a) for a in ai.actual_parameters)}) names no "
                 f"symbolic parameter/region; known params: {sorted(param_of.values())}"
             ) from None
-    return PlannedAction(template_of[name.casefold()], tuple(bound))
+    return PlannedAction(template_of[name.casefold()], tuple(bound), handled)

@@ -6,7 +6,10 @@ checks every name against the scene and the action templates, with errors that n
 and key (``realize.config.ConfigError``). A region may name the object it is written relative to
 (``frame: cube``; ``realize.tasks.frames``): the layout holds it placed in the world frame, and
 ``TaskSpec.frames`` remembers the frame (a warm start carries distributions with it). A plan is written as strings ``"move_to(Table1)"`` or
-as ``{move_to: [Table1]}``.
+as ``{move_to: [Table1]}``; an action that handles an object names it first, by its scene name:
+``"grasp(cube, Cube_g)"``, ``"place(cube, Cube_p)"``, ``"push(stick, Stick_p)"``. The plan is
+checked symbolically before anything runs: the hand holds at most one object (``grasp`` needs an
+empty hand, ``place`` the object it names in hand, ``push`` an empty hand).
 What it doesn't: simulate (``realize.realization``), or plan symbolically (``realize.tasks.pddl``; the
 resulting actions enter here through ``plan_from_actions``).
 """
@@ -20,28 +23,26 @@ from typing import Any, Mapping, Sequence
 from realize.config import ConfigError
 from realize.tasks.frames import WORLD, object_frames, place_region
 from realize.world.geometry import SceneGeometry
+from realize.tasks.goal_spec import GoalSpec, goal_from_dict
 from realize.tasks.param_layout import ParamLayout, region_from_dict
-from realize.tasks.regions import Box, Region
+from realize.tasks.regions import Region
+
+__all__ = ["ActionSpec", "GoalSpec", "TaskSpec", "parse_action", "bind_objects", "check_plan", "check_hand",
+           "task_from_dict", "plan_from_actions", "task_for_plan"]
 
 
 @dataclass(frozen=True)
 class ActionSpec:
-    """One symbolic action: a template bound to symbolic parameters by name."""
+    """One symbolic action: a template bound to symbolic parameters by name, and for templates
+    that handle an object (``Template.takes_object``) the scene object it handles."""
 
     template: str
     params: tuple[str, ...]
+    obj: str | None = None
 
     def __str__(self) -> str:
-        return f"{self.template}({', '.join(self.params)})"
-
-
-@dataclass(frozen=True)
-class GoalSpec:
-    """psi_g: every given condition must hold at the end of the plan."""
-
-    cube_on: str | None = None  # a table name of the scene
-    base_in: str | None = None  # a parameter whose region is a 2-D box
-    cube_in_box: str | None = None  # a named container of the scene (move-and-push)
+        args = ((self.obj,) if self.obj is not None else ()) + self.params
+        return f"{self.template}({', '.join(args)})"
 
 
 @dataclass
@@ -87,8 +88,47 @@ def parse_action(item: Any, where: str) -> ActionSpec:
     raise ConfigError(f"{where}: an action is a string 'name(Param)' or a one-key mapping, got {item!r}")
 
 
-def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mapping[str, Any], where: str) -> None:
-    """Every action names a known template with parameters of the right kind."""
+def bind_objects(plan: Sequence[ActionSpec], templates: Mapping[str, Any], objects: Sequence[str],
+                 where: str) -> list[ActionSpec]:
+    """Split off the object argument (the first) of every action whose template handles an
+    object: ``grasp(cube, Cube_g)`` -> ``ActionSpec("grasp", ("Cube_g",), obj="cube")``."""
+    out = []
+    for i, a in enumerate(plan):
+        tpl = templates.get(a.template)
+        if tpl is None or not getattr(tpl, "takes_object", False) or a.obj is not None:
+            out.append(a)
+            continue
+        if len(a.params) != tpl.n_params + 1:
+            raise ConfigError(f"{where}[{i}]: {a.template} takes an object and {tpl.n_params} parameter(s), got "
+                              f"{a}; write {a.template}(<object>, <Param>) with an object of {list(objects)}")
+        out.append(ActionSpec(a.template, a.params[1:], a.params[0]))
+    return out
+
+
+def check_hand(plan: Sequence[ActionSpec], where: str, held: str | None = None) -> None:
+    """The hand holds at most one object: ``grasp`` needs it empty, ``place`` the object it names
+    in hand, ``push`` it empty (``held``: what it holds when the plan starts)."""
+    hand = held
+    for i, a in enumerate(plan):
+        key = f"{where}[{i}]"
+        if a.template == "grasp":
+            if hand is not None:
+                raise ConfigError(f"{key}: {a} needs an empty hand, but {hand} is held there")
+            hand = a.obj
+        elif a.template == "place":
+            if hand != a.obj:
+                now = f"{hand} is in hand" if hand is not None else "the hand is empty"
+                raise ConfigError(f"{key}: {a} places {a.obj}, but {now} there")
+            hand = None
+        elif a.template == "push" and hand is not None:
+            raise ConfigError(f"{key}: {a} pushes with the closed gripper, but {hand} is held there")
+
+
+def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mapping[str, Any], where: str,
+               objects: Sequence[str] | None = None, held: str | None = None) -> None:
+    """Every action names a known template with parameters of the right kind and, where it
+    handles one, an object of the scene (``objects``; None: not checked); then the hand's
+    contents through the plan (``check_hand``)."""
     if not plan:
         raise ConfigError(f"{where}: the plan is empty")
     for i, a in enumerate(plan):
@@ -98,6 +138,13 @@ def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mappi
         tpl = templates[a.template]
         if len(a.params) != tpl.n_params:
             raise ConfigError(f"{key}: {a.template} takes {tpl.n_params} parameter(s), got {len(a.params)} in {a}")
+        if getattr(tpl, "takes_object", False):
+            if a.obj is None:
+                raise ConfigError(f"{key}: {a} names no object; write {a.template}(<object>, <Param>)")
+            if objects is not None and a.obj not in objects:
+                raise ConfigError(f"{key}: {a} names unknown object {a.obj!r}; the scene's objects: {list(objects)}")
+        elif a.obj is not None:
+            raise ConfigError(f"{key}: {a.template} handles no object, got {a}")
         for p in a.params:
             if p not in layout.names:
                 raise ConfigError(f"{key}: {a} is bound to undefined parameter {p!r}; defined: {layout.names}")
@@ -106,6 +153,7 @@ def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mappi
                 raise ConfigError(
                     f"{key}: parameter {p!r} ({type(region).__name__}, dim {region.dim}) does not fit "
                     f"{a.template}: {tpl.param_doc}")
+    check_hand(plan, where, held)
 
 
 def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mapping[str, Any],
@@ -146,48 +194,29 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
     plan_items = d.get("plan")
     if plan_items is None and not planner.get("enabled", False):
         raise ConfigError(f"{source}: missing key 'plan' (or enable planner: {{enabled: true, ...}})")
+    objects = scene.object_names
     plan = [parse_action(it, f"{source}:plan[{i}]") for i, it in enumerate(plan_items or [])]
+    plan = bind_objects(plan, templates, objects, f"{source}:plan")
     if plan:
-        check_plan(plan, layout, templates, f"{source}:plan")
-    goal_d = d["goal"]
-    if not isinstance(goal_d, Mapping):
-        raise ConfigError(f"{source}:goal must be a mapping")
-    g_unknown = set(goal_d) - {"cube_on", "base_in", "cube_in_box"}
-    if g_unknown:
-        raise ConfigError(f"{source}:goal: unknown predicates {sorted(g_unknown)}; allowed: cube_on, base_in, cube_in_box")
-    goal = GoalSpec(**{k: (str(v) if v is not None else None) for k, v in goal_d.items()})
-    tables = [t.name for t in scene.tables]
-    if goal.cube_on is not None and goal.cube_on not in tables:
-        raise ConfigError(f"{source}:goal.cube_on names unknown object {goal.cube_on!r}; tables: {tables}")
-    if goal.base_in is not None:
-        if goal.base_in not in regions:
-            raise ConfigError(f"{source}:goal.base_in names unknown parameter {goal.base_in!r}; defined: {list(regions)}")
-        r = regions[goal.base_in]
-        if not (isinstance(r, Box) and r.dim == 2):
-            raise ConfigError(f"{source}:goal.base_in: {goal.base_in!r} must be a 2-D box region")
-    if goal.cube_in_box is not None:
-        containers = [b.name for b in getattr(scene, "containers", ())]
-        if goal.cube_in_box not in containers:
-            raise ConfigError(f"{source}:goal.cube_in_box names unknown object {goal.cube_in_box!r}; containers: {containers}")
+        check_plan(plan, layout, templates, f"{source}:plan", objects)
+    goal = goal_from_dict(d["goal"], scene, regions, source)
     final_cost = float(d.get("final_cost", 0.0))
     return TaskSpec(str(d.get("name", "task")), layout, plan, goal, final_cost, source, planner, frames)
 
 
 def plan_from_actions(actions: Sequence[Any], layout: ParamLayout, templates: Mapping[str, Any],
-                      where: str) -> list[ActionSpec]:
-    """Actions with ``.template`` and ``.params`` (e.g. from PDDL) -> checked ActionSpecs."""
-    plan = [ActionSpec(a.template, tuple(a.params)) for a in actions]
-    check_plan(plan, layout, templates, where)
+                      where: str, objects: Sequence[str] | None = None) -> list[ActionSpec]:
+    """Actions with ``.template``, ``.params`` and ``.obj`` (e.g. from PDDL) -> checked ActionSpecs."""
+    plan = [ActionSpec(a.template, tuple(a.params), getattr(a, "obj", None)) for a in actions]
+    check_plan(plan, layout, templates, where, objects)
     return plan
 
 
 def task_for_plan(task: TaskSpec, plan: Sequence[ActionSpec]) -> TaskSpec:
     """``task`` restricted to one candidate plan: the same goal and final cost, and a layout of
-    only the parameters the plan binds (plus the goal's ``base_in``, whose region the goal
-    check reads), in the task's order. ``plan`` must already be checked (``plan_from_actions``)."""
-    used = {p for a in plan for p in a.params}
-    if task.goal.base_in is not None:
-        used.add(task.goal.base_in)
+    only the parameters the plan binds (plus the goal's ``base_in`` and ``at`` regions, which
+    the goal check reads), in the task's order. ``plan`` must already be checked (``plan_from_actions``)."""
+    used = {p for a in plan for p in a.params} | set(task.goal.params())
     regions = {n: r for n, r in task.layout.regions.items() if n in used}
     return TaskSpec(task.name, ParamLayout(regions), list(plan), task.goal, task.final_cost, task.source,
                     dict(task.planner), {n: f for n, f in task.frames.items() if n in regions})

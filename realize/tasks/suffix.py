@@ -7,13 +7,13 @@ What it does:
   * ``suffix_columns(task, k)``: which columns of the full task's sample matrix the suffix's
     columns are (to pick a plan's remaining parameters out of a full one, e.g. a run's best);
   * ``check_suffix_start(task, state)``: what the action templates assume about the actions
-    before them in the same rollout, checked against the state the suffix starts from. ``place``
-    begins only while the fingers hold the cube (``Place.begin``: a grasp happened before), so
-    a suffix whose first manipulation is ``place`` needs a state with ``cube_held``; ``grasp``
-    approaches with an open gripper, so a suffix whose first manipulation is ``grasp`` needs a
-    state without a held cube (it would drop it); ``push`` drives a closed gripper and needs
-    none in hand. ``move_to`` assumes nothing: it plans from where the base is and holds the
-    arm and the gripper as they are (the rollout starts the gripper command from the state).
+    before them in the same rollout, checked against the state the suffix starts from: the
+    hand's contents through the remaining plan (``realize.tasks.spec.check_hand``) starting
+    from the state's ``held`` object. ``place(o, ...)`` begins only while the fingers hold o
+    (``Place.begin``: a grasp happened before); ``grasp`` approaches with an open gripper, so it
+    needs an empty hand (it would drop what it holds); ``push`` drives a closed gripper and
+    needs none in hand. ``move_to`` assumes nothing: it plans from where the base is and holds
+    the arm and the gripper as they are (the rollout starts the gripper command from the state).
 What it doesn't: simulate (``realize.realization``), load state files (``realize.world.state``)
 or read run directories (``realize.app.replan``).
 """
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from realize.config import ConfigError
 from realize.world.state import SceneState
-from realize.tasks.spec import TaskSpec, task_for_plan
+from realize.tasks.spec import TaskSpec, check_hand, task_for_plan
 
 __all__ = ["task_suffix", "suffix_columns", "check_suffix_start"]
 
@@ -46,14 +46,9 @@ def suffix_columns(task: TaskSpec, k: int) -> list[int]:
 
 
 def check_suffix_start(task: TaskSpec, state: SceneState, where: str = "replan") -> None:
-    """Refuse a start state the suffix's first manipulation cannot begin from (module docstring)."""
-    for i, a in enumerate(task.plan):
-        if a.template == "move_to":
-            continue
-        if a.template == "place" and not state.cube_held:
-            raise ConfigError(f"{where}: the remaining plan's action {i} is {a}, which needs the cube in hand, but "
-                              f"the state ({state.source or 'given'}) has cube_held = false")
-        if a.template in ("grasp", "push") and state.cube_held:
-            raise ConfigError(f"{where}: the remaining plan's action {i} is {a}, which starts with no cube in hand, "
-                              f"but the state ({state.source or 'given'}) has cube_held = true")
-        return
+    """Refuse a start state the suffix cannot begin from (module docstring)."""
+    try:
+        check_hand(task.plan, "the remaining plan", state.held)
+    except ConfigError as e:
+        raise ConfigError(f"{where}: {e} (the state, {state.source or 'given'}, holds "
+                          f"{state.held or 'nothing'})") from None

@@ -1,13 +1,13 @@
 """World geometry of the realize scenes: the config (``GeometryCfg``) and the boxes it makes.
 
-What it does: describes the static world (tables, an optional wall or ramp, the exit area, the
-cube and the robot's start pose) in one copy's local frame, checks it (``GeometryCfg`` is a
+What it does: describes the world (tables, an optional wall or ramp, the exit area, the movable
+objects by name (``objects``, ``realize.world.objects``) and the robot's start pose) in one copy's local frame, checks it (``GeometryCfg`` is a
 ``realize.config.Settings``: bad values raise ``ConfigError`` naming the key), and offers the
 obstacle boxes that the controllers (A* occupancy grid, fabric collision terms), the figures and
 the ManiSkill tasks need (``build_geometry`` -> ``SceneGeometry``). The ``push`` variant
-(move-and-push) adds an upright dynamic stick with the cube resting on its top and an open box
-(a static container: floor and four low walls) on the floor; tables are optional there and serve
-as plain obstacles.
+(move-and-push) adds an open box (a static container: floor and four low walls) on the floor;
+its scene config stands an object (the stick) on the floor with the cube on its top; tables are
+optional there and serve as plain obstacles.
 What it doesn't: build anything in a simulator (the tasks in ``envs/`` do), nor hold the
 symbolic parameter regions of a plan (those live in the task config, see ``realize/tasks/regions.py``).
 Pure data: no torch, no simulator imports.
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from realize.config import ConfigError, Settings, setting
+from realize.world.objects import FLOOR, ObjectCfg, SceneObject, place_objects
 
 __all__ = ["VARIANTS", "Box", "SceneGeometry", "TableCfg", "GeometryCfg", "build_geometry"]
 
@@ -64,26 +65,41 @@ class Box:
 
 @dataclass(frozen=True)
 class SceneGeometry:
-    """The whole static world of one copy (local frame), plus the dynamic cube's start."""
+    """The whole world of one copy (local frame): static boxes and the movable objects at rest."""
 
     variant: str
     tables: tuple[Box, ...]
     extras: tuple[Box, ...]  # wall / ramp / the container's floor and walls
-    cube_half_size: float
-    cube_pos: tuple[float, float, float]
-    cube_mass: float
-    cube_friction: float
+    objects: tuple[SceneObject, ...]  # movable, by name, in config order
     robot_start: tuple[float, float, float]  # x, y, yaw
     robot_radius: float
     exit_low: tuple[float, float]
     exit_high: tuple[float, float]
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
-    stick: Box | None = None  # push variant: the dynamic upright stick at its start pose
     containers: tuple[Box, ...] = ()  # push variant: open boxes, outer bounds (walls in extras)
     container_wall: float = 0.0  # wall thickness of the containers (m)
-    stick_mass: float = 0.0  # kg
-    stick_friction: float = 0.0
+
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        return tuple(o.name for o in self.objects)
+
+    def object(self, name: str) -> SceneObject:
+        for o in self.objects:
+            if o.name == name:
+                return o
+        raise KeyError(f"scene has no object named {name!r}; objects: {list(self.object_names)}")
+
+    def object_index(self, name: str) -> int:
+        """Position of object ``name`` in ``objects`` (the m axis of the scene's (N, m, ...) reads)."""
+        return self.object_names.index(self.object(name).name)
+
+    @property
+    def floor_objects(self) -> tuple[Box, ...]:
+        """Footprint boxes of the objects standing on the floor at rest (a stick): obstacles for
+        the base planner, but not for the fabric (they are pushed)."""
+        return tuple(Box(o.name, o.position, o.half_size, yaw=o.yaw, color=o.color)
+                     for o in self.objects if o.rests_on == FLOOR)
 
     @property
     def static_obstacles(self) -> tuple[Box, ...]:
@@ -92,9 +108,9 @@ class SceneGeometry:
 
     @property
     def obstacles(self) -> tuple[Box, ...]:
-        """Every box the robot base must avoid (A* occupancy): the static boxes and the stick's
-        footprint at its start pose."""
-        return self.static_obstacles + ((self.stick,) if self.stick is not None else ())
+        """Every box the robot base must avoid (A* occupancy): the static boxes and the footprints
+        of the objects standing on the floor (``floor_objects``) at rest."""
+        return self.static_obstacles + self.floor_objects
 
     def container(self, name: str) -> Box:
         for c in self.containers:
@@ -120,15 +136,6 @@ def _in(lo: float, hi: float, why: str = "") -> Callable[[float], str | None]:
 
 def _all_positive(v: tuple[float, ...]) -> str | None:
     return None if min(v) > 0 else "all sides must be > 0"
-
-
-def _stick_size(v: tuple[float, float, float]) -> str | None:
-    sx, sy, sh = v
-    if min(sx, sy) <= 0 or not 0.3 <= sh <= 1.1:
-        return "width and depth must be > 0 and the height in [0.3, 1.1] m"
-    if max(sx, sy) > 0.1:
-        return "width and depth must be <= 0.1 m (a stick, not a table)"
-    return None
 
 
 @dataclass
@@ -160,10 +167,8 @@ class GeometryCfg(Settings):
             TableCfg("table2", (0.0, -1.2), (0.6, 0.6), 0.72),
         ]
     )
-    cube_size: float = setting(0.045, check=_in(0.02, 0.08, " (the gripper opens to ~0.1 m)"))
-    cube_offset: tuple[float, float] = setting((0.0, 0.0))  # relative to table1's centre
-    cube_mass: float = setting(0.05, gt=0)
-    cube_friction: float = setting(1.0, ge=0)
+    # movable objects by name (realize.world.objects): where each rests, its shape, mass, friction
+    objects: dict[str, ObjectCfg] = setting(default_factory=lambda: {"cube": ObjectCfg()})
     robot_start: tuple[float, float, float] = setting((-2.0, 0.0, 0.0))
     robot_radius: float = setting(0.32, gt=0)
     exit_low: tuple[float, float] = setting((1.8, -0.4))
@@ -181,12 +186,8 @@ class GeometryCfg(Settings):
     ramp_width: float = setting(0.4, gt=0)
     ramp_drop: float = setting(0.35, gt=0)  # and < ramp_length (check)
     ramp_friction: float = setting(0.0, ge=0)
-    # push variant: an upright stick (dynamic) with the cube on its top (cube_offset is then
-    # relative to the stick's axis) and an open box on the floor (inner footprint, wall height)
-    stick_center: tuple[float, float] = setting((0.0, 0.0))
-    stick_size: tuple[float, float, float] = setting((0.04, 0.04, 0.7), check=_stick_size)
-    stick_mass: float = setting(0.3, gt=0)
-    stick_friction: float = setting(0.8, ge=0)
+    # push variant: an open box on the floor (inner footprint, wall height); its stick and the
+    # cube on the stick's top are objects (objects.stick rests on the floor, objects.cube on the stick)
     box_center: tuple[float, float] = setting((0.8, 0.0))
     box_inner: tuple[float, float] = setting((0.4, 0.4))  # and larger than the cube (check)
     box_wall_height: float = setting(0.12, gt=0, le=0.5)
@@ -206,8 +207,8 @@ def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
 
 
 def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
-    """Turn ``cfg`` into boxes; raises ``ConfigError`` naming ``<where>.<key>`` where the parts
-    do not fit together (single values are already checked by the fields)."""
+    """Turn ``cfg`` into boxes and placed objects; raises ``ConfigError`` naming ``<where>.<key>``
+    where the parts do not fit together (single values are already checked by the fields)."""
     push = cfg.variant == "push"
     names = [t.name for t in cfg.tables]
     if len(cfg.tables) < 2 and not push:
@@ -216,26 +217,20 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         raise _err(where, "tables", names, "table names must be unique")
     tables = [Box(t.name, (t.center[0], t.center[1], t.height / 2), (t.size[0] / 2, t.size[1] / 2, t.height / 2))
               for t in cfg.tables]
+    objects = place_objects(cfg.objects, {t.name: t for t in tables}, f"{where}.objects")
     extras: list[Box] = []
-    stick: Box | None = None
     containers: tuple[Box, ...] = ()
     if push:
-        stick, box_parts, container = _push_parts(cfg, where)
+        box_parts, container = _container_parts(cfg, objects, where)
         extras.extend(box_parts)
         containers = (container,)
-        cx, cy = stick.center[0] + cfg.cube_offset[0], stick.center[1] + cfg.cube_offset[1]
-        if not stick.contains_xy(cx, cy):
-            raise _err(where, "cube_offset", cfg.cube_offset, "the cube's centre must lie above the stick's top")
-        cube_pos = (cx, cy, 2 * stick.half_size[2] + cfg.cube_size / 2)
+    for o in objects:
+        if o.rests_on != FLOOR:
+            continue
         for b in tables:
-            if b.contains_xy(*stick.center[:2], margin=stick.half_size[0] + stick.half_size[1]):
-                raise _err(where, "stick_center", cfg.stick_center, f"the stick overlaps {b.name}")
-    else:
-        t1 = tables[0]
-        cx, cy = t1.center[0] + cfg.cube_offset[0], t1.center[1] + cfg.cube_offset[1]
-        if not t1.contains_xy(cx, cy, margin=-cfg.cube_size / 2):
-            raise _err(where, "cube_offset", cfg.cube_offset, f"the cube must rest on {t1.name}'s top")
-        cube_pos = (cx, cy, 2 * t1.half_size[2] + cfg.cube_size / 2)
+            if b.contains_xy(*o.position[:2], margin=o.half_size[0] + o.half_size[1]):
+                raise _err(where, f"objects.{o.name}.offset", list(cfg.objects[o.name].offset),
+                           f"{o.name} stands on the floor inside {b.name}'s footprint")
 
     if cfg.variant == "wall":
         wx, wy, wz = cfg.wall_size
@@ -247,7 +242,7 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         if not cfg.ramp_drop < cfg.ramp_length:
             raise _err(where, "ramp_drop", cfg.ramp_drop, f"must be > 0 and < ramp_length ({cfg.ramp_length})")
         # The ramp runs along y from table1's side (high end) to table2's side (low end).
-        t2 = tables[1]
+        t1, t2 = tables[0], tables[1]
         low_z = 2 * t2.half_size[2] + 0.01
         high_z = low_z + cfg.ramp_drop
         pitch = math.asin(min(1.0, cfg.ramp_drop / cfg.ramp_length))
@@ -260,7 +255,8 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
                 color=(0.55, 0.55, 0.6, 1.0), friction=cfg.ramp_friction)
         )
     sx, sy, syaw = cfg.robot_start
-    for b in tables + extras + ([stick] if stick is not None else []):
+    floor_boxes = [Box(o.name, o.position, o.half_size, yaw=o.yaw) for o in objects if o.rests_on == FLOOR]
+    for b in tables + extras + floor_boxes:
         if b.contains_xy(sx, sy, margin=cfg.robot_radius):
             raise _err(where, "robot_start", cfg.robot_start, f"the robot's footprint overlaps {b.name}")
     bl, bh = cfg.bounds_low, cfg.bounds_high
@@ -275,34 +271,26 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         variant=cfg.variant,
         tables=tuple(tables),
         extras=tuple(extras),
-        cube_half_size=cfg.cube_size / 2,
-        cube_pos=cube_pos,
-        cube_mass=cfg.cube_mass,
-        cube_friction=cfg.cube_friction,
+        objects=objects,
         robot_start=(sx, sy, syaw),
         robot_radius=cfg.robot_radius,
         exit_low=tuple(el),
         exit_high=tuple(eh),
         bounds_low=tuple(bl),
         bounds_high=tuple(bh),
-        stick=stick,
         containers=containers,
         container_wall=cfg.box_wall_thickness if push else 0.0,
-        stick_mass=cfg.stick_mass if push else 0.0,
-        stick_friction=cfg.stick_friction if push else 0.0,
     )
 
 
-def _push_parts(cfg: GeometryCfg, where: str) -> tuple[Box, list[Box], Box]:
-    """The push variant's stick (start pose), the container's five static boxes (floor, walls)
-    and the container's outer bounds (named ``box``, for the goal predicate)."""
-    sx, sy, sh = cfg.stick_size
-    stick = Box("stick", (cfg.stick_center[0], cfg.stick_center[1], sh / 2), (sx / 2, sy / 2, sh / 2),
-                color=(0.75, 0.6, 0.35, 1.0))
+def _container_parts(cfg: GeometryCfg, objects: tuple[SceneObject, ...], where: str) -> tuple[list[Box], Box]:
+    """The push variant's open box: its five static boxes (floor, walls) and its outer bounds
+    (named ``box``, for the goal predicate)."""
     ix, iy = cfg.box_inner
     h, w = cfg.box_wall_height, cfg.box_wall_thickness
-    if min(ix, iy) <= cfg.cube_size:
-        raise _err(where, "box_inner", cfg.box_inner, f"both sides must be larger than the cube ({cfg.cube_size} m)")
+    smallest = min((2 * min(o.half_size[0], o.half_size[1]) for o in objects if o.rests_on != FLOOR), default=0.0)
+    if min(ix, iy) <= smallest:
+        raise _err(where, "box_inner", cfg.box_inner, f"both sides must be larger than the objects ({smallest} m)")
     bx, by = cfg.box_center
     ox, oy = ix / 2 + w, iy / 2 + w  # outer half sizes
     colour = (0.3, 0.45, 0.7, 1.0)
@@ -315,6 +303,7 @@ def _push_parts(cfg: GeometryCfg, where: str) -> tuple[Box, list[Box], Box]:
         Box("box_wall_yp", (bx, by + iy / 2 + w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
     ]
     outer = Box("box", (bx, by, h / 2), (ox, oy, h / 2), color=colour)
-    if outer.contains_xy(stick.center[0], stick.center[1], margin=max(sx, sy) / 2):
-        raise _err(where, "box_center", cfg.box_center, "the box overlaps the stick")
-    return stick, parts, outer
+    for o in objects:
+        if o.rests_on == FLOOR and outer.contains_xy(o.position[0], o.position[1], margin=max(o.half_size[:2])):
+            raise _err(where, "box_center", cfg.box_center, f"the box overlaps {o.name}")
+    return parts, outer

@@ -40,6 +40,7 @@ class Template:
     name: ClassVar[str] = "template"
     n_params: ClassVar[int] = 1
     param_doc: ClassVar[str] = ""
+    takes_object: ClassVar[bool] = False  # the plan names the object it handles first: grasp(cube, Cube_g)
 
     def __init__(self, n_envs: int, device: torch.device):
         self.n_envs, self.device = n_envs, device
@@ -50,9 +51,10 @@ class Template:
         """Whether a parameter drawn from ``region`` fits this template."""
         raise NotImplementedError
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
         """Start the action for plans ``rows`` with parameters (len(rows), d) drawn from
-        ``region``; returns a (len,) failure code (0 = fine) for plans that fail immediately."""
+        ``region`` on object ``obj`` (its index on the scene's m axis; -1 for templates that
+        handle none); returns a (len,) failure code (0 = fine) for plans that fail immediately."""
         raise NotImplementedError
 
     def act(self, ctx: StepContext, rows: Tensor) -> None:

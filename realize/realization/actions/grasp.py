@@ -1,8 +1,8 @@
-"""The ``grasp`` action template: pick the cube from a pre-grasp pose on a hemisphere around it.
+"""The ``grasp`` action template: pick an object from a pre-grasp pose on a hemisphere around it.
 
 What it does: ``Grasp`` runs the shared manipulation phases (``manipulate``) closing the gripper,
-and decides success from the fingers' contact forces on the cube.
-What it doesn't: carry the cube anywhere (``move_to`` and ``place`` do).
+and decides success from the fingers' contact forces on the object the plan names.
+What it doesn't: carry the object anywhere (``move_to`` and ``place`` do).
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from realize.realization.failures import Failure
 
 
 class Grasp(Manipulate):
-    """grasp(g_p): fabric to the pre-grasp g_p on the hemisphere around the cube, straight in to
-    the cube, close, retreat to g_p.
+    """grasp(o, g_p): fabric to the pre-grasp g_p on the hemisphere around object o, straight in
+    to it, close, retreat to g_p.
 
     Success: the TCP reached the grasp point within ``reach_tolerance`` (paper ``ee_in(g_p)``)
-    AND both fingers press on the cube (contact forces) after the retreat.
+    AND both fingers press on o (contact forces) after the retreat.
     """
 
     name = "grasp"
@@ -41,6 +41,6 @@ class Grasp(Manipulate):
         ok = retreated & holds
         timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
         fail = torch.where(not_held, Failure.GRASP_NOT_HELD,
-                           torch.where(dropped, Failure.CUBE_DROPPED,
+                           torch.where(dropped, Failure.OBJECT_DROPPED,
                                        torch.where(timeout & ~ok, Failure.TIMEOUT, 0)))
         return Outcome(ok | (fail > 0), ok, fail)

@@ -3,9 +3,10 @@
 What it does: ``Manipulate``, the phase machine of ``grasp`` and ``place`` (APPROACH the pre-pose
 on the parameter's hemisphere with the gripper aligned, DESCEND straight in along a goal sliding
 at ``approach_speed``, GRIP: close / open the gripper with the arm still, RETREAT straight back
-out), with the target geometry (TCP goal backed off so the fingertips clear the supporting
-surface, closing axis on two cube faces).
-What it doesn't: decide success (``grasp`` and ``place`` do, from finger contacts and the cube).
+out) on the object the plan names, with the target geometry (TCP goal backed off so the
+fingertips clear the supporting surface, closing axis on two faces of a box, or across a
+cylinder's axis).
+What it doesn't: decide success (``grasp`` and ``place`` do, from finger contacts and the object).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ class Manipulate(Template):
 
     param_doc = "a hemisphere region (pre-pose on its surface, approach towards its centre)"
     closes_gripper = True  # gripper command in the GRIP phase
+    takes_object = True
 
     def __init__(self, n_envs: int, device: torch.device):
         super().__init__(n_envs, device)
@@ -41,6 +43,7 @@ class Manipulate(Template):
         self.target = torch.zeros(n, 3, device=device)
         self.approach = torch.zeros(n, 3, device=device)
         self.closing = torch.zeros(n, 3, device=device)
+        self.obj = torch.zeros(n, dtype=torch.long, device=device)  # the object each plan handles
 
     @classmethod
     def accepts(cls, region: Region) -> bool:
@@ -56,26 +59,27 @@ class Manipulate(Template):
         up = torch.tensor([0.0, 0.0, ctx.cfg.place_pre_height], device=self.device)
         return p, p + up
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
         centre, pre = self._centre_and_pre(ctx, params, region)
         d = centre - pre
         approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
+        self.obj[rows] = obj
         self.pre[rows] = pre
         self.approach[rows] = approach
-        self.closing[rows] = self._closing_axis(ctx, rows, approach)
-        self.target[rows] = self._target(ctx, rows, centre, approach)
+        self.closing[rows] = self._closing_axis(ctx, rows, approach, obj)
+        self.target[rows] = self._target(ctx, rows, centre, approach, obj)
         self.phase[rows] = APPROACH
         self.phase_t[rows] = 0
         self.t[rows] = 0
         ctx.start_fabric(rows)
         return torch.zeros(len(rows), dtype=torch.long, device=self.device)
 
-    def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor) -> Tensor:
+    def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor, obj: int) -> Tensor:
         """TCP goal of the plans ``rows`` that begin the action now: the region centre (the
-        cube's centre), backed off along the approach just enough that the fingertips stay
-        ``grasp_clearance`` above the surface the cube rests on."""
+        object's centre), backed off along the approach just enough that the fingertips stay
+        ``grasp_clearance`` above the surface the object rests on."""
         cfg, g = ctx.cfg, ctx.scene.geometry
-        support = centre[:, 2] - g.cube_half_size
+        support = centre[:, 2] - g.objects[obj].half_height
         a_z = approach[:, 2].clamp(max=-0.2)  # approaches from below the horizon are not useful
         tilt = torch.sqrt((1.0 - approach[:, 2] ** 2).clamp(min=0.0))
         hand = ctx.scene.robot.gripper
@@ -84,10 +88,13 @@ class Manipulate(Template):
         back = back.clamp(min=0.0) + cfg.grasp_offset
         return centre - approach * back[:, None]
 
-    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor) -> Tensor:
-        """Closing axis of the goal pose: the cube's face normal (perpendicular to the approach)
-        nearest to the gripper's current closing axis, so the fingers close on two faces."""
-        frame = quat_to_matrix(ctx.cube[rows, 3:7])  # (n, 3, 3), columns = cube axes
+    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor, obj: int) -> Tensor:
+        """Closing axis of the goal pose: the object's face normal (perpendicular to the
+        approach) nearest to the gripper's current closing axis, so the fingers close on two
+        faces; a cylinder offers only the axes across its own (it is never squeezed end to end)."""
+        frame = quat_to_matrix(ctx.objects[rows, obj, 3:7])  # (n, 3, 3), columns = object axes
+        if ctx.scene.geometry.objects[obj].shape == "cylinder":
+            frame = frame[:, :, :2]
         cand = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 6, 3)
         cand = cand - (cand * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
         norm = cand.norm(dim=-1)
@@ -151,7 +158,7 @@ class Manipulate(Template):
         err, _ = self._advance(ctx, rows)
         ph, pt = self.phase[rows], self.phase_t[rows]
         done = (ph == GRIP) & (pt >= ctx.steps(ctx.cfg.grip_s))
-        return err, ph, pt, ctx.holds(rows), done
+        return err, ph, pt, ctx.holds(rows, self.obj[rows]), done
 
     def _retreated(self, ctx: StepContext, rows: Tensor, err: Tensor) -> Tensor:
         """Back at the pre-pose, or most of the way back out along the approach line."""

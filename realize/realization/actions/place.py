@@ -1,9 +1,9 @@
-"""The ``place`` action template: set the held cube down at a place pose or let it go at a point.
+"""The ``place`` action template: set the held object down at a place pose or let it go at a point.
 
 What it does: ``Place`` runs the shared manipulation phases (``manipulate``) opening the
-gripper, aims the TCP so that the held cube's centre lands on the place point, and decides
-success from the fingers letting go and the cube coming to rest.
-What it doesn't: check where the cube came to rest (the plan's goal does, ``goals``).
+gripper, aims the TCP so that the held object's centre lands on the place point, and decides
+success from the fingers letting go and the object coming to rest.
+What it doesn't: check where the object came to rest (the plan's goal does, ``goals``).
 """
 
 from __future__ import annotations
@@ -42,15 +42,15 @@ class Place(Manipulate):
     def accepts(cls, region: Region) -> bool:
         return isinstance(region, Hemisphere) or (isinstance(region, Box) and region.dim == 3)
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
-        code = super().begin(ctx, rows, params, region)
-        held = ctx.holds(rows)
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
+        code = super().begin(ctx, rows, params, region, obj)
+        held = ctx.holds(rows, obj)
         return torch.where(held, code, Failure.NOT_HOLDING)
 
-    def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor) -> Tensor:
-        """TCP goal that puts the held cube's centre at the region centre (plus a small drop
-        height): the cube sits ``s`` ahead of the TCP along the approach axis, measured now."""
-        s = ((ctx.cube[rows, :3] - ctx.tcp[rows]) * ctx.approach[rows]).sum(dim=1, keepdim=True)
+    def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor, obj: int) -> Tensor:
+        """TCP goal that puts the held object's centre at the region centre (plus a small drop
+        height): the object sits ``s`` ahead of the TCP along the approach axis, measured now."""
+        s = ((ctx.objects[rows, obj, :3] - ctx.tcp[rows]) * ctx.approach[rows]).sum(dim=1, keepdim=True)
         lift = torch.tensor([0.0, 0.0, ctx.cfg.place_drop], device=centre.device)
         return centre + lift - approach * s
 
@@ -68,9 +68,9 @@ class Place(Manipulate):
         if released.any():
             ctx.start_fabric(rows[released])
         ph = self.phase[rows]
-        resting = ctx.cube_speed[rows] <= cfg.rest_speed
+        resting = ctx.object_speed[rows, self.obj[rows]] <= cfg.rest_speed
         retreated = (ph == RETREAT) & self._retreated(ctx, rows, err)
         ok = retreated & ~holds & resting
         timeout = self.t[rows] >= ctx.steps(cfg.manip_timeout_s)
-        fail = torch.where(dropped, Failure.CUBE_DROPPED, torch.where(timeout & ~ok, Failure.TIMEOUT, 0))
+        fail = torch.where(dropped, Failure.OBJECT_DROPPED, torch.where(timeout & ~ok, Failure.TIMEOUT, 0))
         return Outcome(ok | (fail > 0), ok, fail)

@@ -24,7 +24,7 @@ PUSH_APPROACH, PUSH_THROUGH, PUSH_RETREAT = 0, 1, 2
 
 
 class Push(Template):
-    """push(p): push an object at the point p with the closed gripper, straight and horizontally.
+    """push(o, p): push object o at the point p with the closed gripper, straight and horizontally.
 
     Push direction rule: horizontal, from the base's position at the start of the action towards
     the push point, ``u = normalize((p - x_base)_xy, 0)``. The robot pushes away from where it
@@ -45,6 +45,7 @@ class Push(Template):
     """
 
     name = "push"
+    takes_object = True  # push(stick, Stick_p): the object pushed (the goal checks where it went)
     param_doc = "a 3-D box region of push points (x, y, z), e.g. around the upper part of the object"
 
     def __init__(self, n_envs: int, device: torch.device):
@@ -63,7 +64,7 @@ class Push(Template):
     def accepts(cls, region: Region) -> bool:
         return region.dim == 3 and isinstance(region, (Box, Fixed))
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region) -> Tensor:
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
         cfg = ctx.cfg
         point = params[:, :3].to(torch.float32)
         d = point[:, :2] - ctx.base[rows, BASE_XY]
