@@ -26,6 +26,7 @@ __all__ = ["FLOOR", "SHAPES", "ObjectCfg", "SceneObject", "place_objects"]
 
 FLOOR = "floor"
 SHAPES = ("box", "cylinder")
+DEFAULT_BOX = (0.045, 0.045, 0.045)  # a box without a size: the seed paper's 4.5 cm cube
 
 
 def _positive_sides(v: tuple[float, float, float] | None) -> str | None:
@@ -36,13 +37,13 @@ def _positive_sides(v: tuple[float, float, float] | None) -> str | None:
 
 @dataclass
 class ObjectCfg(Settings):
-    """One movable object (module docstring). A box needs ``size``; a cylinder ``radius`` and
-    ``height`` (its axis is vertical at rest)."""
+    """One movable object (module docstring). A box has ``size`` (default ``DEFAULT_BOX``); a
+    cylinder ``radius`` and ``height`` (its axis is vertical at rest)."""
 
     config_key: ClassVar[str] = "scene.objects"
 
     shape: str = setting("box", choices=SHAPES)
-    size: tuple[float, float, float] | None = setting((0.045, 0.045, 0.045), check=_positive_sides)
+    size: tuple[float, float, float] | None = setting(None, check=_positive_sides)  # box; None: DEFAULT_BOX
     radius: float | None = setting(None, gt=0, le=0.5)
     height: float | None = setting(None, gt=0, le=1.5)
     rests_on: str = "table1"  # a table, "floor", or another object (not "on": YAML reads that as true)
@@ -55,10 +56,13 @@ class ObjectCfg(Settings):
     def check(self, where: str) -> None:
         if self.shape == "box":
             if self.size is None:
-                raise ConfigError(f"{where}.size = None is invalid: a box needs its edge lengths [x, y, z] (m)")
+                self.size = DEFAULT_BOX
             if self.radius is not None or self.height is not None:
                 raise ConfigError(f"{where}: a box has a size, not a radius or height (set shape: cylinder)")
         else:
+            if self.size is not None:
+                raise ConfigError(f"{where}.size = {list(self.size)!r} is invalid: a cylinder has radius and height, "
+                                  "not a size")
             if self.radius is None or self.height is None:
                 raise ConfigError(f"{where}: a cylinder needs radius and height (m), got radius = {self.radius!r}, "
                                   f"height = {self.height!r}")
