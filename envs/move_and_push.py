@@ -31,7 +31,7 @@ from typing import Any
 from mani_skill.utils.registration import register_env
 
 from envs.pick_place import RealizePickPlaceEnv
-from realize.world.geometry import GeometryCfg, SceneGeometry
+from realize.world.geometry import ContainerCfg, GeometryCfg, SceneGeometry
 from realize.world.objects import FLOOR, ObjectCfg
 
 ENV_ID = "RealizeMoveAndPush-v1"
@@ -45,7 +45,8 @@ class RealizeMoveAndPushEnv(RealizePickPlaceEnv):
     @classmethod
     def default_geometry(cls) -> GeometryCfg:
         stick = ObjectCfg(size=(0.04, 0.04, 0.7), rests_on=FLOOR, mass=0.3, friction=0.8, color=(0.75, 0.6, 0.35, 1.0))
-        return GeometryCfg(variant="push", tables=[], objects={"cube": ObjectCfg(rests_on="stick"), "stick": stick})
+        return GeometryCfg(variant="push", tables=[], objects={"cube": ObjectCfg(rests_on="stick"), "stick": stick},
+                           containers=[ContainerCfg()])
 
     @classmethod
     def default_goal(cls, geometry: SceneGeometry) -> dict[str, Any]:

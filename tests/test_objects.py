@@ -27,7 +27,7 @@ from realize.tasks.goals import goal_reached, object_at
 from realize.tasks.pddl import plan_from_pddl
 from realize.tasks.regions import Fixed
 from realize.tasks.spec import check_hand, parse_action, task_from_dict
-from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import ContainerCfg, GeometryCfg, build_geometry
 from realize.world.objects import ObjectCfg
 from realize.world.state import SceneState, load_state
 
@@ -57,7 +57,7 @@ def test_the_seed_cube_rests_where_it_did() -> None:
 def test_objects_stack_on_objects_and_floor_objects_are_obstacles() -> None:
     stick = ObjectCfg(size=(0.04, 0.04, 0.7), rests_on="floor")
     g = build_geometry(GeometryCfg(variant="push", tables=[], objects={"cube": ObjectCfg(rests_on="stick"),
-                                                                     "stick": stick}))
+                                                                     "stick": stick}, containers=[ContainerCfg()]))
     assert g.object("stick").position == (0.0, 0.0, 0.35) and g.object("stick").top_z == 0.7
     assert g.object("cube").position[2] == pytest.approx(0.7 + 0.0225)
     assert [b.name for b in g.floor_objects] == ["stick"] and "stick" in [b.name for b in g.obstacles]
@@ -78,7 +78,10 @@ def test_a_cylinder_is_an_upright_solid() -> None:
     (["+scene.objects.can={shape:cylinder,radius:0.02}"], ["scene.objects.can", "height"]),
     (["+scene.objects.can={shape:cylinder,size:[0.1,0.1,0.1],radius:0.02,height:0.1}"], ["scene.objects.can.size"]),
     (["scene.objects.cube.shape=sphere"], ["scene.objects.cube.shape", "sphere"]),
-    (["+scene.objects.table2={rests_on:table1}"], ["scene.objects.table2", "taken"]),
+    (["+scene.objects.table2={rests_on:table1}"], ["table2", "own name"]),
+    (["scene=push", "scene.containers=[]"], ["scene.containers", "open box"]),
+    (["scene=ramp", "scene.ramps.0.low_table=table7"], ["scene.ramps[0].low_table", "table7"]),
+    (["scene=ramp", "scene.ramps.0.drop=0.9"], ["scene.ramps", "drop", "length"]),
 ])
 def test_bad_objects_are_one_line_naming_the_key(overrides: list[str], needles: list[str]) -> None:
     msg = _error(*overrides)

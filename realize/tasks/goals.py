@@ -63,7 +63,7 @@ def object_in_container(p: Tensor, speed: Tensor, geometry: SceneGeometry, name:
     """(N,) bool: centres ``p`` (N, 3) inside container ``name``'s inner footprint, below its
     wall tops, with speeds ``speed`` (N,) at most ``rest_speed``."""
     box = geometry.container(name)
-    w = geometry.container_wall
+    w = geometry.container_wall(name)
     hx, hy, hz = box.half_size
     inside = ((p[:, 0] - box.center[0]).abs() <= hx - w) & ((p[:, 1] - box.center[1]).abs() <= hy - w)
     return inside & (p[:, 2] <= 2 * hz) & (speed <= rest_speed)
@@ -71,7 +71,7 @@ def object_in_container(p: Tensor, speed: Tensor, geometry: SceneGeometry, name:
 
 def object_in_container_distance(p: Tensor, geometry: SceneGeometry, name: str) -> Tensor:
     """(N,) how far (m) centres ``p`` are from container ``name``'s inside."""
-    box, w = geometry.container(name), geometry.container_wall
+    box, w = geometry.container(name), geometry.container_wall(name)
     dz = (p[:, 2] - 2 * box.half_size[2]).clamp(min=0.0)
     return torch.sqrt(_outside_xy(p, box.center, (box.half_size[0] - w, box.half_size[1] - w)) ** 2 + dz ** 2)
 

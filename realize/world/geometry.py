@@ -1,11 +1,11 @@
 """World geometry of the realize scenes: the config (``GeometryCfg``) and the boxes it makes.
 
-What it does: describes the world (tables, an optional wall or ramp, the exit area, the movable
-objects by name (``objects``, ``realize.world.objects``) and the robot's start pose) in one copy's local frame, checks it (``GeometryCfg`` is a
+What it does: describes the world (tables, walls, ramps and open boxes by name, the exit area,
+the movable objects by name (``objects``, ``realize.world.objects``) and the robot's start pose) in one copy's local frame, checks it (``GeometryCfg`` is a
 ``realize.config.Settings``: bad values raise ``ConfigError`` naming the key), and offers the
 obstacle boxes that the controllers (A* occupancy grid, fabric collision terms), the figures and
 the ManiSkill tasks need (``build_geometry`` -> ``SceneGeometry``). The ``push`` variant
-(move-and-push) adds an open box (a static container: floor and four low walls) on the floor;
+(move-and-push) has an open box (a static container: floor and four low walls) on the floor;
 its scene config stands an object (the stick) on the floor with the cube on its top; tables are
 optional there and serve as plain obstacles.
 What it doesn't: build anything in a simulator (the tasks in ``envs/`` do), nor hold the
@@ -26,7 +26,8 @@ from typing import Any, ClassVar
 from realize.config import ConfigError, Settings, setting
 from realize.world.objects import FLOOR, ObjectCfg, SceneObject, place_objects
 
-__all__ = ["VARIANTS", "Box", "SceneGeometry", "TableCfg", "GeometryCfg", "build_geometry"]
+__all__ = ["VARIANTS", "Box", "SceneGeometry", "TableCfg", "WallCfg", "RampCfg", "ContainerCfg", "GeometryCfg",
+           "build_geometry"]
 
 VARIANTS = ("plain", "wall", "ramp", "push")
 
@@ -69,7 +70,7 @@ class SceneGeometry:
 
     variant: str
     tables: tuple[Box, ...]
-    extras: tuple[Box, ...]  # wall / ramp / the container's floor and walls
+    extras: tuple[Box, ...]  # the containers' floors and walls, then walls, then ramps
     objects: tuple[SceneObject, ...]  # movable, by name, in config order
     robot_start: tuple[float, float, float]  # x, y, yaw
     robot_radius: float
@@ -77,8 +78,8 @@ class SceneGeometry:
     exit_high: tuple[float, float]
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
-    containers: tuple[Box, ...] = ()  # push variant: open boxes, outer bounds (walls in extras)
-    container_wall: float = 0.0  # wall thickness of the containers (m)
+    containers: tuple[Box, ...] = ()  # open boxes, outer bounds (their floor and walls are in extras)
+    container_walls: tuple[float, ...] = ()  # wall thickness of each container (m)
 
     @property
     def object_names(self) -> tuple[str, ...]:
@@ -111,6 +112,10 @@ class SceneGeometry:
         """Every box the robot base must avoid (A* occupancy): the static boxes and the footprints
         of the objects standing on the floor (``floor_objects``) at rest."""
         return self.static_obstacles + self.floor_objects
+
+    def container_wall(self, name: str) -> float:
+        """Wall thickness (m) of container ``name``."""
+        return self.container_walls[self.containers.index(self.container(name))]
 
     def container(self, name: str) -> Box:
         for c in self.containers:
@@ -151,12 +156,64 @@ class TableCfg(Settings):
 
 
 @dataclass
+class WallCfg(Settings):
+    """A thin static wall standing on the floor: centre (x, y) and size (x, y, height)."""
+
+    config_key: ClassVar[str] = "scene.walls"
+
+    name: str = "wall"
+    center: tuple[float, float] = (0.0, 0.0)
+    size: tuple[float, float, float] = setting((1.6, 0.1, 1.0), check=_all_positive)
+
+
+@dataclass
+class RampCfg(Settings):
+    """A static plank tilted from ``high_table``'s side down onto ``low_table``'s near edge (along
+    y, between the two tables): its low end 1 cm over the low table's top, ``drop`` m lower than
+    its high end. Slippery by default: a cube released above it slides onto the low table
+    (30 deg; PhysX averages the two frictions: (cube 1.0 + ramp 0.0) / 2 = 0.5 < tan 30 deg)."""
+
+    config_key: ClassVar[str] = "scene.ramps"
+
+    name: str = "ramp"
+    center: tuple[float, float] = (0.0, -0.63)  # the default tables: low end 3 cm over table 2's near edge
+    length: float = setting(0.7, gt=0)
+    width: float = setting(0.4, gt=0)
+    drop: float = setting(0.35, gt=0)  # and < length (check)
+    friction: float = setting(0.0, ge=0)
+    high_table: str = "table1"
+    low_table: str = "table2"
+
+    def check(self, where: str) -> None:
+        if not self.drop < self.length:
+            raise ConfigError(f"{where}.drop = {self.drop!r} is invalid: must be > 0 and < length ({self.length})")
+
+
+@dataclass
+class ContainerCfg(Settings):
+    """An open box on the floor (floor plate and four walls, open top): centre (x, y), inner
+    footprint (x, y), wall height and thickness (m)."""
+
+    config_key: ClassVar[str] = "scene.containers"
+
+    name: str = "box"
+    center: tuple[float, float] = (0.8, 0.0)
+    inner: tuple[float, float] = (0.4, 0.4)  # and larger than the objects (check)
+    wall_height: float = setting(0.12, gt=0, le=0.5)
+    wall_thickness: float = setting(0.02, gt=0, le=0.1)
+
+
+@dataclass
 class GeometryCfg(Settings):
     """Config of the world (the Hydra ``scene`` group maps onto this one to one).
 
-    Single-value bounds are field metadata; how the parts fit together (the cube on its table or
-    stick, nothing under the robot's start, bounds and exit non-empty) is ``check``, which builds
-    the boxes once to see."""
+    Named entries: ``tables``, movable ``objects`` (``realize.world.objects``), and the static
+    fixtures ``walls``, ``ramps`` and ``containers`` (open boxes). ``variant`` names the
+    ManiSkill task that builds the world (``push``: ``RealizeMoveAndPush-v1``; the others
+    ``RealizePickPlace-v1``) and labels results; every fixture listed is built whatever it says.
+    Single-value bounds are field metadata; how the parts fit together (objects on their
+    supports, nothing under the robot's start, bounds and exit non-empty, unique names) is
+    ``check``, which builds the boxes once to see."""
 
     config_key: ClassVar[str] = "scene"
 
@@ -169,29 +226,15 @@ class GeometryCfg(Settings):
     )
     # movable objects by name (realize.world.objects): where each rests, its shape, mass, friction
     objects: dict[str, ObjectCfg] = setting(default_factory=lambda: {"cube": ObjectCfg()})
+    walls: list[WallCfg] = setting(default_factory=list)
+    ramps: list[RampCfg] = setting(default_factory=list)
+    containers: list[ContainerCfg] = setting(default_factory=list)
     robot_start: tuple[float, float, float] = setting((-2.0, 0.0, 0.0))
     robot_radius: float = setting(0.32, gt=0)
     exit_low: tuple[float, float] = setting((1.8, -0.4))
     exit_high: tuple[float, float] = setting((2.6, 0.4))
     bounds_low: tuple[float, float] = setting((-3.0, -3.0))
     bounds_high: tuple[float, float] = setting((3.2, 3.0))
-    # wall variant: a thin wall across the direct route between the tables
-    wall_center: tuple[float, float] = setting((0.0, 0.0))
-    wall_size: tuple[float, float, float] = setting((1.6, 0.1, 1.0), check=_all_positive)
-    # ramp variant: a slippery tilted plank between the tables whose low end rests on table2's
-    # near edge, so a cube released above it slides onto table2 (30 deg; PhysX averages the two
-    # frictions: (cube 1.0 + ramp 0.0) / 2 = 0.5 < tan 30 deg = 0.58)
-    ramp_center: tuple[float, float] = setting((0.0, -0.63))  # low end 3 cm over table 2's near edge
-    ramp_length: float = setting(0.7, gt=0)
-    ramp_width: float = setting(0.4, gt=0)
-    ramp_drop: float = setting(0.35, gt=0)  # and < ramp_length (check)
-    ramp_friction: float = setting(0.0, ge=0)
-    # push variant: an open box on the floor (inner footprint, wall height); its stick and the
-    # cube on the stick's top are objects (objects.stick rests on the floor, objects.cube on the stick)
-    box_center: tuple[float, float] = setting((0.8, 0.0))
-    box_inner: tuple[float, float] = setting((0.4, 0.4))  # and larger than the cube (check)
-    box_wall_height: float = setting(0.12, gt=0, le=0.5)
-    box_wall_thickness: float = setting(0.02, gt=0, le=0.1)
 
     def check(self, where: str) -> None:
         _assemble(self, where)
@@ -215,15 +258,21 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         raise _err(where, "tables", names, "need at least two tables (pick and place)")
     if len(set(names)) != len(names):
         raise _err(where, "tables", names, "table names must be unique")
+    if push and not cfg.containers:
+        raise _err(where, "containers", [], "the push variant needs an open box (its goal: an object in it)")
+    fixtures = names + [f.name for f in (*cfg.walls, *cfg.ramps, *cfg.containers)] + list(cfg.objects)
+    for name in fixtures:
+        if fixtures.count(name) > 1:
+            raise _err(where, "tables", name, "every table, wall, ramp, container and object needs its own name")
     tables = [Box(t.name, (t.center[0], t.center[1], t.height / 2), (t.size[0] / 2, t.size[1] / 2, t.height / 2))
               for t in cfg.tables]
     objects = place_objects(cfg.objects, {t.name: t for t in tables}, f"{where}.objects")
     extras: list[Box] = []
-    containers: tuple[Box, ...] = ()
-    if push:
-        box_parts, container = _container_parts(cfg, objects, where)
+    containers: list[Box] = []
+    for i, c in enumerate(cfg.containers):
+        box_parts, container = _container_parts(c, objects, f"{where}.containers[{i}]")
         extras.extend(box_parts)
-        containers = (container,)
+        containers.append(container)
     for o in objects:
         if o.rests_on != FLOOR:
             continue
@@ -232,27 +281,26 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
                 raise _err(where, f"objects.{o.name}.offset", list(cfg.objects[o.name].offset),
                            f"{o.name} stands on the floor inside {b.name}'s footprint")
 
-    if cfg.variant == "wall":
-        wx, wy, wz = cfg.wall_size
-        extras.append(
-            Box("wall", (cfg.wall_center[0], cfg.wall_center[1], wz / 2), (wx / 2, wy / 2, wz / 2),
-                color=(0.6, 0.6, 0.65, 1.0))
-        )
-    elif cfg.variant == "ramp":
-        if not cfg.ramp_drop < cfg.ramp_length:
-            raise _err(where, "ramp_drop", cfg.ramp_drop, f"must be > 0 and < ramp_length ({cfg.ramp_length})")
-        # The ramp runs along y from table1's side (high end) to table2's side (low end).
-        t1, t2 = tables[0], tables[1]
-        low_z = 2 * t2.half_size[2] + 0.01
-        high_z = low_z + cfg.ramp_drop
-        pitch = math.asin(min(1.0, cfg.ramp_drop / cfg.ramp_length))
+    for w in cfg.walls:
+        wx, wy, wz = w.size
+        extras.append(Box(w.name, (w.center[0], w.center[1], wz / 2), (wx / 2, wy / 2, wz / 2),
+                          color=(0.6, 0.6, 0.65, 1.0)))
+    by_name = {t.name: t for t in tables}
+    for i, r in enumerate(cfg.ramps):
+        for key in ("high_table", "low_table"):
+            if getattr(r, key) not in by_name:
+                raise _err(where, f"ramps[{i}].{key}", getattr(r, key), f"no table of that name; tables: {names}")
+        # the ramp runs along y from the high table's side to the low table's side
+        t_high, t_low = by_name[r.high_table], by_name[r.low_table]
+        low_z = 2 * t_low.half_size[2] + 0.01
+        high_z = low_z + r.drop
+        pitch = math.asin(min(1.0, r.drop / r.length))
         thick = 0.02
-        # yaw = -pi/2 makes the box's local +x point towards -y (from table1 to table2)
+        # yaw = -pi/2 makes the box's local +x point towards -y (from the high table to the low one)
         extras.append(
-            Box("ramp", (cfg.ramp_center[0], cfg.ramp_center[1], (low_z + high_z) / 2),
-                (cfg.ramp_length / 2, cfg.ramp_width / 2, thick / 2),
-                yaw=-math.pi / 2 * (1 if t1.center[1] > t2.center[1] else -1), pitch=pitch,
-                color=(0.55, 0.55, 0.6, 1.0), friction=cfg.ramp_friction)
+            Box(r.name, (r.center[0], r.center[1], (low_z + high_z) / 2), (r.length / 2, r.width / 2, thick / 2),
+                yaw=-math.pi / 2 * (1 if t_high.center[1] > t_low.center[1] else -1), pitch=pitch,
+                color=(0.55, 0.55, 0.6, 1.0), friction=r.friction)
         )
     sx, sy, syaw = cfg.robot_start
     floor_boxes = [Box(o.name, o.position, o.half_size, yaw=o.yaw) for o in objects if o.rests_on == FLOOR]
@@ -278,32 +326,32 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         exit_high=tuple(eh),
         bounds_low=tuple(bl),
         bounds_high=tuple(bh),
-        containers=containers,
-        container_wall=cfg.box_wall_thickness if push else 0.0,
+        containers=tuple(containers),
+        container_walls=tuple(c.wall_thickness for c in cfg.containers),
     )
 
 
-def _container_parts(cfg: GeometryCfg, objects: tuple[SceneObject, ...], where: str) -> tuple[list[Box], Box]:
-    """The push variant's open box: its five static boxes (floor, walls) and its outer bounds
-    (named ``box``, for the goal predicate)."""
-    ix, iy = cfg.box_inner
-    h, w = cfg.box_wall_height, cfg.box_wall_thickness
+def _container_parts(c: ContainerCfg, objects: tuple[SceneObject, ...], where: str) -> tuple[list[Box], Box]:
+    """An open box: its five static boxes (``<name>_floor``, ``<name>_wall_xn`` ...) and its
+    outer bounds (named as the container, for the goal predicate and its frame)."""
+    ix, iy = c.inner
+    h, w = c.wall_height, c.wall_thickness
     smallest = min((2 * min(o.half_size[0], o.half_size[1]) for o in objects if o.rests_on != FLOOR), default=0.0)
     if min(ix, iy) <= smallest:
-        raise _err(where, "box_inner", cfg.box_inner, f"both sides must be larger than the objects ({smallest} m)")
-    bx, by = cfg.box_center
+        raise _err(where, "inner", c.inner, f"both sides must be larger than the objects ({smallest} m)")
+    bx, by = c.center
     ox, oy = ix / 2 + w, iy / 2 + w  # outer half sizes
     colour = (0.3, 0.45, 0.7, 1.0)
     floor = w / 2
     parts = [
-        Box("box_floor", (bx, by, floor / 2), (ox, oy, floor / 2), color=colour),
-        Box("box_wall_xn", (bx - ix / 2 - w / 2, by, h / 2), (w / 2, oy, h / 2), color=colour),
-        Box("box_wall_xp", (bx + ix / 2 + w / 2, by, h / 2), (w / 2, oy, h / 2), color=colour),
-        Box("box_wall_yn", (bx, by - iy / 2 - w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
-        Box("box_wall_yp", (bx, by + iy / 2 + w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
+        Box(f"{c.name}_floor", (bx, by, floor / 2), (ox, oy, floor / 2), color=colour),
+        Box(f"{c.name}_wall_xn", (bx - ix / 2 - w / 2, by, h / 2), (w / 2, oy, h / 2), color=colour),
+        Box(f"{c.name}_wall_xp", (bx + ix / 2 + w / 2, by, h / 2), (w / 2, oy, h / 2), color=colour),
+        Box(f"{c.name}_wall_yn", (bx, by - iy / 2 - w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
+        Box(f"{c.name}_wall_yp", (bx, by + iy / 2 + w / 2, h / 2), (ix / 2, w / 2, h / 2), color=colour),
     ]
-    outer = Box("box", (bx, by, h / 2), (ox, oy, h / 2), color=colour)
+    outer = Box(c.name, (bx, by, h / 2), (ox, oy, h / 2), color=colour)
     for o in objects:
         if o.rests_on == FLOOR and outer.contains_xy(o.position[0], o.position[1], margin=max(o.half_size[:2])):
-            raise _err(where, "box_center", cfg.box_center, f"the box overlaps {o.name}")
+            raise _err(where, "center", c.center, f"the box overlaps {o.name}")
     return parts, outer
