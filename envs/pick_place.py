@@ -19,7 +19,7 @@ stepped by one call. ``realize.scene.BatchedScene`` hides which of the two is us
 
 **Randomizations** (``reset(options=dict(randomize=...))``, off by default: plan realization
 wants the same initial state for every sample): each object's xy offset by up to
-``object_xy_noise`` m and its yaw (objects standing on the floor keep their pose; an object on
+``object_xy_noise`` m and its yaw by up to ``object_yaw_noise`` rad (objects standing on the floor keep their pose; an object on
 another object stays above its top), and the robot's start xy by up to ``robot_xy_noise`` m.
 
 **Success conditions** (``evaluate``): the ``goal`` kwarg, written as a task config's goal
@@ -138,6 +138,7 @@ class RealizePickPlaceEnv(BaseEnv):
         sim_freq: int = 100,
         control_freq: int = 20,
         object_xy_noise: float = 0.02,
+        object_yaw_noise: float = math.pi / 4,
         goal: GoalSpec | Mapping[str, Any] | None = None,
         robot_xy_noise: float = 0.05,
         robot_uids: str = "fetch_omni",
@@ -155,6 +156,7 @@ class RealizePickPlaceEnv(BaseEnv):
         self.n_tiles = n_tiles
         self.offsets = tile_offsets(n_tiles, self.geometry.extent)
         self.object_xy_noise = object_xy_noise
+        self.object_yaw_noise = object_yaw_noise
         self.goal: GoalSpec = self.checked_goal(goal)
         self.robot_xy_noise = robot_xy_noise
         self._sim_settings = dict(
@@ -335,7 +337,7 @@ class RealizePickPlaceEnv(BaseEnv):
                     yaw = torch.full((b,), o.yaw)
                     if randomize and o.rests_on != FLOOR:
                         xy = xy + (torch.rand(b, 2) * 2 - 1) * self.object_xy_noise
-                        yaw = yaw + (torch.rand(b) * 2 - 1) * math.pi / 4
+                        yaw = yaw + (torch.rand(b) * 2 - 1) * self.object_yaw_noise
                     poses[o.name] = (xy, yaw)
                 # The root sits at the copy's start xy with zero yaw; the planar joints hold
                 # the base pose relative to it, so joint velocities are world-frame velocities.

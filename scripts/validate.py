@@ -1,14 +1,14 @@
 """Validation replicas: re-simulate a run's best plan K times at once under small perturbations
 and write the success share into RUN_DIR/result.json under `validation`.
 
-Usage: python scripts/validate.py RUN_DIR [--replicas 16] [--seed 0] [--friction 0.8 1.2]
-                                  [--no-randomize] [--object-noise M] [--robot-noise M]
-                                  [--backend cpu|gpu|auto] [--dry-run] [--json]
+Usage: python scripts/validate.py RUN_DIR [--replicas 16] [--seed 0] [--friction LOW HIGH|none]
+            [--mass LOW HIGH|none] [--no-randomize] [--object-noise M] [--object-yaw RAD] [--robot-noise M]
+            [--no-track] [--backend cpu|gpu|auto] [--dry-run] [--json]
 
-Perturbations: the task's reset randomization (each object's xy and yaw where it rests, robot
-start xy; amplitudes from the task unless --object-noise/--robot-noise) and each object's
-friction scaled per replica by a factor drawn uniformly from --friction (CPU backend only;
---friction none: off).
+Perturbations: the run task's perturbation model (``perturbation`` in its task config,
+realize/tasks/perturbation.py: each object's xy and yaw where it rests, the robot start's xy,
+each object's friction and mass scaled per replica by factors drawn uniformly from their ranges;
+CPU backend for friction and mass), any field overridden by the flags (``none``: unchanged).
 """
 
 from __future__ import annotations
@@ -25,32 +25,44 @@ from realize.app.validation import validate  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
 
+def _range(ap: argparse.ArgumentParser, values: list[str] | None, flag: str) -> tuple[float, float] | None:
+    if values is None:
+        return None
+    if values == ["none"]:
+        return (1.0, 1.0)
+    try:
+        lo, hi = (float(v) for v in values)
+    except ValueError:
+        ap.error(f"{flag} takes LOW HIGH or 'none'")
+    return (lo, hi)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
     ap.add_argument("--replicas", type=int, default=16, help="K copies simulated at once (default 16)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the perturbations (default 0)")
-    ap.add_argument("--friction", nargs="+", default=["0.8", "1.2"], metavar="LOW HIGH",
-                    help="object friction factor range (default 0.8 1.2), or 'none'")
+    ap.add_argument("--friction", nargs="+", default=None, metavar="LOW HIGH",
+                    help="object friction factor range, or 'none' (default: the task's perturbation model)")
+    ap.add_argument("--mass", nargs="+", default=None, metavar="LOW HIGH",
+                    help="object mass factor range, or 'none' (default: the task's)")
     ap.add_argument("--no-randomize", action="store_true", help="no start-state randomization")
-    ap.add_argument("--object-noise", type=float, default=None, help="object xy noise (m), task default if unset")
-    ap.add_argument("--robot-noise", type=float, default=None, help="robot start xy noise (m)")
+    ap.add_argument("--object-noise", type=float, default=None, help="object xy noise (m), the task's if unset")
+    ap.add_argument("--object-yaw", type=float, default=None, help="object yaw noise (rad), the task's if unset")
+    ap.add_argument("--robot-noise", type=float, default=None, help="robot start xy noise (m), the task's if unset")
+    ap.add_argument("--no-track", action="store_true",
+                    help="aim at objects' config poses, not where they lie (controller.track_objects=false)")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
     ap.add_argument("--dry-run", action="store_true", help="report only, leave result.json unchanged")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
     args = ap.parse_args(argv)
-    if args.friction == ["none"]:
-        friction = None
-    else:
-        try:
-            lo, hi = (float(v) for v in args.friction)
-        except ValueError:
-            ap.error("--friction takes LOW HIGH or 'none'")
-        friction = (lo, hi)
+    overrides = dict(friction=_range(ap, args.friction, "--friction"), mass=_range(ap, args.mass, "--mass"),
+                     object_xy=args.object_noise, object_yaw=args.object_yaw, robot_xy=args.robot_noise)
+    if args.no_randomize:
+        overrides.update(object_xy=0.0, object_yaw=0.0, robot_xy=0.0)
     try:
-        rep = validate(args.run_dir, args.replicas, args.seed, friction_range=friction,
-                       randomize=not args.no_randomize, object_xy_noise=args.object_noise,
-                       robot_xy_noise=args.robot_noise, backend=args.backend, write=not args.dry_run)
+        rep = validate(args.run_dir, args.replicas, args.seed, backend=args.backend, write=not args.dry_run,
+                       track_objects=False if args.no_track else None, **overrides)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -1,20 +1,22 @@
-"""Validation replicas: a run's best plan re-simulated K times at once under small perturbations.
+"""Validation replicas: a run's best plan re-simulated K times at once under the task's perturbations.
 
 What it does: ``validate`` builds one batched scene of K copies of the run's world (the run's
-task, geometry, physics, controllers) with ``EnvOptions`` that make every reset apply the task's
-randomization (each object's xy and yaw, robot start xy; noise amplitudes the task's unless
-given), gives each copy's objects their own friction (each its configured value times a factor
-drawn from ``friction_range``, object by object in the scene's order; CPU backend), realizes the best plan in all K copies, and reports the share
+task, geometry, physics, controllers) whose every reset applies the task's perturbation model
+(``TaskSpec.perturbation``, ``realize.tasks.perturbation``: each object's xy and yaw, the robot
+start's xy; any field can be overridden), gives each copy's objects their own friction and
+mass (the configured values times factors drawn from the model's ranges, object by object in
+the scene's order; CPU backend), realizes the best plan in all K copies, and reports the share
 that reaches the goal, the failure reasons and the cost of the successful ones.
 ``write_validation`` stores the report in ``result.json`` under ``validation`` (read, add the
 key, write back atomically).
 What it doesn't: search, replay one copy or record video (``realize.app.replay``), or perturb
-anything but the start state and the objects' friction. The K replicas are not bit-identical even
-without perturbations: each copy sits at its own tile offset (float32 rounding differs).
+anything the model does not name. The K replicas are not bit-identical even without
+perturbations: each copy sits at its own tile offset (float32 rounding differs).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import Counter
@@ -25,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from realize.app.replay import ReplayError, best_z_rows, build_replay_spec, saved_plan
+from realize.config import ConfigError
+from realize.tasks.perturbation import Perturbation
 from realize.run_dir.directory import RunDir
 from realize.scene import EnvOptions
 
@@ -37,11 +41,10 @@ class ValidationReport:
     success_share: float
     failures: dict[str, int]  # failure reason ("<action>:<template>:<reason>") -> count
     seed: int
-    friction_range: list[float] | None
+    perturbation: dict[str, Any]  # the model the replicas were drawn from (realize.tasks.perturbation)
+    track_objects: bool  # controller.track_objects of the replicas' rollouts
     friction: dict[str, list[float]]  # object -> its friction in each replica
-    randomize: bool
-    object_xy_noise: float | None
-    robot_xy_noise: float | None
+    mass: dict[str, list[float]]  # object -> its mass (kg) in each replica
     cost_mean: float | None  # over the successful replicas
     cost_std: float | None
     saved_cost: float | None
@@ -53,48 +56,48 @@ class ValidationReport:
 
 
 def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
-             friction_range: tuple[float, float] | None = (0.8, 1.2), randomize: bool = True,
-             object_xy_noise: float | None = None, robot_xy_noise: float | None = None,
-             backend: str = "cpu", write: bool = True) -> ValidationReport:
+             perturbation: Perturbation | None = None, backend: str = "cpu", write: bool = True,
+             track_objects: bool | None = None, **overrides: Any) -> ValidationReport:
     """Re-simulate the best plan ``replicas`` times at once under perturbations; report the share
     that reaches the goal and (``write``) store it in ``result.json`` under ``validation``.
 
-    Perturbations: the task's reset randomization with ``seed`` (noise amplitudes: the task's
-    defaults unless given) and, per replica, each object's friction times U(friction_range)
-    drawn from ``numpy.random.default_rng(seed)``, object after object (None: unchanged).
+    Perturbations: ``perturbation`` (None: the run task's model) with ``overrides`` of its fields
+    (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the reset randomization is seeded with
+    ``seed``, the friction and mass factors are drawn from ``numpy.random.default_rng(seed)``.
+    ``track_objects``: override the run's ``controller.track_objects`` (None: the run's).
     """
     from realize.app.realizers import open_realization
 
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
         raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")
-    if friction_range is not None:
-        lo, hi = map(float, friction_range)
-        if not (0 < lo <= hi and math.isfinite(hi)):
-            raise ReplayError(f"friction range {friction_range} must satisfy 0 < low <= high")
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     spec = build_replay_spec(run, backend)
-    options = EnvOptions(object_xy_noise=object_xy_noise, robot_xy_noise=robot_xy_noise, randomize_resets=randomize)
+    if track_objects is not None:
+        spec.rollout = dataclasses.replace(spec.rollout, track_objects=bool(track_objects))
+    try:
+        model = (perturbation or spec.task.perturbation).with_overrides(**overrides)
+    except (TypeError, ConfigError) as e:
+        raise ReplayError(f"perturbation: {e}") from None
+    options = EnvOptions(object_xy_noise=model.object_xy, object_yaw_noise=model.object_yaw,
+                         robot_xy_noise=model.robot_xy, randomize_resets=model.moves_start)
     scene, (realizer,) = open_realization(spec, n_envs=replicas, env=options, seed=seed)
     with scene:
-        friction: dict[str, list[float]] = {}
-        rng = np.random.default_rng(seed)
-        for o in scene.geometry.objects:
-            if friction_range is not None:
-                friction[o.name] = scene.set_object_friction(o.name, rng.uniform(lo, hi, size=replicas)).tolist()
-            else:
-                friction[o.name] = [float(o.friction)] * replicas
+        f_friction, f_mass = model.draw_factors(scene.object_names, replicas, np.random.default_rng(seed))
+        # a [1, 1] range leaves the simulator untouched (the configured values, bit for bit)
+        friction = {o.name: (scene.set_object_friction(o.name, f_friction[o.name]).tolist()
+                             if model.friction != (1.0, 1.0) else [o.friction] * replicas)
+                    for o in scene.geometry.objects}
+        mass = {o.name: (scene.set_object_mass(o.name, f_mass[o.name]).tolist()
+                         if model.mass != (1.0, 1.0) else [o.mass] * replicas) for o in scene.geometry.objects}
         res = realizer.rollout(best_z_rows(run, replicas))
-        noise = (scene.object_xy_noise, scene.robot_xy_noise)
         used_backend = scene.backend
     ok = res.feasible.numpy()
     costs = res.cost.numpy().astype(np.float64)[ok]
     report = ValidationReport(
         replicas=replicas, success_share=float(ok.mean()),
         failures=dict(sorted(Counter(f for f in res.failure if f).items())), seed=int(seed),
-        friction_range=None if friction_range is None else [lo, hi], friction=friction,
-        randomize=randomize, object_xy_noise=noise[0] if randomize else None,
-        robot_xy_noise=noise[1] if randomize else None,
+        perturbation=model.to_dict(), track_objects=spec.rollout.track_objects, friction=friction, mass=mass,
         cost_mean=float(costs.mean()) if len(costs) else None, cost_std=float(costs.std()) if len(costs) else None,
         saved_cost=run.best_cost if math.isfinite(run.best_cost) else None, backend=used_backend, wall_time_s=time.perf_counter() - t0,
     )

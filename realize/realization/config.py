@@ -63,6 +63,8 @@ class RolloutConfig(Settings):
     diverge_speed: float = setting(50.0, gt=0)  # joint speed that marks a plan as diverged
     base_feedback: float = setting(3.0, gt=0)  # 1/s, base position feedback onto the fabric's base velocity
     freeze_finished: bool = True  # put robots of finished / failed plans to sleep (saves physics)
+    track_objects: bool = True  # a region framed by a movable object follows where it is seen when its action starts
+    track_min_shift: float = setting(0.005, ge=0)  # m, seen this close to its config pose it counts as there
     pid: PIDConfig = field(default_factory=PIDConfig)
     astar: AStarConfig = field(default_factory=AStarConfig)
     fabric: WholeBodyConfig = field(default_factory=WholeBodyConfig)

@@ -40,6 +40,8 @@ from realize.tasks.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
 from realize.scene import BatchedScene
 from realize.world.state import SceneState
+from realize.tasks.frames import position_columns
+from realize.tasks.regions import Region
 from realize.tasks.spec import TaskSpec
 
 
@@ -134,12 +136,34 @@ class Rollout:
         if self.realizer.action_hook is not None:
             self.realizer.action_hook(a, rows)
         obj = -1 if spec.obj is None else self.scene.object_index(spec.obj)
-        code = self._template(a).begin(self.ctx, rows, self._padded(name, rows), self.realizer.layout.regions[name], obj)
+        region = self.realizer.layout.regions[name]
+        params, shift = self._tracked(name, region, self._padded(name, rows), rows)
+        code = self._template(a).begin(self.ctx, rows, params, region, obj, shift)
         bad = code > 0
         if bad.any():
             r = rows[bad]
             self._fail(r, code[bad], a)
             self.ctx.hold_arm(r)
+
+    def _tracked(self, name: str, region: Region, params: Tensor, rows: Tensor) -> tuple[Tensor, Tensor | None]:
+        """Parameters of ``rows`` resolved against where the object their region is framed by
+        is seen now (``controller.track_objects``), and that shift (len, 3), or None: untracked.
+        A region framed by a movable object is written relative to its config pose; the object
+        seen more than ``track_min_shift`` from there moves the region's points (and a
+        hemisphere's centre, ``Template.begin``) by the difference, as a robot with perception
+        would aim at the object where it lies."""
+        frame = self.task.frame_of(name)
+        g = self.scene.geometry
+        if not self.cfg.track_objects or frame not in g.object_names:
+            return params, None
+        obj = g.object(frame)
+        seen = self.ctx.objects[rows, g.object_index(frame), :3]
+        shift = seen - torch.tensor(obj.position, dtype=seen.dtype, device=seen.device)
+        shift = torch.where((shift.norm(dim=1) > self.cfg.track_min_shift)[:, None], shift, torch.zeros_like(shift))
+        k = position_columns(region)
+        params = params.clone()
+        params[:, :k] += shift[:, :k].to(params.dtype)
+        return params, shift
 
     def _write_commands(self, asleep: Tensor) -> None:
         scene, ctx = self.scene, self.ctx

@@ -301,6 +301,11 @@ class BatchedScene:
         return float(self.u.object_xy_noise)
 
     @property
+    def object_yaw_noise(self) -> float:
+        """Amplitude (rad) of the objects' yaw noise of a randomized reset."""
+        return float(self.u.object_yaw_noise)
+
+    @property
     def robot_xy_noise(self) -> float:
         """Amplitude (m) of the robot start's xy noise of a randomized reset."""
         return float(self.u.robot_xy_noise)
@@ -386,6 +391,23 @@ class BatchedScene:
             raise ConfigError(f"friction factors must be finite and > 0, got {f.tolist()}")
         values = float(self.geometry.objects[k].friction) * f
         self._impl.set_object_friction(k, values)
+        return values
+
+    def object_mass(self, name: str) -> torch.Tensor:
+        """(N,) mass (kg) of object ``name`` in each copy (float64; CPU backend)."""
+        return self._impl.object_mass(self.object_index(name))
+
+    def set_object_mass(self, name: str, factors: torch.Tensor | np.ndarray | Sequence[float]) -> torch.Tensor:
+        """Scale each copy's mass (and inertia) of object ``name`` by ``factors`` (N,) from its
+        configured value; returns the (N,) masses now set (float64). Once per scene, not per step."""
+        k = self.object_index(name)
+        f = torch.as_tensor(np.asarray(factors, dtype=np.float64)).reshape(-1)
+        if len(f) != self.n_envs:
+            raise ConfigError(f"{len(f)} mass factors for {self.n_envs} copies")
+        if not bool(torch.isfinite(f).all()) or bool((f <= 0).any()):
+            raise ConfigError(f"mass factors must be finite and > 0, got {f.tolist()}")
+        values = float(self.geometry.objects[k].mass) * f
+        self._impl.set_object_mass(k, values)
         return values
 
     def push_object(self, name: str, copy: int, velocity: tuple[float, float, float]) -> None:

@@ -289,3 +289,17 @@ class CpuTiledBackend(PhysicsBackend):
         for shape, mu in zip(shapes, values.tolist()):
             old = shape.get_physical_material()
             shape.set_physical_material(sapien.physx.PhysxMaterial(float(mu), float(mu), float(old.restitution)))
+
+    def object_mass(self, k: int) -> torch.Tensor:
+        return torch.tensor([body.get_mass() for body in self._object_bodies[k]], dtype=torch.float64)
+
+    def set_object_mass(self, k: int, values: torch.Tensor) -> None:
+        """One loop over the copies; the inertia scales with the mass (same shape, same density
+        distribution)."""
+        bodies = self._object_bodies[k]
+        if len(values) != len(bodies):
+            raise ConfigError(f"{len(values)} mass values for {len(bodies)} copies")
+        for body, m in zip(bodies, values.tolist()):
+            f = float(m) / body.get_mass()
+            body.set_mass(float(m))
+            body.set_inertia(np.asarray(body.get_inertia(), dtype=np.float32) * np.float32(f))

@@ -10,8 +10,8 @@ joints and poses, updates the links' kinematics, then fetches (ManiSkill's own r
 after the substeps the buffers are fetched once. ``realize.scene.backends`` checks SAPIEN's
 PhysX GPU library (``realize.physx_gpu``) before this backend is built.
 What it doesn't: repeat bit for bit (PhysX GPU contacts are not deterministic), put finished
-copies to sleep (it holds them still), or set friction per copy (PhysX GPU fixes materials when
-the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA
+copies to sleep (it holds them still), or set friction or mass per copy (PhysX GPU fixes materials
+and masses when the scene is built). It has not run on a GPU in this repository's CI: its test skips without CUDA
 (nor has ``set_state``, the restore of a saved state, which no test runs on a GPU). Each
 movable object is one batched ManiSkill actor over the sub-scenes; reads stack them on the m axis.
 """
@@ -134,3 +134,9 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
 
     def set_object_friction(self, k: int, values: torch.Tensor) -> None:
         raise ConfigError(_NO_FRICTION)
+
+    def object_mass(self, k: int) -> torch.Tensor:
+        raise ConfigError(_NO_FRICTION.replace("friction", "mass"))
+
+    def set_object_mass(self, k: int, values: torch.Tensor) -> None:
+        raise ConfigError(_NO_FRICTION.replace("friction", "mass"))

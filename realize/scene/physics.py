@@ -6,7 +6,7 @@ What it does:
     pose, every movable object's pose and velocity, finger-object contact forces; objects in the
     geometry's order, the m axis), drive-target writes, physics substeps, putting finished copies
     to sleep, history-free resets, teleporting every copy into a restored state (``set_state``),
-    per-copy object friction and test-only object pushes. Everything is an (N, ...) tensor on
+    per-copy object friction and mass, and test-only object pushes. Everything is an (N, ...) tensor on
     the backend's device.
   * ``make_task``: builds the ManiSkill task of the scene's world (its env id from the geometry
     variant, ``task_id``; gym imports ``envs``, which registers them, by the id's ``envs:`` prefix:
@@ -73,6 +73,8 @@ def make_task(geometry: GeometryCfg, sim: SimSettings, options: EnvOptions, robo
             kwargs["human_render_camera_configs"] = {"render_camera": render}
     if options.object_xy_noise is not None:
         kwargs["object_xy_noise"] = options.object_xy_noise
+    if options.object_yaw_noise is not None:
+        kwargs["object_yaw_noise"] = options.object_yaw_noise
     if options.robot_xy_noise is not None:
         kwargs["robot_xy_noise"] = options.robot_xy_noise
     return gym.make(f"envs:{task_id(geometry.variant)}", **backend_kwargs, **kwargs)
@@ -161,6 +163,14 @@ class PhysicsBackend(ABC):
     @abstractmethod
     def set_object_friction(self, k: int, values: torch.Tensor) -> None:
         """Give object ``k`` of copy i the friction ``values[i]`` (static = dynamic; (N,) float64)."""
+
+    @abstractmethod
+    def object_mass(self, k: int) -> torch.Tensor:
+        """(N,) mass (kg) of object ``k`` in each copy (float64)."""
+
+    @abstractmethod
+    def set_object_mass(self, k: int, values: torch.Tensor) -> None:
+        """Give object ``k`` of copy i the mass ``values[i]`` (its inertia scaled alike; (N,) float64)."""
 
     def close(self) -> None:
         self.env.close()

@@ -88,8 +88,8 @@ class Camera(Settings):
 class EnvOptions(Settings):
     """What the ManiSkill task is built and reset with besides geometry and physics.
 
-    ``camera``: the render camera (None: the task's). ``object_xy_noise`` / ``robot_xy_noise``:
-    reset noise amplitudes in m (None: the task's defaults). ``randomize_resets``: every
+    ``camera``: the render camera (None: the task's). ``object_xy_noise`` / ``robot_xy_noise`` (m) and
+    ``object_yaw_noise`` (rad): reset noise amplitudes (None: the task's defaults). ``randomize_resets``: every
     ``reset`` applies the task's randomization (object xy/yaw, robot start xy), whatever the
     caller asks (the realizer resets without it)."""
 
@@ -97,5 +97,6 @@ class EnvOptions(Settings):
 
     camera: Camera | None = None
     object_xy_noise: float | None = setting(None, ge=0)
+    object_yaw_noise: float | None = setting(None, ge=0)
     robot_xy_noise: float | None = setting(None, ge=0)
     randomize_resets: bool = False

@@ -1,7 +1,8 @@
 """Task specs: symbolic parameters with regions, the plan (actions bound to parameters by name),
 the goal predicate psi_g and the final cost, parsed and checked from a task config.
 
-What it does: turns a mapping such as ``configs/task/pick_place.yaml`` into a ``TaskSpec`` and
+What it does: turns a mapping such as ``configs/task/pick_place.yaml`` (params, plan, goal,
+final cost, planner, and the ``perturbation`` model of ``realize.tasks.perturbation``) into a ``TaskSpec`` and
 checks every name against the scene and the action templates, with errors that name the file
 and key (``realize.config.ConfigError``). A region may name the object it is written relative to
 (``frame: cube``; ``realize.tasks.frames``): the layout holds it placed in the world frame, and
@@ -25,6 +26,7 @@ from realize.tasks.frames import WORLD, object_frames, place_region
 from realize.world.geometry import SceneGeometry
 from realize.tasks.goal_spec import GoalSpec, goal_from_dict
 from realize.tasks.param_layout import ParamLayout, region_from_dict
+from realize.tasks.perturbation import Perturbation
 from realize.tasks.regions import Region
 
 __all__ = ["ActionSpec", "GoalSpec", "TaskSpec", "parse_action", "bind_objects", "check_plan", "check_hand",
@@ -57,6 +59,8 @@ class TaskSpec:
     # the frame each parameter's region was written in (``realize.tasks.frames``); the layout holds
     # the regions placed in the world frame
     frames: dict[str, str] = field(default_factory=dict)
+    # how the world a plan meets may differ (``realize.tasks.perturbation``): validation's replicas
+    perturbation: Perturbation = field(default_factory=Perturbation)
 
     def frame_of(self, param: str) -> str:
         return self.frames.get(param, WORLD)
@@ -161,7 +165,7 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
     """Build and check a TaskSpec. ``source`` names the file for error messages."""
     if not isinstance(d, Mapping):
         raise ConfigError(f"{source}: a task config is a mapping, got {type(d).__name__}")
-    allowed = {"name", "params", "plan", "goal", "final_cost", "planner"}
+    allowed = {"name", "params", "plan", "goal", "final_cost", "planner", "perturbation"}
     unknown = set(d) - allowed
     if unknown:
         raise ConfigError(f"{source}: unknown keys {sorted(unknown)}; allowed: {sorted(allowed)}")
@@ -201,7 +205,8 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
         check_plan(plan, layout, templates, f"{source}:plan", objects)
     goal = goal_from_dict(d["goal"], scene, regions, source)
     final_cost = float(d.get("final_cost", 0.0))
-    return TaskSpec(str(d.get("name", "task")), layout, plan, goal, final_cost, source, planner, frames)
+    perturbation = Perturbation.from_mapping(d.get("perturbation"), f"{source}:perturbation")
+    return TaskSpec(str(d.get("name", "task")), layout, plan, goal, final_cost, source, planner, frames, perturbation)
 
 
 def plan_from_actions(actions: Sequence[Any], layout: ParamLayout, templates: Mapping[str, Any],
@@ -219,4 +224,4 @@ def task_for_plan(task: TaskSpec, plan: Sequence[ActionSpec]) -> TaskSpec:
     used = {p for a in plan for p in a.params} | set(task.goal.params())
     regions = {n: r for n, r in task.layout.regions.items() if n in used}
     return TaskSpec(task.name, ParamLayout(regions), list(plan), task.goal, task.final_cost, task.source,
-                    dict(task.planner), {n: f for n, f in task.frames.items() if n in regions})
+                    dict(task.planner), {n: f for n, f in task.frames.items() if n in regions}, task.perturbation)

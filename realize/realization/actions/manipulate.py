@@ -49,18 +49,22 @@ class Manipulate(Template):
     def accepts(cls, region: Region) -> bool:
         return isinstance(region, Hemisphere)
 
-    def _centre_and_pre(self, ctx: StepContext, params: Tensor, region: Region) -> tuple[Tensor, Tensor]:
+    def _centre_and_pre(self, ctx: StepContext, params: Tensor, region: Region,
+                        shift: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """(object point, pre-pose) of the action: a hemisphere parameter is the pre-pose around
-        the region's fixed centre; a 3-D box parameter (place only) is the point itself, reached
-        straight down from ``place_pre_height`` above it."""
+        the region's fixed centre (moved by ``shift``: the tracked object lies elsewhere); a 3-D
+        box parameter (place only) is the point itself, reached straight down from
+        ``place_pre_height`` above it."""
         p = params[:, :3].to(torch.float32)
         if isinstance(region, Hemisphere):
-            return torch.tensor(region.center, dtype=torch.float32, device=self.device).expand(len(p), 3), p
+            centre = torch.tensor(region.center, dtype=torch.float32, device=self.device).expand(len(p), 3)
+            return (centre if shift is None else centre + shift.to(torch.float32)), p
         up = torch.tensor([0.0, 0.0, ctx.cfg.place_pre_height], device=self.device)
         return p, p + up
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
-        centre, pre = self._centre_and_pre(ctx, params, region)
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
+              shift: Tensor | None = None) -> Tensor:
+        centre, pre = self._centre_and_pre(ctx, params, region, shift)
         d = centre - pre
         approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
         self.obj[rows] = obj

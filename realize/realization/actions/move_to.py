@@ -115,7 +115,8 @@ class MoveTo(Template):
         pts[m], lens[m], found[m] = _pad_to(p2, length), n2.to(lens), f2
         return pts, lens, found
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
+              shift: Tensor | None = None) -> Tensor:
         start = ctx.base[rows, BASE_XY]
         goal = params[:, :2].to(start)
         extra = self._carry_grids(ctx, rows)

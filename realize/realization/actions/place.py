@@ -42,8 +42,9 @@ class Place(Manipulate):
     def accepts(cls, region: Region) -> bool:
         return isinstance(region, Hemisphere) or (isinstance(region, Box) and region.dim == 3)
 
-    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1) -> Tensor:
-        code = super().begin(ctx, rows, params, region, obj)
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
+              shift: Tensor | None = None) -> Tensor:
+        code = super().begin(ctx, rows, params, region, obj, shift)
         held = ctx.holds(rows, obj)
         return torch.where(held, code, Failure.NOT_HOLDING)
 
