@@ -44,7 +44,7 @@ def release_point(result: ResultDoc) -> tuple[float, float] | None:
     hemisphere: its centre, the place point, is fixed by the task, so the pre-pose is used)."""
     params = result.best_params or {}
     plan = result.plan or ""
-    names = [args.split(",")[0].strip() for tpl, args in re.findall(r"(\w+)\(([^)]*)\)", plan) if tpl == "place"]
+    names = [args.split(",")[-1].strip() for tpl, args in re.findall(r"(\w+)\(([^)]*)\)", plan) if tpl == "place"]
     for name in names or [n for n in params if n.lower().startswith("cube_p")]:
         p = params.get(name)
         if p is not None:

@@ -68,7 +68,7 @@ class FakeRollout:
     traj_t: torch.Tensor | None = None
     traj_base: torch.Tensor | None = None
     traj_ee: torch.Tensor | None = None
-    traj_cube: torch.Tensor | None = None
+    traj_objects: torch.Tensor | None = None  # (N, T, m, 3)
     wall_time_s: float = 0.0
 
 

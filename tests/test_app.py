@@ -40,7 +40,7 @@ from realize.app.sweep_summary import COLUMNS, write_summary
 def test_default_config_validates_without_simulating(no_sim: None) -> None:
     spec = build_run_spec(plain([]))
     assert spec.ce.n_envs == 200 and spec.ce.n_elite == 10 and spec.ce.iterations == 10
-    assert spec.task.describe() == "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
+    assert spec.task.describe() == "move_to(Table1), grasp(cube, Cube_g), move_to(Table2), place(cube, Cube_p), move_to(Exit)"
     assert spec.task.layout.names == ["Table1", "Cube_g", "Table2", "Cube_p", "Exit"]
     # the yaml spells out the defaults; the backend is resolved at the edge (device=auto)
     assert asdict(spec.sim) == dict(asdict(realize.scene.SimSettings()), backend=spec.placement.backend)
@@ -133,10 +133,10 @@ BAD = [
     (["task.params.Cube_g.radius=-0.1"], ["params.Cube_g", "radius"]),
     (["task.params.Table1.r_min=2.0"], ["params.Table1", "r_min"]),
     (["task.params.Exit.type=triangle"], ["params.Exit", "triangle"]),
-    (['task.plan=["move_to(Table1)","grasp(Nowhere)"]'], ["plan[1]", "Nowhere"]),
+    (['task.plan=["move_to(Table1)","grasp(cube,Nowhere)"]'], ["plan[1]", "Nowhere"]),
     (['task.plan=["fly(Table1)"]'], ["plan[0]", "fly"]),
-    (['task.plan=["grasp(Table1)"]'], ["plan[0]", "Table1", "grasp"]),
-    (["task.goal.cube_on=table9"], ["goal.cube_on", "table9"]),
+    (['task.plan=["grasp(cube,Table1)"]'], ["plan[0]", "Table1", "grasp"]),
+    (["task.goal.rests_on.cube=table9"], ["goal.rests_on.cube", "table9"]),
     (["task.planner.enabled=true", "task.planner.domain=missing_domain.pddl"], ["missing_domain.pddl"]),
     (["sim.sim_freq=50"], ["sim.sim_freq = 50"]),
     (["sim.backend=tpu"], ["sim.backend", "tpu"]),

@@ -23,11 +23,11 @@ from realize.controllers.astar_search import SQRT2, _heuristic, _TIE, octile
 from realize.controllers.grid_cache import clear_grid_cache, grid_cached
 from realize.controllers.occupancy import cell_in_grid, cell_to_world, grid_from_bounds, occupancy_from_boxes, world_to_cell
 from realize.controllers.waypoints import _compact, path_to_waypoints
-from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, WallCfg, build_geometry
 
 
 def scene_grid(variant: str):
-    geo = build_geometry(GeometryCfg(variant=variant))
+    geo = build_geometry(GeometryCfg(variant=variant, walls=[WallCfg()] if variant == "wall" else []))
     spec = grid_from_bounds((geo.bounds_low[0], geo.bounds_low[1], geo.bounds_high[0], geo.bounds_high[1]), 0.05)
     obs = geo.obstacles
     occ = occupancy_from_boxes(spec, torch.tensor([b.center[:2] for b in obs]),

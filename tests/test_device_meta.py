@@ -19,7 +19,7 @@ import torch
 
 DOF = 11  # the default robot's whole-body joints (fetch_omni: base 3 + torso + 7 arm)
 from realize.controllers.whole_body import WholeBodyFabric
-from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, RampCfg, build_geometry
 from realize.robot.jacobians import prefix_ends
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
@@ -38,7 +38,7 @@ def _on_meta(what: str, fn: Callable[[], Any]) -> Any:
 
 @pytest.fixture(scope="module")
 def geometry():
-    return build_geometry(GeometryCfg(variant="ramp"))  # tables, the ramp (a pitched box) and the floor
+    return build_geometry(GeometryCfg(variant="ramp", ramps=[RampCfg()]))  # tables, the ramp (a pitched box) and the floor
 
 
 def _meta_fabric(geometry) -> WholeBodyFabric:
@@ -66,11 +66,11 @@ class _MetaScene:
 
     whole_body_qd = whole_body_q
 
-    def cube_pose(self) -> torch.Tensor:
-        return torch.zeros(N, 7, device=META)
+    def object_poses(self) -> torch.Tensor:  # one object (the seed scene's cube)
+        return torch.zeros(N, 1, 7, device=META)
 
-    def cube_velocity(self) -> torch.Tensor:
-        return torch.zeros(N, 6, device=META)
+    def object_velocities(self) -> torch.Tensor:
+        return torch.zeros(N, 1, 6, device=META)
 
 
 def test_rollout_context_fabric_bookkeeping_on_meta(geometry) -> None:

@@ -29,8 +29,11 @@ def test_the_registry_lists_our_tasks() -> None:
 
 @pytest.mark.parametrize("env_id, geometry, words", [
     (envs.MOVE_AND_PUSH_ID, {"variant": "plain"}, "geometry.variant = 'plain'"),
-    (envs.ENV_ID, {"variant": "push", "tables": []}, "geometry.variant = 'push'"),
-    (envs.ENV_ID, {"cube_size": 1.0}, "geometry.cube_size"),
+    (envs.ENV_ID, {"variant": "push", "tables": [], "objects": {"stick": {"size": [0.04, 0.04, 0.7], "rests_on": "floor"},
+                                                               "cube": {"rests_on": "stick"}},
+                   "containers": [{}]},
+     "geometry.variant = 'push'"),
+    (envs.ENV_ID, {"objects": {"cube": {"size": [1.6, 0.045, 0.045]}}}, "geometry.objects.cube.size"),
 ])
 def test_wrong_geometry_is_refused_by_kwarg_name(env_id: str, geometry: dict, words: str) -> None:
     with pytest.raises(ConfigError) as e:
@@ -92,13 +95,13 @@ def test_drop_links_refuses_moving_or_inner_links() -> None:
 
 
 def test_robot_solver_iterations_apply_to_robots_only() -> None:
-    """``sim.solver_position_iterations_robot`` sets every robot's count; the cubes keep the
+    """``sim.solver_position_iterations_robot`` sets every robot's count; the objects (cubes) keep the
     scene's ``solver_position_iterations``."""
     from realize.scene import BatchedScene, SimSettings
 
     with BatchedScene(2, None, SimSettings(solver_position_iterations=12, solver_position_iterations_robot=3)) as s:
         assert [a.get_solver_position_iterations() for a in s._impl._arts] == [3, 3]
-        assert [b.get_solver_position_iterations() for b in s._impl._cube_bodies] == [12, 12]
+        assert [b.get_solver_position_iterations() for b in s._impl._object_bodies[0]] == [12, 12]
 
 
 def test_hand_collisions_keep_every_mass_and_leave_shapes_on_the_hand_only() -> None:
@@ -131,7 +134,7 @@ def test_physx_scene_settings_reach_every_shape_and_the_solver() -> None:
 
     with BatchedScene(1, None, SimSettings(contact_offset=0.007, solver="pgs")) as s:
         shapes = [sh for ln in s._impl._arts[0].get_links() for sh in ln.get_collision_shapes()]
-        shapes += s._impl._cube_shapes()
+        shapes += s._impl._shapes(0)
         assert len(shapes) == 16 and all(sh.contact_offset == pytest.approx(0.007) for sh in shapes)
         assert sapien.physx.get_scene_config().enable_tgs is False
     with pytest.raises(ConfigError, match="robot_collisions"):

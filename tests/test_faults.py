@@ -46,10 +46,10 @@ def test_nan_targets_in_one_plan_leave_the_other_seven_unchanged(monkeypatch: py
     assert [clean.failure[i] for i in others] == [faulty.failure[i] for i in others]
     for name in ("feasible", "action_success"):
         assert torch.equal(getattr(clean, name)[others], getattr(faulty, name)[others]), name
-    for name in ("traj_base", "traj_ee", "traj_cube"):  # nothing of the NaN leaked into another plan
+    for name in ("traj_base", "traj_ee", "traj_objects"):  # nothing of the NaN leaked into another plan
         assert not getattr(faulty, name)[others].isnan().any(), name
     if blas_batch_invariant():  # bit for bit where the controllers' batched products allow it
-        for name in ("cost", "steps", "traj_base", "traj_ee", "traj_cube"):
+        for name in ("cost", "steps", "traj_base", "traj_ee", "traj_objects"):
             assert torch.equal(getattr(clean, name)[others], getattr(faulty, name)[others]), name
     else:  # the fabric's batch lost a row: last-bit differences, amplified by contact, not the NaN
         assert ((faulty.cost[others] - clean.cost[others]).abs() <= 0.05 * clean.cost[others]).all()

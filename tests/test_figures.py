@@ -214,14 +214,14 @@ def test_ramp_modes_classifies_release_points(tmp_path) -> None:
 
     from scripts.ramp_modes import main
 
-    plan = "move_to(Table1), grasp(Cube_g), move_to(Drop), place(Cube_p), move_to(Exit)"
+    plan = "move_to(Table1), grasp(cube, Cube_g), move_to(Drop), place(cube, Cube_p), move_to(Exit)"
     runs = {"s0": (0.0, -0.6, 500.0, True), "s1": (0.05, -1.2, 540.0, True), "s2": (0.0, 0.0, None, False)}
     for name, (x, y, cost, ok) in runs.items():
         d = tmp_path / name
         d.mkdir()
         doc = {"feasible": ok, "best_cost": cost, "seed": int(name[1]), "plan": plan,
                "best_params": {"Cube_p": {"x": x, "y": y, "z": 1.0}} if ok else None,
-               "success_per_iter": [0.1, 0.5], "config": {"scene": {"variant": "ramp"}, "ce": {}}}
+               "success_per_iter": [0.1, 0.5], "config": {"scene": {"variant": "ramp", "ramps": [{}]}, "ce": {}}}
         (d / "result.json").write_text(json.dumps(doc))
     assert main([str(tmp_path), "--out", str(tmp_path / "m.csv")]) == 0
     modes = {r["run"].rsplit("/", 1)[-1]: r["mode"] for r in csv.DictReader((tmp_path / "m.csv").open())}

@@ -37,7 +37,7 @@ def test_object_frames_of_the_default_scene_are_the_seed_task_world_regions():
 
 def test_moving_the_cube_and_table2_moves_their_regions():
     base = _task().layout.regions
-    moved = _task("scene.cube_offset=[0.06,-0.05]", "scene.tables.1.center=[0.3,-1.5]").layout.regions
+    moved = _task("scene.objects.cube.offset=[0.06,-0.05]", "scene.tables.1.center=[0.3,-1.5]").layout.regions
     assert moved["Cube_g"].center == pytest.approx((0.06, 1.15, 0.7425), abs=1e-12)
     assert moved["Table2"].center == pytest.approx((0.3, -1.5), abs=1e-12)
     assert moved["Cube_p"].center == pytest.approx((0.3, -1.5, 0.7475), abs=1e-12)

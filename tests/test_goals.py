@@ -14,15 +14,15 @@ import math
 import pytest
 import torch
 
-from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import ContainerCfg, GeometryCfg, build_geometry
 from realize.tasks.goals import (
     HEIGHT_TOL,
     base_in_rectangle,
     base_rectangle_distance,
-    cube_in_container,
-    cube_on_table,
-    cube_on_table_distance,
     goal_reached,
+    object_in_container,
+    object_on_table,
+    object_on_table_distance,
 )
 from realize.tasks.regions import Box as BoxRegion
 from realize.scene import BatchedScene, SimSettings
@@ -31,7 +31,7 @@ from realize.tasks.spec import GoalSpec
 
 def _on_top(geometry, table: str, dx: float = 0.0, dz: float = 0.0) -> list[float]:
     t = geometry.table(table)
-    return [t.center[0] + dx, t.center[1], 2 * t.half_size[2] + geometry.cube_half_size + dz]
+    return [t.center[0] + dx, t.center[1], 2 * t.half_size[2] + geometry.object("cube").half_height + dz]
 
 
 def test_cube_on_table_and_its_distance() -> None:
@@ -40,19 +40,19 @@ def test_cube_on_table_and_its_distance() -> None:
     p = torch.tensor([_on_top(g, "table2"), _on_top(g, "table2", dz=HEIGHT_TOL + 0.01),
                       _on_top(g, "table2", dx=t2.half_size[0] + 0.3), _on_top(g, "table2")])
     speed = torch.tensor([0.0, 0.0, 0.0, 0.2])
-    assert cube_on_table(p, speed, g, "table2").tolist() == [True, False, False, False]
-    d = cube_on_table_distance(p, g, "table2")
+    assert object_on_table(p, speed, g, "cube", "table2").tolist() == [True, False, False, False]
+    d = object_on_table_distance(p, g, "cube", "table2")
     assert d[0] == 0 and d[3] == 0
     assert float(d[1]) == pytest.approx(0.01, abs=1e-5) and float(d[2]) == pytest.approx(0.3, abs=1e-5)
 
 
 def test_cube_in_container() -> None:
-    g = build_geometry(GeometryCfg(variant="push"))
+    g = build_geometry(GeometryCfg(variant="push", containers=[ContainerCfg()]))
     box = g.containers[0]
-    inside = [box.center[0], box.center[1], g.cube_half_size + 0.01]
-    beside = [box.center[0] + box.half_size[0] + 0.1, box.center[1], g.cube_half_size]
+    inside = [box.center[0], box.center[1], g.object("cube").half_height + 0.01]
+    beside = [box.center[0] + box.half_size[0] + 0.1, box.center[1], g.object("cube").half_height]
     p = torch.tensor([inside, beside, inside])
-    ok = cube_in_container(p, torch.tensor([0.0, 0.0, 1.0]), g, box.name)
+    ok = object_in_container(p, torch.tensor([0.0, 0.0, 1.0]), g, box.name)
     assert ok.tolist() == [True, False, False]
 
 
@@ -64,14 +64,14 @@ def test_base_rectangle_and_goal_reached_sums_distances() -> None:
     assert base_rectangle_distance(base, exit_.low, exit_.high).tolist() == pytest.approx([0.0, 0.3, 0.0])
     cube = torch.tensor([_on_top(g, "table2"), _on_top(g, "table2"), _on_top(g, "table1")])
     speed = torch.zeros(3)
-    goal = GoalSpec(cube_on="table2", base_in="Exit")
-    ok, dist = goal_reached(goal, g, {"Exit": exit_}, cube, speed, base)
+    goal = GoalSpec(on={"cube": "table2"}, base_in="Exit")
+    ok, dist = goal_reached(goal, g, {"Exit": exit_}, cube[:, None], speed[:, None], base)
     assert ok.tolist() == [True, False, False]
     t1, t2 = g.table("table1"), g.table("table2")
     gap = abs(t1.center[1] - t2.center[1]) - t2.half_size[1]  # table 1's centre to table 2's edge
     assert dist.tolist() == pytest.approx([0.0, 0.3, gap], abs=1e-5)
     # no condition: the goal holds everywhere, at distance 0
-    ok, dist = goal_reached(GoalSpec(), g, {}, cube, speed, base)
+    ok, dist = goal_reached(GoalSpec(), g, {}, cube[:, None], speed[:, None], base)
     assert ok.all() and (dist == 0).all()
 
 
@@ -88,8 +88,8 @@ def test_pick_place_evaluate_reads_every_copy() -> None:
     with BatchedScene(3, GeometryCfg(), SimSettings(backend="cpu")) as scene:
         g = scene.geometry
         scene.reset(seed=0)
-        start = list(g.cube_pos)
-        scene.place_cube(torch.tensor([start, _on_top(g, "table2"), _on_top(g, "table2")]))
+        start = list(g.object("cube").position)
+        scene.place_object("cube", torch.tensor([start, _on_top(g, "table2"), _on_top(g, "table2")]))
         exit_xy = [(g.exit_low[0] + g.exit_high[0]) / 2, (g.exit_low[1] + g.exit_high[1]) / 2]
         _teleport_base(scene, 2, exit_xy)
         info = scene.u.evaluate()
@@ -99,13 +99,13 @@ def test_pick_place_evaluate_reads_every_copy() -> None:
 
 
 def test_move_and_push_evaluate_reads_every_copy() -> None:
-    with BatchedScene(2, GeometryCfg(variant="push"), SimSettings(backend="cpu")) as scene:
+    with BatchedScene(2, GeometryCfg(variant="push", containers=[ContainerCfg()]), SimSettings(backend="cpu")) as scene:
         g = scene.geometry
         scene.reset(seed=0)
         box = g.containers[0]
-        inside = [box.center[0], box.center[1], 2 * g.container_wall + g.cube_half_size]
-        scene.place_cube(torch.tensor([list(g.cube_pos), inside]))
+        inside = [box.center[0], box.center[1], 2 * g.container_wall(box.name) + g.object("cube").half_height]
+        scene.place_object("cube", torch.tensor([list(g.object("cube").position), inside]))
         info = scene.u.evaluate()
-    assert not math.isclose(g.cube_pos[0], box.center[0])
+    assert not math.isclose(g.object("cube").position[0], box.center[0])
     assert info["cube_in_box"].tolist() == [False, True]
     assert info["success"].tolist() == [False, True]

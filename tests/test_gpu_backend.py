@@ -145,7 +145,7 @@ def _recorded_backend() -> tuple[GpuBackend, _GpuPhysx]:
     scene._gpu_fetch_all = MethodType(ManiSkillScene._gpu_fetch_all, scene)
     b = object.__new__(GpuBackend)  # everything but building a PhysX GPU env
     b.n_envs, b.device, b.u = N, torch.device("cpu"), SimpleNamespace(scene=scene)
-    b._robot, b._cube, b._base_j, b._arm_j, b._finger_j = robot, cube, [], [], []
+    b._robot, b._objects, b._base_j, b._arm_j, b._finger_j = robot, [cube], [], [], []
     return b, px
 
 
@@ -154,11 +154,11 @@ def test_every_gpu_write_is_applied_before_the_next_step_or_fetch() -> None:
     z = torch.zeros(N, 8)
     b.apply_targets(torch.zeros(N, 3), z, z, torch.zeros(N), torch.zeros(N, dtype=torch.bool))
     b.step(3)
-    b.push_cube(1, (0.2, 0.0, 0.0))
+    b.push_object(0, 1, (0.2, 0.0, 0.0))
     b.step(3)
-    b.place_cube(torch.ones(N, 3))
+    b.place_object(0, torch.ones(N, 3))
     b.step(3)
-    b.set_state(torch.zeros(N, 15), torch.zeros(N, 7))
+    b.set_state(torch.zeros(N, 15), torch.zeros(N, 1, 7))
     assert px.problems == [], "\n".join(px.problems + ["log:"] + px.log)
     log = px.log
     last = len(log) - 1 - log[::-1].index("write qpos")  # set_state: apply, then kinematics, then fetch
@@ -170,7 +170,7 @@ def test_the_recorder_catches_a_lost_write_and_stale_link_poses() -> None:
     # what the backend did before the fix: a cube write with no apply before the step, and a
     # restore of joints with apply-all and fetch-all only (ManiSkill's reset updates kinematics)
     b, px = _recorded_backend()
-    b._cube.set_linear_velocity(torch.zeros(N, 3))
+    b._objects[0].set_linear_velocity(torch.zeros(N, 3))
     px.step()
     b._robot.set_qpos(torch.zeros(N, 15))
     b.u.scene._gpu_apply_all()

@@ -74,7 +74,7 @@ def sample_goals(spec: dict, n: int, geometry: SceneGeometry, zone: str, g: torc
 
 @pytest.fixture(scope="module")
 def wall_scene():
-    scene = BatchedScene(N_PLANS, geometry=dict(variant="wall"), sim=SimSettings(backend="cpu"))
+    scene = BatchedScene(N_PLANS, geometry=dict(variant="wall", walls=[{}]), sim=SimSettings(backend="cpu"))
     yield scene
     scene.close()
 

@@ -18,22 +18,25 @@ DEMO_PROBLEM = PDDL_DIR / "carry_or_push_problem.pddl"
 TEMPLATES = ("move_to", "grasp", "place", "push")
 SEED_PARAMS = ("Table1", "Cube_g", "Table2", "Cube_p", "Exit")
 DEMO_PARAMS = ("PushSide", "Stick_p", "StickSide", "BoxSide", "Cube_g", "Cube_p")
+SEED_OBJECTS = ("cube",)  # scene.objects of the seed scene
+DEMO_OBJECTS = ("stick", "cube")  # and of scene=carry_or_push
 
 
-def A(template: str, *params: str) -> PlannedAction:
-    return PlannedAction(template, params)
+def A(template: str, *params: str, obj: str | None = None) -> PlannedAction:
+    return PlannedAction(template, params, obj)
 
 
 SEED_PLAN = [
     A("move_to", "Table1"),
-    A("grasp", "Cube_g"),
+    A("grasp", "Cube_g", obj="cube"),
     A("move_to", "Table2"),
-    A("place", "Cube_p"),
+    A("place", "Cube_p", obj="cube"),
     A("move_to", "Exit"),
 ]
-PUSH_PLAN = [A("move_to", "PushSide"), A("push", "Stick_p")]
-CARRY_PLAN = [A("move_to", "StickSide"), A("grasp", "Cube_g"), A("place", "Cube_p")]
-CARRY_DRIVE_PLAN = [A("move_to", "StickSide"), A("grasp", "Cube_g"), A("move_to", "BoxSide"), A("place", "Cube_p")]
+PUSH_PLAN = [A("move_to", "PushSide"), A("push", "Stick_p", obj="stick")]  # push handles the stick, not the cube
+CARRY_PLAN = [A("move_to", "StickSide"), A("grasp", "Cube_g", obj="cube"), A("place", "Cube_p", obj="cube")]
+CARRY_DRIVE_PLAN = [A("move_to", "StickSide"), A("grasp", "Cube_g", obj="cube"), A("move_to", "BoxSide"),
+                    A("place", "Cube_p", obj="cube")]
 
 
 def _variant(tmp_path: Path, src: Path, old: str, new: str) -> Path:
@@ -45,26 +48,27 @@ def _variant(tmp_path: Path, src: Path, old: str, new: str) -> Path:
 
 
 def test_seed_problem_plans_the_seed_plan(capsys: pytest.CaptureFixture[str]) -> None:
-    plans = plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, SEED_PARAMS)
+    plans = plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, SEED_PARAMS, objects=SEED_OBJECTS)
     assert plans == [SEED_PLAN]
     assert [str(a) for a in plans[0]] == [
-        "move_to(Table1)", "grasp(Cube_g)", "move_to(Table2)", "place(Cube_p)", "move_to(Exit)",
+        "move_to(Table1)", "grasp(cube, Cube_g)", "move_to(Table2)", "place(cube, Cube_p)", "move_to(Exit)",
     ]
     assert capsys.readouterr().out == ""  # no planner credits or logs on stdout
 
 
 def test_top_k_demo_returns_the_three_skeletons_cheapest_first() -> None:
-    plans = plan_from_pddl(DEMO_DOMAIN, DEMO_PROBLEM, TEMPLATES, DEMO_PARAMS, top_k=3)
+    plans = plan_from_pddl(DEMO_DOMAIN, DEMO_PROBLEM, TEMPLATES, DEMO_PARAMS, objects=DEMO_OBJECTS, top_k=3)
     # unit costs 2, 3 and 4; the one-way road graph leaves only one other (useless) 4-action
     # plan, carry then drive to BoxSide, which the fixed order of equally long plans puts 4th
     assert plans == [PUSH_PLAN, CARRY_PLAN, CARRY_DRIVE_PLAN]
-    assert plan_from_pddl(DEMO_DOMAIN, DEMO_PROBLEM, TEMPLATES, DEMO_PARAMS, top_k=2) == [PUSH_PLAN, CARRY_PLAN]
+    assert plan_from_pddl(DEMO_DOMAIN, DEMO_PROBLEM, TEMPLATES, DEMO_PARAMS, objects=DEMO_OBJECTS,
+                          top_k=2) == [PUSH_PLAN, CARRY_PLAN]
     assert len({tuple(p) for p in plans}) == len(plans)
     assert [len(p) for p in plans] == sorted(len(p) for p in plans)
 
 
 def test_top_k_drops_duplicates_and_keeps_order_on_seed() -> None:
-    plans = plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, SEED_PARAMS, top_k=3)
+    plans = plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, SEED_PARAMS, objects=SEED_OBJECTS, top_k=3)
     assert plans[0] == SEED_PLAN
     assert len(plans) == 3 and len({tuple(p) for p in plans}) == 3
     assert [len(p) for p in plans] == sorted(len(p) for p in plans)
@@ -73,12 +77,12 @@ def test_top_k_drops_duplicates_and_keeps_order_on_seed() -> None:
 def test_mapping_is_case_insensitive_and_keeps_task_spelling() -> None:
     params = ("TABLE1", "cube_G", "table2", "Cube_P", "eXit")
     templates = ("Move_To", "GRASP", "place")
-    (plan,) = plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, templates, params)
+    (plan,) = plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, templates, params, objects=("Cube",))
     assert plan == [
         A("Move_To", "TABLE1"),
-        A("GRASP", "cube_G"),
+        A("GRASP", "cube_G", obj="Cube"),
         A("Move_To", "table2"),
-        A("place", "Cube_P"),
+        A("place", "Cube_P", obj="Cube"),
         A("Move_To", "eXit"),
     ]
 
@@ -147,7 +151,7 @@ def test_argument_without_param_is_named_with_action_and_params() -> None:
 @pytest.mark.parametrize("top_k", [1, 2])
 def test_unsolvable_problem_says_so(tmp_path: Path, top_k: int) -> None:
     # without a place pose on table 2 the cube can never get there
-    bad = _variant(tmp_path, SEED_PROBLEM, "(place-on Cube_p loc_table2)", "")
+    bad = _variant(tmp_path, SEED_PROBLEM, "(place-on Cube_p cube loc_table2)", "")
     msg = r"found no plan .*pick_place_problem\.pddl.*UNSOLVABLE_\w+ \(the problem is unsolvable"
     with pytest.raises(PlanningError, match=msg):
         plan_from_pddl(SEED_DOMAIN, bad, TEMPLATES, SEED_PARAMS, top_k=top_k)

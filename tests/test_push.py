@@ -21,7 +21,7 @@ import torch
 
 from helpers import blas_batch_invariant, compose_config as _compose
 from realize.config import ConfigError
-from realize.tasks.goals import cube_in_container
+from realize.tasks.goals import object_in_container
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
 from realize.app.run_config import RunSpec, build_run_spec
@@ -52,10 +52,10 @@ def spec(cfg: dict[str, Any]) -> RunSpec:
 
 
 def _readback(scene: BatchedScene) -> dict[str, torch.Tensor]:
-    poses = [s._bodies[0].get_entity_pose() for s in scene.u.sticks]
+    poses = [s._bodies[0].get_entity_pose() for s in scene.u.object_actors["stick"]]
     stick = torch.from_numpy(np.array([np.concatenate([p.p, p.q]) for p in poses], dtype=np.float32))
     stick[:, :2] -= torch.as_tensor(scene.u.offsets, dtype=torch.float32)
-    return dict(cube=scene.cube_pose(), speed=scene.cube_velocity()[:, :3].norm(dim=1), stick=stick)
+    return dict(cube=scene.object_pose("cube"), speed=scene.object_velocity("cube")[:, :3].norm(dim=1), stick=stick)
 
 
 def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False, repeat: int = 1) -> list[dict[str, Any]]:
@@ -88,13 +88,13 @@ def test_push_towards_the_box_drops_the_cube_in(spec: RunSpec, batch: list[dict[
     g = spec.geometry
     box = g.container("box")
     cube = batch[0]["cube"][0]
-    assert abs(float(cube[0]) - box.center[0]) <= box.half_size[0] - g.container_wall
-    assert abs(float(cube[1]) - box.center[1]) <= box.half_size[1] - g.container_wall
+    assert abs(float(cube[0]) - box.center[0]) <= box.half_size[0] - g.container_wall("box")
+    assert abs(float(cube[1]) - box.center[1]) <= box.half_size[1] - g.container_wall("box")
     assert float(cube[2]) < 2 * box.half_size[2]
-    assert cube_in_container(batch[0]["cube"][:1, :3], batch[0]["speed"][:1], g, "box").item()
+    assert object_in_container(batch[0]["cube"][:1, :3], batch[0]["speed"][:1], g, "box").item()
     # the stick lies on its side (it was pushed over), no longer upright
     stick = batch[0]["stick"][0]
-    assert float(stick[2]) < 0.5 * g.stick.center[2]
+    assert float(stick[2]) < 0.5 * g.object("stick").position[2]
     # push cost is the counted steps (drive + push), well under the horizon
     assert 150 <= float(res.cost[0]) <= 600
 
@@ -102,7 +102,7 @@ def test_push_towards_the_box_drops_the_cube_in(spec: RunSpec, batch: list[dict[
 def test_push_from_the_wrong_side_misses(spec: RunSpec, batch: list[dict[str, Any]]) -> None:
     res: RolloutResult = batch[0]["res"]
     assert not res.feasible[1]
-    assert not cube_in_container(batch[0]["cube"][1:2, :3], batch[0]["speed"][1:2], spec.geometry, "box").item()
+    assert not object_in_container(batch[0]["cube"][1:2, :3], batch[0]["speed"][1:2], spec.geometry, "box").item()
     # both actions were carried out; the cube simply is not in the box
     assert res.action_success[1].tolist() == [True, True]
     assert res.failure[1] == "2:goal:goal_not_reached"
@@ -117,8 +117,8 @@ def test_batched_equals_per_sample(batch: list[dict[str, Any]], alone: list[dict
         assert torch.equal(a.action_success[0], b.action_success[i]) and a.failure[0] == b.failure[i]
         assert a.cost[0] == b.cost[i]
         if i == 0:  # copy 0 sits at the origin in both scenes: bit-identical
-            n_rec = a.traj_cube.shape[1]
-            assert torch.equal(a.traj_cube[0], b.traj_cube[0, :n_rec])
+            n_rec = a.traj_objects.shape[1]
+            assert torch.equal(a.traj_objects[0], b.traj_objects[0, :n_rec])
             assert torch.equal(out["cube"][0], batch[0]["cube"][0])
         # tiled copies round their world coordinates differently (see tests/test_rollout.py); where
         # the batched products also depend on the batch's other rows, the cube that tumbles off
@@ -136,7 +136,7 @@ def test_reset_is_deterministic(spec: RunSpec, batch: list[dict[str, Any]]) -> N
     first = batch[0]
     for other in (batch[1], fresh):
         r1, r2 = first["res"], other["res"]
-        for name in ("cost", "feasible", "action_success", "goal", "steps", "distance", "traj_cube", "traj_ee",
+        for name in ("cost", "feasible", "action_success", "goal", "steps", "distance", "traj_objects", "traj_ee",
                      "traj_base"):
             assert torch.equal(getattr(r1, name), getattr(r2, name)), name
         assert torch.equal(first["cube"], other["cube"]) and torch.equal(first["stick"], other["stick"])
@@ -191,8 +191,8 @@ def test_bad_push_setting_names_the_key(key: str, value: float) -> None:
 
 def test_goal_names_unknown_container(cfg: dict[str, Any], spec: RunSpec) -> None:
     d = copy.deepcopy(cfg["task"])
-    d["goal"] = {"cube_in_box": "crate"}
-    with pytest.raises(ConfigError, match=r"goal\.cube_in_box names unknown object 'crate'.*\['box'\]"):
+    d["goal"] = {"rests_in": {"cube": "crate"}}
+    with pytest.raises(ConfigError, match=r"goal\.rests_in\.cube = 'crate' names no container.*\['box'\]"):
         build_task(d, spec.geometry, "push_task.yaml")
 
 
@@ -210,13 +210,13 @@ def test_carry_or_push_both_skeletons_realize_and_carry_is_cheaper() -> None:
     d = compose_config("task.planner.enabled=false", experiment="carry_or_push")
     assert d["scene"]["robot_start"][:2] == [0.45, -0.85]
     cost = {}
-    for name, plan in (("push", ["move_to(PushSide)", "push(Stick_p)"]),
-                       ("carry", ["move_to(StickSide)", "grasp(Cube_g)", "place(Cube_p)"])):
+    for name, plan in (("push", ["move_to(PushSide)", "push(stick, Stick_p)"]),
+                       ("carry", ["move_to(StickSide)", "grasp(cube, Cube_g)", "place(cube, Cube_p)"])):
         d["task"]["plan"] = plan
         spec = build_run_spec(d)
         res = run_fresh(spec, torch.tensor([CARRY_OR_PUSH], dtype=torch.float64))[0]
         assert res["res"].feasible.tolist() == [True], (name, res["res"].failure)
-        assert cube_in_container(res["cube"][:, :3], res["speed"], spec.geometry, "box").item()
+        assert object_in_container(res["cube"][:, :3], res["speed"], spec.geometry, "box").item()
         cost[name] = float(res["res"].cost[0])
     # measured: push 523, carry 437 control steps
     assert cost["carry"] < cost["push"], cost

@@ -60,8 +60,8 @@ class ReachOutcome:
 
 def sample_goals(n: int, geometry, g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(n, 3) TCP positions, unit approach axes and unit horizontal closing axes."""
-    cube = torch.tensor(geometry.cube_pos)
-    top = cube[2] + geometry.cube_half_size
+    cube = torch.tensor(geometry.object("cube").position)
+    top = cube[2] + geometry.object("cube").half_height
     r = 0.10 * torch.sqrt(torch.rand(n, generator=g))
     a = 2 * math.pi * torch.rand(n, generator=g)
     pos = torch.stack([cube[0] + r * torch.cos(a), cube[1] + r * torch.sin(a),

@@ -20,10 +20,10 @@ from realize.tasks.suffix import task_suffix
 from helpers import compose_config
 
 FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"
-# that run's best parameters of move_to(Table2), place(Cube_p), move_to(Exit)
+# that run's best parameters of move_to(Table2), place(cube, Cube_p), move_to(Exit)
 REST_Z = [-0.9659641240604275, -1.0622591208176722, -0.050928051774466784, -1.1459906667680084, 0.8778431067079995,
           1.9177437232633234, -0.07168660186229141]
-# ... and of the whole plan (move_to(Table1), grasp(Cube_g) first)
+# ... and of the whole plan (move_to(Table1), grasp(cube, Cube_g) first)
 FULL_Z = [-0.9953907433402727, 0.9260304134062874, -0.03445283281557375, 1.189657915463341, 0.8881229501088985,
           *REST_Z]
 
@@ -47,18 +47,18 @@ def test_restored_grip_holds_and_open_gripper_drops(torch_single_thread: None) -
     scene, _ = open_realization(_spec(2, held), n_envs=2)
     with scene:
         scene.reset(state=held)
-        assert scene.holds_cube().all() and scene.gripper_command().all()
+        assert scene.holds("cube").all() and scene.gripper_command().all()
         again = scene.capture_state(1)
         assert torch.allclose(torch.tensor(again.base), torch.tensor(held.base), atol=1e-4)
-        z0 = scene.cube_pose()[:, 2]
+        z0 = scene.object_pose("cube")[:, 2]
         for _ in range(10):
             scene.step()
-        assert scene.holds_cube().all() and (scene.cube_pose()[:, 2] - z0).abs().max() < 5e-3
+        assert scene.holds("cube").all() and (scene.object_pose("cube")[:, 2] - z0).abs().max() < 5e-3
         # the same pose with the gripper open: nothing holds the cube, it falls out of the hand
-        scene.reset(state=dataclasses.replace(held, gripper_closed=False, cube_held=False))
+        scene.reset(state=dataclasses.replace(held, gripper_closed=False, held=None))
         for _ in range(10):
             scene.step()
-        assert (z0 - scene.cube_pose()[:, 2]).min() > 0.03
+        assert (z0 - scene.object_pose("cube")[:, 2]).min() > 0.03
 
 
 def test_remaining_actions_put_the_held_cube_on_table2(torch_single_thread: None) -> None:
@@ -67,7 +67,7 @@ def test_remaining_actions_put_the_held_cube_on_table2(torch_single_thread: None
     with scene:
         res = realizer.rollout(torch.tensor([REST_Z], dtype=torch.float64))
         assert res.action_success.all() and bool(res.feasible[0]), res.failure
-        assert _on_table2(scene.cube_pose()[0])
+        assert _on_table2(scene.object_pose("cube")[0])
         assert 150 < float(res.cost[0]) < 400  # three actions, not five (the whole plan: 445)
 
 
@@ -106,13 +106,13 @@ def test_captured_state_continues_the_rollout(torch_single_thread: None) -> None
     with scene:
         full = realizer.rollout(torch.tensor([FULL_Z], dtype=torch.float64))
     state, at = seen["state"], dict(begins)
-    assert isinstance(state, SceneState) and state.cube_held and bool(full.feasible[0])
+    assert isinstance(state, SceneState) and state.held == "cube" and bool(full.feasible[0])
     scene, (realizer,) = open_realization(_spec(2, state), n_envs=1)
     again: list[tuple[int, int]] = []
     realizer.action_hook = lambda a, rows: again.append((a + 2, scene.step_count))
     with scene:
         rest = realizer.rollout(torch.tensor([REST_Z], dtype=torch.float64))
-        assert bool(rest.feasible[0]) and _on_table2(scene.cube_pose()[0])
+        assert bool(rest.feasible[0]) and _on_table2(scene.object_pose("cube")[0])
     assert abs(dict(again)[3] - (at[3] - at[2])) <= 2  # move_to(Table2) from the restored base pose
     remainder = float(full.cost[0]) - at[2]
     assert abs(float(rest.cost[0]) - remainder) <= 0.05 * remainder
@@ -143,11 +143,11 @@ def test_replan_run_writes_where_it_started(tmp_path: Path, torch_single_thread:
             "workers.n=1", "controller.max_time_s=4", "logging.rerun=false", "logging.progress=false"]
     out = run(compose_config(*args), tmp_path / "replan", cli_overrides=args)
     doc = read_json(tmp_path / "replan" / "result.json")
-    assert out.iterations_done == 1 and doc["plan"] == "move_to(Table2), place(Cube_p), move_to(Exit)"
+    assert out.iterations_done == 1 and doc["plan"] == "move_to(Table2), place(cube, Cube_p), move_to(Exit)"
     assert doc["columns"] == ["Table2.x", "Table2.y", "Cube_p.x", "Cube_p.y", "Cube_p.z", "Exit.x", "Exit.y"]
     rp = doc["replan"]
     assert (rp["from"], rp["action"], rp["state_file"]) == (str(earlier), 2, str(FIXTURE))
-    assert rp["state"]["cube_held"]
+    assert rp["state"]["held"] == "cube" and set(rp["state"]["objects"]) == {"cube"}
     # warm-started from the earlier run's marginal over the remaining columns, moved with table 2
     assert rp["warm_start"]["run_dir"] == str(earlier) and doc["warm_start"] == rp["warm_start"]
     assert rp["warm_start"]["moved"]["Table2"] == [0.3, 0.0, 0.0]

@@ -72,46 +72,48 @@ def test_replay_reaches_the_goal(run_dir: Path) -> None:
 def test_randomized_reset_and_friction_per_copy() -> None:
     with BatchedScene(3, sim=SIM, env=EnvOptions(randomize_resets=True)) as s:
         s.reset(seed=7)
-        cube_a, base_a = s.cube_pose(), s.base_pose()
+        cube_a, base_a = s.object_pose("cube"), s.base_pose()
         s.reset(seed=7)
-        assert torch.equal(s.cube_pose(), cube_a) and torch.equal(s.base_pose(), base_a)  # seeded
+        assert torch.equal(s.object_pose("cube"), cube_a) and torch.equal(s.base_pose(), base_a)  # seeded
         g = s.geometry
-        nominal = torch.tensor(g.cube_pos[:2], dtype=torch.float32)
+        nominal = torch.tensor(g.object("cube").position[:2], dtype=torch.float32)
         off = (cube_a[:, :2] - nominal).abs()
-        assert (off.max(dim=1).values > 1e-4).all() and (off <= s.cube_xy_noise + 1e-4).all()
+        assert (off.max(dim=1).values > 1e-4).all() and (off <= s.object_xy_noise + 1e-4).all()
         assert len({round(float(v), 5) for v in cube_a[:, 0]}) == 3  # each copy drew its own
         start_off = (base_a[:, :2] - torch.tensor(g.robot_start[:2])).abs()
         assert (start_off <= s.robot_xy_noise + 1e-4).all() and (start_off.max(dim=1).values > 1e-4).all()
 
-        mu = s.set_cube_friction([0.2, 1.0, 1.0]).numpy()
-        assert np.allclose(s.cube_friction().numpy(), np.stack([mu, mu], axis=1))
-        assert np.allclose(mu, g.cube_friction * np.array([0.2, 1.0, 1.0]))
+        mu = s.set_object_friction("cube", [0.2, 1.0, 1.0]).numpy()
+        assert np.allclose(s.object_friction("cube").numpy(), np.stack([mu, mu], axis=1))
+        assert np.allclose(mu, g.object("cube").friction * np.array([0.2, 1.0, 1.0]))
         with pytest.raises(ValueError):
-            s.set_cube_friction([1.0, 1.0])
+            s.set_object_friction("cube", [1.0, 1.0])
         # the same shove slides the slippery cube further along the table
         s.reset(seed=7)
-        start = s.cube_pose()[:, :2]
+        start = s.object_pose("cube")[:, :2]
         for c in range(2):
-            s.push_cube(c, (0.0, 0.6, 0.0))
+            s.push_object("cube", c, (0.0, 0.6, 0.0))
         for _ in range(10):
             s.step()
-        slid = (s.cube_pose()[:, :2] - start).norm(dim=1)
+        slid = (s.object_pose("cube")[:, :2] - start).norm(dim=1)
         assert slid[0] > slid[1] + 0.01
 
 
 def test_validation_writes_result_json(run_dir: Path) -> None:
-    rep = validate(run_dir, replicas=4, seed=3, friction_range=(0.8, 1.2))
+    rep = validate(run_dir, replicas=4, seed=3, friction=(0.8, 1.2))
     doc = json.loads((run_dir / RESULT_FILE).read_text())
     v = doc["validation"]
     assert v["replicas"] == 4 and v["seed"] == 3 and 0.0 <= v["success_share"] <= 1.0
     assert v["success_share"] == rep.success_share
     assert sum(v["failures"].values()) == round(4 * (1 - v["success_share"]))
-    assert all(0.8 <= f / doc["config"]["scene"]["cube_friction"] <= 1.2 for f in v["friction"])
+    assert v["perturbation"]["friction"] == [0.8, 1.2]
+    assert set(v["friction"]) == {"cube"} and len(v["friction"]["cube"]) == 4
+    assert all(0.8 <= f / doc["config"]["scene"]["objects"]["cube"]["friction"] <= 1.2 for f in v["friction"]["cube"])
     assert doc["best_z"] == FEASIBLE_Z and doc["config"]["seed"] == 0  # the rest is kept
     assert rep.success_share > 0  # seed 3 gave 3 of 4 when written; the key matters here
 
 
-def test_push_scene_gets_its_camera_and_noise(tmp_path: Path) -> None:
+def test_push_scene_gets_its_camera_and_noise(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """scene=push builds RealizeMoveAndPush-v1: the video camera and the validation noise reach
     that task too (they used to be patched into the pick-and-place task's registry entry only)."""
     import imageio.v2 as imageio
@@ -119,8 +121,21 @@ def test_push_scene_gets_its_camera_and_noise(tmp_path: Path) -> None:
     spec = build_run_spec(compose_config("experiment=move_and_push", cpu=False))
     z = spec.task.layout.sample_uniform(1, torch.Generator().manual_seed(0))[0].tolist()
     d = _write_run(tmp_path / "push", ["experiment=move_and_push", "controller.max_time_s=0.5"], z=z)
-    rep = validate(d, replicas=2, seed=1, friction_range=None, cube_xy_noise=0.004, robot_xy_noise=0.01, write=False)
-    assert (rep.cube_xy_noise, rep.robot_xy_noise) == (0.004, 0.01)
+    import realize.app.realizers as realizers
+
+    opened, noise = realizers.open_realization, []
+
+    def open_and_note(*args, **kwargs):  # the noise the task that validation built reads back
+        scene, rs = opened(*args, **kwargs)
+        noise.append((scene.u.unwrapped.spec.id, scene.object_xy_noise, scene.robot_xy_noise))
+        return scene, rs
+
+    monkeypatch.setattr(realizers, "open_realization", open_and_note)
+    rep = validate(d, replicas=2, seed=1, friction=(1.0, 1.0), object_xy=0.004, robot_xy=0.01, write=False)
+    assert (rep.perturbation["object_xy"], rep.perturbation["robot_xy"]) == (0.004, 0.01)
+    assert noise == [("RealizeMoveAndPush-v1", 0.004, 0.01)]
+    assert set(rep.friction) == {"stick", "cube"}  # no friction range: every object keeps its own
+    assert rep.friction["stick"] == [0.8, 0.8] and rep.friction["cube"] == [1.0, 1.0]
     out = tmp_path / "push.mp4"
     v = replay(d, out, fps=10, every=5, width=96, height=64, hold_s=0.0).video
     assert v is not None and (v.width, v.height) == (96, 64)
@@ -156,6 +171,6 @@ def test_video_follows_the_action_and_labels_every_frame(tmp_path: Path) -> None
     red = (frames[..., 0] > 150) & (frames[..., 1] < 90) & (frames[..., 2] < 90)
     widths = [int(np.ptp(np.nonzero(r.any(axis=0))[0])) + 1 if r.any() else 0 for r in red]
     assert max(widths) >= 20, widths
-    cap = Caption(["move_to(Table1)", "grasp(Cube_g)"], control_freq=20, height=720)
+    cap = Caption(["move_to(Table1)", "grasp(cube, Cube_g)"], control_freq=20, height=720)
     cap.on_action(1, torch.tensor([0]))
-    assert cap.text(412) == "2/2 grasp(Cube_g)   step 412   20.6 s"
+    assert cap.text(412) == "2/2 grasp(cube, Cube_g)   step 412   20.6 s"

@@ -72,7 +72,7 @@ def test_link_poses_on_the_control_step_timeline(tiny_run) -> None:
 def test_world_boxes_meshes_and_failure_labels(tiny_run) -> None:
     _, rrd = tiny_run
     assert rrd.boxes["/world3d/obstacles"] == 2  # the two tables
-    assert rrd.boxes["/world3d/best/cube"] == 1
+    assert rrd.boxes["/world3d/best/objects/cube"] == 1 and rrd.boxes["/world3d/objects_start/cube"] == 1
     assert "/world3d/best/robot/base_link/mesh" in rrd.assets and len(rrd.assets) >= 15
     labels = rrd.labels["/world3d/best/action"]
     assert labels and labels[0] == "1/5 move_to(Table1)"

@@ -11,7 +11,7 @@ import torch
 
 from _synthetic import make_geometry, make_layout, run_synthetic
 from realize.world.geometry import Box as ObstacleBox
-from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, RampCfg, WallCfg, build_geometry
 from realize.tasks.hemisphere import Hemisphere
 from realize.recording.log import RerunLogger
 from realize.recording.paths import SCALAR_PATHS
@@ -80,7 +80,7 @@ def test_ellipses_are_two_sigma_of_the_sampling_distribution(synthetic, summary)
 def test_scene_and_samples(synthetic, summary):
     paths = set(summary["entity_paths"])
     static = set(summary["static_paths"])
-    for p in ("/world/obstacles", "/world/obstacles_padded", "/world/exit", "/world/cube", "/world/robot_start"):
+    for p in ("/world/obstacles", "/world/obstacles_padded", "/world/exit", "/world/objects", "/world/robot_start"):
         assert p in static
     for name in synthetic.layout.names:
         assert f"/world/regions/{name}" in static
@@ -163,8 +163,8 @@ def test_trajectory_cap_and_nan_padding(tmp_path, synthetic):
 
 def test_variants_with_extras(tmp_path):
     layout = make_layout()
-    for variant in ("wall", "ramp"):
-        geom = build_geometry(GeometryCfg(variant=variant))
+    for variant, fixtures in (("wall", dict(walls=[WallCfg()])), ("ramp", dict(ramps=[RampCfg()]))):
+        geom = build_geometry(GeometryCfg(variant=variant, **fixtures))
         path = tmp_path / f"{variant}.rrd"
         with RerunLogger(path, layout, geom):
             pass

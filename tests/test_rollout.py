@@ -92,7 +92,7 @@ def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False) -> dict[str,
         counter = StepCounter(scene)
         realizer = PlanRealizer.from_spec(spec, None, scene)
         res = realizer.rollout(Z, record=record)
-        return dict(res=res, calls=counter.calls, cube=scene.cube_pose(), base=scene.base_pose())
+        return dict(res=res, calls=counter.calls, cube=scene.object_pose("cube"), base=scene.base_pose())
 
 
 @pytest.fixture(scope="module")
@@ -127,9 +127,10 @@ def test_good_vector_succeeds_in_the_simulator(spec: RunSpec, alone: list[dict[s
     # the cube, read from the simulator: on table 2's top, resting at its height, upright
     t2 = g.table("table2")
     cube = out["cube"][0]
-    assert abs(float(cube[0]) - t2.center[0]) < t2.half_size[0] - g.cube_half_size
-    assert abs(float(cube[1]) - t2.center[1]) < t2.half_size[1] - g.cube_half_size
-    assert float(cube[2]) == pytest.approx(t2.top_z + g.cube_half_size, abs=2e-3)
+    h = g.object("cube").half_height
+    assert abs(float(cube[0]) - t2.center[0]) < t2.half_size[0] - h
+    assert abs(float(cube[1]) - t2.center[1]) < t2.half_size[1] - h
+    assert float(cube[2]) == pytest.approx(t2.top_z + h, abs=2e-3)
     assert abs(float(cube[3])) > math.cos(math.radians(10) / 2)  # tilt + yaw under ~10 deg
     # and not on table 1 any more
     t1 = g.table("table1")
@@ -201,7 +202,7 @@ def test_batched_equals_per_sample(alone: list[dict[str, Any]], batch: dict[str,
             # copy 0 sits at the origin in both scenes: bit-identical while its plan runs (where
             # the controllers' batched products do not depend on the batch's other rows)
             assert torch.equal(a.distance[0], b.distance[i])
-            for name in ("traj_base", "traj_ee", "traj_cube"):
+            for name in ("traj_base", "traj_ee", "traj_objects"):
                 assert torch.equal(getattr(a, name)[0], getattr(b, name)[i, :n_rec]), name
         else:
             # copies 1 and 2 are tiled 9 m / 8 m from the origin: float32 world coordinates
@@ -211,7 +212,7 @@ def test_batched_equals_per_sample(alone: list[dict[str, Any]], batch: dict[str,
             # (copy 2, whose grasp pushes against its reach limit until the timeout), cube 0.2 mm.
             assert (a.traj_base[0] - b.traj_base[i, :n_rec]).abs().max() < 0.05
             assert (a.traj_ee[0] - b.traj_ee[i, :n_rec]).abs().max() < 0.05
-            assert (a.traj_cube[0] - b.traj_cube[i, :n_rec]).abs().max() < 0.005
+            assert (a.traj_objects[0] - b.traj_objects[i, :n_rec]).abs().max() < 0.005
         # where everything ended, read from the simulator (a finished plan's robot still moves
         # during the physics step in which it is frozen: ~1 mm for copy 0)
         assert (out["cube"][0, :3] - batch["cube"][i, :3]).abs().max() < 0.005
@@ -222,7 +223,7 @@ def test_same_seed_same_numbers(spec: RunSpec, batch: dict[str, Any]) -> None:
     again = run_fresh(spec, VECTORS, record=True)
     r1, r2 = batch["res"], again["res"]
     for name in ("cost", "feasible", "action_success", "goal", "steps", "progress", "distance",
-                 "traj_t", "traj_base", "traj_ee", "traj_cube"):
+                 "traj_t", "traj_base", "traj_ee", "traj_objects"):
         assert torch.equal(getattr(r1, name), getattr(r2, name)), name
     assert r1.failure == r2.failure
     assert torch.equal(batch["cube"], again["cube"]) and torch.equal(batch["base"], again["base"])
@@ -242,7 +243,7 @@ def _move_steps(spec: RunSpec, seed_task: dict[str, Any], scene: BatchedScene, Z
 def _far_grasp(spec: RunSpec, seed_task: dict[str, Any], offset: tuple[float, float]) -> tuple[Any, list[float]]:
     """The seed task with the Cube_g hemisphere centred ``offset`` (m, xy) away from the cube."""
     params = copy.deepcopy(seed_task["params"])
-    cube = spec.geometry.cube_pos
+    cube = spec.geometry.object("cube").position
     centre = [cube[0] + offset[0], cube[1] + offset[1], cube[2]]
     params["Cube_g"]["center"] = centre
     params["Cube_g"]["frame"] = "world"  # the seed task writes it relative to the cube
@@ -258,12 +259,12 @@ def _with_grasp(vec: list[float], centre: list[float], table1: list[float]) -> l
 def test_reachable_grasp_pose_30cm_away_fails_when_the_grip_is_empty(
         spec: RunSpec, seed_task_dict: dict[str, Any], scene3: BatchedScene) -> None:
     task, centre = _far_grasp(spec, seed_task_dict, (0.0, 0.3))  # over table 1's edge, beside the cube
-    assert math.dist(centre, spec.geometry.cube_pos) == pytest.approx(0.3)
+    assert math.dist(centre, spec.geometry.object("cube").position) == pytest.approx(0.3)
     table1 = [[-0.85, 1.2], [0.9, 1.5]]  # the second base pose is past table 1: a longer drive
     Z = torch.tensor([_with_grasp(GOOD, centre, t) for t in table1])
     assert task.layout.contains(Z.double()).all()
     res = PlanRealizer(task, scene3, spec.rollout).rollout(Z, record=True)
-    cube_after, width_after = scene3.cube_pose(), scene3.finger_width()
+    cube_after, width_after = scene3.object_pose("cube"), scene3.finger_width()
     move = _move_steps(spec, seed_task_dict, scene3, Z)
     timeout = round(spec.rollout.manip_timeout_s * scene3.sim.control_freq)
     grip = round(spec.rollout.grip_s * scene3.sim.control_freq)
@@ -276,8 +277,8 @@ def test_reachable_grasp_pose_30cm_away_fails_when_the_grip_is_empty(
         # approach + straight descent + the full grip time, and well before the timeout
         assert descend + grip <= grasp_steps < timeout
         # the fingers closed on air (narrower than the cube), the cube was never touched
-        assert float(width_after[i]) < 2 * spec.geometry.cube_half_size
-        assert (cube_after[i, :3] - torch.tensor(spec.geometry.cube_pos)).abs().max() < 1e-3
+        assert float(width_after[i]) < 2 * spec.geometry.object("cube").half_height
+        assert (cube_after[i, :3] - torch.tensor(spec.geometry.object("cube").position)).abs().max() < 1e-3
     # the plan that failed first was not simulated afterwards: its robot froze in place
     first = int(res.steps.argmin())
     assert int(res.steps[first]) < res.sim_steps
@@ -293,7 +294,7 @@ def test_unreachable_grasp_pose_30cm_away_stops_at_the_grasp_timeout(
     table1 = [[-0.85, 1.2]]
     Z = torch.tensor([_with_grasp(GOOD, centre, t) for t in table1])
     res = PlanRealizer(task, scene3, spec.rollout).rollout(Z)
-    cube_after = scene3.cube_pose()
+    cube_after = scene3.object_pose("cube")
     move = _move_steps(spec, seed_task_dict, scene3, Z)
     timeout = round(spec.rollout.manip_timeout_s * scene3.sim.control_freq)
     assert res.action_success.int().tolist() == [[1, 0, 0, 0, 0]]
@@ -303,7 +304,7 @@ def test_unreachable_grasp_pose_30cm_away_stops_at_the_grasp_timeout(
     assert int(res.steps[0]) == move[0] + timeout == res.sim_steps
     assert float(res.cost[0]) == move[0] + timeout
     assert float(res.distance[0]) > 0.05  # the TCP never got near its target
-    assert (cube_after[0, :3] - torch.tensor(spec.geometry.cube_pos)).abs().max() < 1e-3
+    assert (cube_after[0, :3] - torch.tensor(spec.geometry.object("cube").position)).abs().max() < 1e-3
 
 
 # ---------------------------------------------------------------------------------- bad input
@@ -345,7 +346,7 @@ def test_empty_box(tmp_path: Path, plain_cfg: dict[str, Any], seed_task_dict: di
 def test_action_bound_to_undefined_parameter(tmp_path: Path, plain_cfg: dict[str, Any],
                                              seed_task_dict: dict[str, Any]) -> None:
     msg, path = _bad_task(tmp_path, plain_cfg, seed_task_dict, "undefined_param",
-                          lambda d: d["plan"].__setitem__(1, "grasp(Cube_x)"))
+                          lambda d: d["plan"].__setitem__(1, "grasp(cube, Cube_x)"))
     assert f"{path}:plan[1]" in msg and "'Cube_x'" in msg and "undefined parameter" in msg
 
 
@@ -357,8 +358,8 @@ def test_unknown_action_template(tmp_path: Path, plain_cfg: dict[str, Any], seed
 
 def test_goal_names_unknown_object(tmp_path: Path, plain_cfg: dict[str, Any], seed_task_dict: dict[str, Any]) -> None:
     msg, path = _bad_task(tmp_path, plain_cfg, seed_task_dict, "unknown_table",
-                          lambda d: d["goal"].update(cube_on="table3"))
-    assert f"{path}:goal.cube_on" in msg and "'table3'" in msg
+                          lambda d: d["goal"]["rests_on"].update(cube="table3"))
+    assert f"{path}:goal.rests_on.cube" in msg and "'table3'" in msg
     msg, path = _bad_task(tmp_path, plain_cfg, seed_task_dict, "unknown_exit",
                           lambda d: d["goal"].update(base_in="Exit2"))
     assert f"{path}:goal.base_in" in msg and "'Exit2'" in msg
@@ -412,11 +413,11 @@ def test_ramp_slide_and_carry_both_put_the_cube_on_table2() -> None:
     with BatchedScene(2, spec.geometry_cfg, spec.sim) as scene:
         realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=0)
         res = realizer.rollout(torch.tensor([RAMP_SLIDE, RAMP_CARRY], dtype=torch.float64))
-        cube = scene.cube_pose()[:, :3]
+        cube = scene.object_pose("cube")[:, :3]
     assert res.feasible.tolist() == [True, True], res.failure
     t2 = scene.geometry.table("table2")
     assert ((cube[:, 1] - t2.center[1]).abs() <= t2.half_size[1]).all()
-    assert ((cube[:, 2] - (2 * t2.half_size[2] + scene.geometry.cube_half_size)).abs() < 0.01).all()
+    assert ((cube[:, 2] - (2 * t2.half_size[2] + scene.geometry.object("cube").half_height)).abs() < 0.01).all()
     ramp = next(b for b in scene.geometry.obstacles if b.name == "ramp")
     assert ramp.contains_xy(RAMP_SLIDE[7], RAMP_SLIDE[8]) and not t2.contains_xy(RAMP_SLIDE[7], RAMP_SLIDE[8])
 
@@ -433,10 +434,10 @@ def test_goal_failure_ranks_by_distance_to_the_goal() -> None:
     with BatchedScene(1, spec.geometry_cfg, spec.sim) as scene:
         res = PlanRealizer(spec.task, scene, spec.rollout, seed=0).rollout(
             torch.tensor([FLOOR_DROP], dtype=torch.float64))
-        cube = scene.cube_pose()[0, :3]
+        cube = scene.object_pose("cube")[0, :3]
     assert res.failure == ["5:goal:goal_not_reached"] and res.action_success.all()
     t2 = scene.geometry.table("table2")
-    top = 2 * t2.half_size[2] + scene.geometry.cube_half_size
+    top = 2 * t2.half_size[2] + scene.geometry.object("cube").half_height
     dx = max(abs(float(cube[0]) - t2.center[0]) - t2.half_size[0], 0.0)
     dy = max(abs(float(cube[1]) - t2.center[1]) - t2.half_size[1], 0.0)
     dz = max(abs(float(cube[2]) - top) - 0.02, 0.0)

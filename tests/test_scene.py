@@ -11,6 +11,8 @@ from realize.world.geometry import GeometryCfg, build_geometry
 from realize.scene import BatchedScene, SimSettings
 
 SIM = SimSettings(backend="cpu")
+# configs/scene/push.yaml's objects: the stick on the floor, the cube on its top
+PUSH_OBJECTS = {"stick": {"size": [0.04, 0.04, 0.7], "rests_on": "floor"}, "cube": {"rests_on": "stick"}}
 
 
 def _drive(scene: BatchedScene, steps: int) -> None:
@@ -36,13 +38,16 @@ def test_builds_and_shapes(n: int) -> None:
         assert s.whole_body_qd().shape == (n, 11)
         assert s.base_pose().shape == (n, 3)
         assert s.ee_pose().shape == (n, 7)
-        assert s.cube_pose().shape == (n, 7)
-        assert s.cube_velocity().shape == (n, 6)
-        assert s.holds_cube().shape == (n,) and s.holds_cube().dtype == torch.bool
+        assert s.object_names == ("cube",)
+        assert s.object_pose("cube").shape == (n, 7) and s.object_poses().shape == (n, 1, 7)
+        assert s.object_velocity("cube").shape == (n, 6) and s.object_velocities().shape == (n, 1, 6)
+        assert s.holds("cube").shape == (n,) and s.holds("cube").dtype == torch.bool
+        assert s.holding().shape == (n, 1) and s.finger_forces().shape == (n, 1, 2)
+        assert s.held_object().tolist() == [-1] * n
         # every copy starts in the same local state, at the configured start pose
         g = s.geometry
         assert torch.allclose(s.base_pose()[:, :2], torch.tensor(g.robot_start[:2]).repeat(n, 1), atol=1e-5)
-        assert torch.allclose(s.cube_pose()[:, :3], torch.tensor(g.cube_pos, dtype=torch.float32).repeat(n, 1), atol=1e-4)
+        assert torch.allclose(s.object_pose("cube")[:, :3], torch.tensor(g.object("cube").position, dtype=torch.float32).repeat(n, 1), atol=1e-4)
 
 
 def test_base_follows_velocity_command() -> None:
@@ -63,9 +68,9 @@ def test_pushing_one_copy_leaves_the_others_unchanged() -> None:
         with BatchedScene(4, sim=SIM) as s:
             s.reset(seed=1)
             if push:
-                s.push_cube(2, (0.0, -1.5, 0.5))
+                s.push_object("cube", 2, (0.0, -1.5, 0.5))
             _drive(s, 30)
-            return s.cube_pose(), s.whole_body_q()
+            return s.object_pose("cube"), s.whole_body_q()
 
     cube_a, q_a = run(False)
     cube_b, q_b = run(True)
@@ -80,7 +85,7 @@ def test_same_seed_gives_identical_states_after_200_steps() -> None:
         with BatchedScene(3, sim=SIM) as s:
             s.reset(seed=7, randomize=True)
             _drive(s, 200)
-            return torch.cat([s.whole_body_q(), s.cube_pose(), s.ee_pose()], dim=1)
+            return torch.cat([s.whole_body_q(), s.object_pose("cube"), s.ee_pose()], dim=1)
 
     assert torch.equal(run(), run())
 
@@ -119,7 +124,7 @@ def test_bad_input_names_the_key(geometry, sim, n, key) -> None:
 
 def test_variants_build() -> None:
     for variant in ("wall", "ramp"):
-        with BatchedScene(1, geometry=dict(variant=variant), sim=SIM) as s:
+        with BatchedScene(1, geometry={"variant": variant, f"{variant}s": [{}]}, sim=SIM) as s:  # walls / ramps
             s.reset()
             names = [b.name for b in s.geometry.extras]
             assert names == [variant]
@@ -132,7 +137,7 @@ def test_gpu_backend_matches_shapes() -> None:  # pragma: no cover - GPU machine
         s.reset()
         _drive(s, 10)
         assert s.whole_body_q().shape == (16, 11) and s.whole_body_q().device.type == "cuda"
-        assert s.cube_pose().shape == (16, 7)
+        assert s.object_pose("cube").shape == (16, 7)
 
 
 def test_ramp_slides_a_released_cube_onto_table2() -> None:
@@ -140,33 +145,38 @@ def test_ramp_slides_a_released_cube_onto_table2() -> None:
     comes to rest on table 2; one let go above the floor beside the ramp does not."""
     over_ramp = [(0.0, -0.4, 1.12), (0.1, -0.6, 1.0), (-0.1, -0.85, 0.88)]
     beside = [(0.6, -0.6, 0.9)]
-    with BatchedScene(4, geometry=dict(variant="ramp"), sim=SIM) as s:
+    with BatchedScene(4, geometry=dict(variant="ramp", ramps=[{}]), sim=SIM) as s:
         s.reset()
-        s.place_cube(torch.tensor(over_ramp + beside))
+        s.place_object("cube", torch.tensor(over_ramp + beside))
         for _ in range(60):
             s.step()
-        p = s.cube_pose()[:, :3]
+        p = s.object_pose("cube")[:, :3]
         t2 = s.geometry.table("table2")
-        top = 2 * t2.half_size[2] + s.geometry.cube_half_size
+        top = 2 * t2.half_size[2] + s.geometry.object("cube").half_height
         on_t2 = ((p[:, 0] - t2.center[0]).abs() <= t2.half_size[0]) & ((p[:, 1] - t2.center[1]).abs() <= t2.half_size[1])
         on_t2 &= (p[:, 2] - top).abs() < 0.01
         assert on_t2.tolist() == [True, True, True, False]
-        assert float(s.cube_velocity()[:3, :3].norm(dim=1).max()) < 0.05
+        assert float(s.object_velocity("cube")[:3, :3].norm(dim=1).max()) < 0.05
 
 
-@pytest.mark.parametrize("key, value", [("ramp_drop", 0.8), ("ramp_friction", -0.1)])
-def test_bad_ramp_names_the_key(key: str, value: float) -> None:
-    with pytest.raises(ConfigError, match=key):
-        build_geometry(GeometryCfg.from_mapping({"variant": "ramp", key: value}))
+@pytest.mark.parametrize("key, value", [("drop", 0.8), ("friction", -0.1), ("low_table", "table9")])
+def test_bad_ramp_names_the_key(key: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=rf"scene\.ramps\[0\]\.{key} = "):
+        build_geometry(GeometryCfg.from_mapping({"variant": "ramp", "ramps": [{key: value}]}))
 
 
 @pytest.mark.parametrize("d, key, words", [
     ({"tables": [{"name": "t", "height": 2.0}]}, "scene.tables[0].height", "[0.3, 1.1]"),
     ({"tables": [{"name": "t"}, {"name": "t", "center": [0.0, -1.2]}]}, "scene.tables", "unique"),
-    ({"cube_size": 0.2}, "scene.cube_size", "[0.02, 0.08]"),
-    ({"variant": "push", "tables": [], "stick_size": [0.3, 0.04, 0.7]}, "scene.stick_size", "<= 0.1"),
-    ({"variant": "push", "tables": [], "box_inner": [0.03, 0.4]}, "scene.box_inner", "larger than the cube"),
-    ({"box_wall_height": 0.0}, "scene.box_wall_height", "must be > 0"),
+    ({"objects": {"cube": {"size": [0.045, 0.0, 0.045]}}}, "scene.objects.cube.size", "every side must be > 0"),
+    ({"variant": "push", "tables": [], "objects": {"stick": {"size": [0.04, 0.04, 2.0], "rests_on": "floor"}}},
+     "scene.objects.stick.size", "<= 1.5 m"),
+    ({"objects": {"cube": {"rests_on": "table9"}}}, "scene.objects.cube.rests_on", "no table or object of that name"),
+    ({"objects": {"cube": {"offset": [0.5, 0.0]}}}, "scene.objects.cube.offset", "must rest on table1's top"),
+    ({"variant": "push", "tables": [], "objects": PUSH_OBJECTS, "containers": [{"inner": [0.03, 0.4]}]},
+     "scene.containers[0].inner", "larger than the objects"),
+    ({"containers": [{"wall_height": 0.0}]}, "scene.containers[0].wall_height", "must be > 0"),
+    ({"variant": "push", "tables": [], "objects": PUSH_OBJECTS}, "scene.containers", "needs an open box"),
     ({"bounds_low": [3.3, -3.0]}, "scene.bounds_low", "bounds_high"),
 ])
 def test_geometry_config_errors(d: dict, key: str, words: str) -> None:
@@ -177,36 +187,36 @@ def test_geometry_config_errors(d: dict, key: str, words: str) -> None:
 
 
 def test_every_variant_builds_from_the_config_files() -> None:
-    import yaml
+    from helpers import compose_config
 
-    from realize.paths import CONFIG_DIR
-
-    plain = yaml.safe_load((CONFIG_DIR / "scene" / "plain.yaml").read_text())
-    for variant in ("plain", "wall", "ramp", "push"):
-        d = dict(plain, variant=variant, **({"tables": []} if variant == "push" else {}))
-        g = build_geometry(GeometryCfg.from_mapping(d))
-        assert g.variant == variant and (g.stick is not None) == (variant == "push")
+    extras = {"plain": [], "wall": ["wall"], "ramp": ["ramp"],
+              "push": ["box_floor", "box_wall_xn", "box_wall_xp", "box_wall_yn", "box_wall_yp"]}
+    for variant in ("plain", "wall", "ramp", "push"):  # configs/scene/<variant>.yaml, composed as the app does
+        g = build_geometry(GeometryCfg.from_mapping(compose_config(f"scene={variant}")["scene"]))
+        stick = [b.name for b in g.floor_objects] == ["stick"]
+        assert g.variant == variant and stick == (variant == "push")
+        assert [b.name for b in g.extras] == extras[variant] and bool(g.containers) == (variant == "push")
 
 
 def test_step_hooks_env_options_and_friction() -> None:
     """What replay and validation use: step hooks, forced randomized resets with the task's noise,
-    per-copy cube friction (the scene builds its task from the scene's variant)."""
+    per-copy object friction (the scene builds its task from the scene's variant)."""
     from realize.scene import EnvOptions
 
     seen: list[int] = []
-    opts = EnvOptions(cube_xy_noise=0.03, randomize_resets=True)
+    opts = EnvOptions(object_xy_noise=0.03, randomize_resets=True)
     with BatchedScene(2, sim=SIM, env=opts) as s:
         s.add_step_hook(seen.append, every=2)
         s.reset(seed=3)
         for _ in range(5):
             s.step()
         assert seen == [0, 2, 4] and s.step_count == 5
-        assert s.cube_xy_noise == 0.03 and s.robot_xy_noise == pytest.approx(0.05)
-        off = (s.cube_pose()[:, :2] - torch.tensor(s.geometry.cube_pos[:2])).abs()
+        assert s.object_xy_noise == 0.03 and s.robot_xy_noise == pytest.approx(0.05)
+        off = (s.object_pose("cube")[:, :2] - torch.tensor(s.geometry.object("cube").position[:2])).abs()
         assert (off.max(dim=1).values > 1e-4).all()  # randomized although reset() did not ask
-        mu = s.set_cube_friction([0.5, 2.0])
-        assert torch.allclose(s.cube_friction(), torch.stack([mu, mu], dim=1).to(torch.float64))
+        mu = s.set_object_friction("cube", [0.5, 2.0])
+        assert torch.allclose(s.object_friction("cube"), torch.stack([mu, mu], dim=1).to(torch.float64))
         with pytest.raises(ConfigError):
-            s.set_cube_friction([1.0])
+            s.set_object_friction("cube", [1.0])
         with pytest.raises(ConfigError):
             s.add_step_hook(seen.append, every=0)

@@ -1,6 +1,6 @@
 """The CPU backend's state I/O: cached reads equal fresh simulator reads after every kind of state
 change, writing only the changed drive targets simulates exactly what writing all does, and the
-finger-cube contact forces equal a plain numpy reading of SAPIEN's contact list."""
+finger-object contact forces equal a plain numpy reading of SAPIEN's contact list."""
 
 from __future__ import annotations
 
@@ -32,9 +32,10 @@ def _fresh(scene: BatchedScene) -> dict[str, np.ndarray]:
         "qpos": np.stack([a.get_qpos() for a in impl._arts]),
         "qvel": np.stack([a.get_qvel() for a in impl._arts]),
         "ee_pose": poses(impl._ee_links),
-        "cube_pose": poses(impl._cube_bodies),
-        "cube_velocity": np.array([np.concatenate([b.get_linear_velocity(), b.get_angular_velocity()])
-                                   for b in impl._cube_bodies], dtype=np.float32),
+        "object_poses": np.stack([poses(bodies) for bodies in impl._object_bodies], axis=1),  # (N, m, 7)
+        "object_velocities": np.stack([np.array([np.concatenate([b.get_linear_velocity(), b.get_angular_velocity()])
+                                                 for b in bodies], dtype=np.float32)
+                                       for bodies in impl._object_bodies], axis=1),
     }
 
 
@@ -44,6 +45,9 @@ def _assert_reads_fresh(scene: BatchedScene) -> None:
         for name, want in fresh.items():
             got = getattr(scene, name)().numpy()
             assert got.dtype == np.float32 and np.array_equal(got, want), name
+        for k, name in enumerate(scene.object_names):  # one object by name: its slice of the m axis
+            assert np.array_equal(scene.object_pose(name).numpy(), fresh["object_poses"][:, k]), name
+            assert np.array_equal(scene.object_velocity(name).numpy(), fresh["object_velocities"][:, k]), name
         wb = scene.whole_body_q()
         assert np.array_equal(wb[:, 3:].numpy(), fresh["qpos"][:, scene._wb_idx.numpy()[3:]])
         assert np.array_equal(scene.whole_body_qd().numpy(), fresh["qvel"][:, scene._wb_idx.numpy()])
@@ -65,10 +69,10 @@ def test_cached_reads_equal_fresh_reads_after_every_state_change() -> None:
         s.freeze(torch.tensor([False, True, False]))  # zeroes copy 1's joint velocities
         _assert_reads_fresh(s)
         assert float(s.qvel()[1].abs().max()) == 0.0
-        s.push_cube(2, (0.0, 0.5, 0.0))
+        s.push_object("cube", 2, (0.0, 0.5, 0.0))
         _assert_reads_fresh(s)
-        assert float(s.cube_velocity()[2, 1]) == 0.5
-        s.place_cube(s.cube_pose()[:, :3] + torch.tensor([0.0, 0.0, 0.05]))
+        assert float(s.object_velocity("cube")[2, 1]) == 0.5
+        s.place_object("cube", s.object_pose("cube")[:, :3] + torch.tensor([0.0, 0.0, 0.05]))
         _assert_reads_fresh(s)
         s.step()
         _assert_reads_fresh(s)
@@ -84,7 +88,7 @@ def test_cached_reads_equal_fresh_reads_after_every_state_change() -> None:
 def _scripted(scene: BatchedScene, steps: int) -> list[np.ndarray]:
     """Motion with a long stretch where no target changes (held arm, still base: a robot nobody
     writes to falls asleep after ~1 s), a gripper that closes and a copy frozen midway; returns
-    every step's joint positions, velocities and cube poses."""
+    every step's joint positions, velocities and object poses."""
     n = scene.n_envs
     q0 = scene.whole_body_q()
     trace = []
@@ -102,7 +106,8 @@ def _scripted(scene: BatchedScene, steps: int) -> list[np.ndarray]:
         if k == 30:
             scene.freeze(torch.arange(n) == 1)
         scene.step()
-        trace.append(np.concatenate([scene.qpos().numpy(), scene.qvel().numpy(), scene.cube_pose().numpy()], axis=1))
+        trace.append(np.concatenate([scene.qpos().numpy(), scene.qvel().numpy(),
+                                      scene.object_poses().flatten(1).numpy()], axis=1))
     return trace
 
 
@@ -120,24 +125,25 @@ def test_changed_only_target_writes_give_the_same_trajectory_as_writing_all() ->
 
 
 def _finger_forces_oracle(scene: BatchedScene) -> np.ndarray:
-    """(N, 2) finger-cube contact forces straight from SAPIEN's contact list, matched by the link
-    and cube objects of each copy, each contact's impulse summed and normed with numpy."""
+    """(N, m, 2) finger-object contact forces straight from SAPIEN's contact list, matched by the
+    link and object bodies of each copy, each contact's impulse summed and normed with numpy."""
     impl = scene._impl
-    out = np.zeros((scene.n_envs, 2))
+    out = np.zeros((scene.n_envs, len(impl._object_bodies), 2))
     fingers = [[a.robot.links_map[ln]._objs[0] for ln in FINGER_LINKS] for a in scene.u.agents]
     for contact in impl._px.get_contacts():
         pair = list(contact.bodies)
-        for c, cube in enumerate(impl._cube_bodies):
-            for f, link in enumerate(fingers[c]):
-                if any(b is cube for b in pair) and any(b is link for b in pair):
-                    total = np.zeros(3)
-                    for pt in contact.points:
-                        total += pt.impulse
-                    out[c, f] += np.linalg.norm(total)
+        for k, bodies in enumerate(impl._object_bodies):
+            for c, body in enumerate(bodies):
+                for f, link in enumerate(fingers[c]):
+                    if any(b is body for b in pair) and any(b is link for b in pair):
+                        total = np.zeros(3)
+                        for pt in contact.points:
+                            total += pt.impulse
+                        out[c, k, f] += np.linalg.norm(total)
     return out * scene.sim.sim_freq
 
 
-def test_finger_cube_forces_equal_a_numpy_oracle_on_a_held_cube() -> None:
+def test_finger_forces_equal_a_numpy_oracle_on_a_held_cube() -> None:
     held = load_state(Path(__file__).parent / "fixtures" / "state_grasped.json")
     with BatchedScene(2, sim=SIM) as s:
         s.reset(state=held)
@@ -145,7 +151,8 @@ def test_finger_cube_forces_equal_a_numpy_oracle_on_a_held_cube() -> None:
         for _ in range(6):
             s.step()
             want = _finger_forces_oracle(s)
-            got = s.finger_cube_forces().numpy()
-            assert np.array_equal(got, want.astype(np.float32))
+            got = s.finger_forces().numpy()
+            assert got.shape == (2, 1, 2) and np.array_equal(got, want.astype(np.float32))
             pressed += int((want > 0).all())
+            assert s.holds("cube").tolist() == (got >= s.sim.grasp_min_force).all(axis=2)[:, 0].tolist()
         assert pressed == 6  # both fingers of both copies pressed on the cube at every step

@@ -25,7 +25,7 @@ from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.run_dir.result_doc import ResultDoc
 
 TOPK = ["task.planner.enabled=true", "task.planner.top_k=2"]
-SEED_PLAN = "move_to(Table1), grasp(Cube_g), move_to(Table2), place(Cube_p), move_to(Exit)"
+SEED_PLAN = "move_to(Table1), grasp(cube, Cube_g), move_to(Table2), place(cube, Cube_p), move_to(Exit)"
 
 BAD = [
     (["task.planner.top_k=0"], ["task:planner.top_k = 0", ">= 1"]),

@@ -42,7 +42,7 @@ def _source_run(path: Path, *overrides: str, mean=None, std=None, weights=None, 
 
 def test_means_follow_the_objects_their_regions_follow_and_the_std_widens(tmp_path):
     src = _source_run(tmp_path / "src")
-    spec = _spec("scene.cube_offset=[0.06,-0.05]", "scene.tables.1.center=[0.3,-1.5]", "ce.warm_widen=3.0",
+    spec = _spec("scene.objects.cube.offset=[0.06,-0.05]", "scene.tables.1.center=[0.3,-1.5]", "ce.warm_widen=3.0",
                  "ce.warm_uniform_share=0.25")
     ws = load_warm_start(str(src), spec.task, spec.geometry, spec.ce)
     old = torch.tensor([0.1 * i for i in range(spec.task.layout.dim)], dtype=F64)
@@ -88,7 +88,7 @@ def test_merge_modes_of_equal_modes_is_that_mode():
 
 @pytest.mark.parametrize("problem, message", [
     ("missing", r"warm_start = '.*nowhere': .* is not a directory"),
-    ("other_plan", r"that run realized the plan move_to\(Table1\), grasp\(Cube_g\); this run realizes move_to\(Table1\)"),
+    ("other_plan", r"that run realized the plan move_to\(Table1\), grasp\(cube, Cube_g\); this run realizes move_to\(Table1\)"),
     ("other_columns", r"that run's parameters are \['Table1.x'\]; this run's are \['Table1.x', 'Table1.y'"),
     ("no_distribution", r"has no final distribution \(final_mean/final_std\)"),
     ("top_k", r"a top-k run \(several candidate plans\) cannot seed"),
@@ -98,7 +98,7 @@ def test_a_run_that_cannot_seed_this_one_is_refused_naming_why(tmp_path, problem
     if problem == "missing":
         src = tmp_path / "nowhere"
     else:
-        doc = {"other_plan": {"plan": "move_to(Table1), grasp(Cube_g)"}, "other_columns": {"columns": ["Table1.x"]},
+        doc = {"other_plan": {"plan": "move_to(Table1), grasp(cube, Cube_g)"}, "other_columns": {"columns": ["Table1.x"]},
                "no_distribution": {"final_mean": None}, "top_k": {"top_k": 2, "candidates": []}}[problem]
         src = _source_run(tmp_path / "src")
         body = json.loads((src / "result.json").read_text())
@@ -159,11 +159,11 @@ def test_a_plan_tail_starts_from_the_marginal_of_the_earlier_run(tmp_path):
 
     src = _source_run(tmp_path / "src")
     spec = _spec("ce.warm_widen=1.0")
-    tail = task_for_plan(spec.task, spec.task.plan[2:])  # move_to(Table2), place(Cube_p), move_to(Exit)
+    tail = task_for_plan(spec.task, spec.task.plan[2:])  # move_to(Table2), place(cube, Cube_p), move_to(Exit)
     ws = load_warm_start(str(src), tail, spec.geometry, spec.ce)
     full = spec.task.layout.column_names
     want = torch.tensor([0.1 * full.index(c) for c in tail.layout.column_names], dtype=F64)
     assert tail.layout.column_names[0] == "Table2.x" and torch.allclose(ws.distribution.mean, want)
     head = task_for_plan(spec.task, spec.task.plan[:2])  # not a tail: refused
-    with pytest.raises(ConfigError, match="this run realizes move_to\\(Table1\\), grasp\\(Cube_g\\)"):
+    with pytest.raises(ConfigError, match="this run realizes move_to\\(Table1\\), grasp\\(cube, Cube_g\\)"):
         load_warm_start(str(src), head, spec.geometry, spec.ce)

@@ -17,7 +17,7 @@ from realize.controllers.fabric_jets import distance_jets
 from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.obstacles import BoxDistance
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
-from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.geometry import GeometryCfg, RampCfg, build_geometry
 from realize.realization.config import RolloutConfig
 from realize.robot.spec import load_robot_spec
 
@@ -29,7 +29,7 @@ F64 = torch.float64
 
 @pytest.fixture(scope="module")
 def wb() -> WholeBodyFabric:
-    return WholeBodyFabric(build_geometry(GeometryCfg(variant="ramp")), dt=0.05, dtype=F64)
+    return WholeBodyFabric(build_geometry(GeometryCfg(variant="ramp", ramps=[RampCfg()])), dt=0.05, dtype=F64)
 
 
 def _rotation(yaw: torch.Tensor, pitch: torch.Tensor) -> torch.Tensor:

@@ -72,7 +72,8 @@ def _result(rows: range, steps: int, frames: int) -> RolloutResult:
                          steps=v.long(), progress=v, distance=-v, failure=[f"r{i}" for i in rows], sim_steps=steps,
                          horizon_cost=9.0, traj_t=torch.arange(frames, dtype=torch.float32),
                          traj_base=v[:, None, None].expand(n, frames, 2) + torch.arange(frames)[None, :, None],
-                         traj_ee=torch.zeros(n, frames, 3), traj_cube=torch.zeros(n, frames, 3))
+                         traj_ee=torch.zeros(n, frames, 3),
+                         traj_objects=v[:, None, None, None].expand(n, frames, 2, 3) + torch.arange(frames)[None, :, None, None])
 
 
 def test_join_keeps_row_order_and_pads_trajectories() -> None:
@@ -82,6 +83,9 @@ def test_join_keeps_row_order_and_pads_trajectories() -> None:
     assert j.sim_steps == 12 and j.traj_base.shape == (5, 6, 2) and len(j.traj_t) == 6
     assert torch.equal(j.traj_base[0, 4:], a.traj_base[0, 3:4].expand(2, 2))  # last frame held
     assert torch.equal(j.traj_base[3:], b.traj_base)
+    assert j.traj_objects.shape == (5, 6, 2, 3)  # (N, T, m, 3): padded along T only
+    assert torch.equal(j.traj_objects[0, 4:], a.traj_objects[0, 3:4].expand(2, 2, 3))
+    assert torch.equal(j.traj_objects[3:], b.traj_objects)
 
 
 def test_worker_count_and_threads() -> None:

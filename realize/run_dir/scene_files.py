@@ -26,6 +26,7 @@ import numpy as np
 
 from realize.world.geometry import Box as ObstacleBox
 from realize.world.geometry import GeometryCfg, SceneGeometry, build_geometry
+from realize.world.objects import SceneObject
 from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.jsonio import atomic_write_json, atomic_write_npz, read_json
 from realize.run_dir.names import SCENE_FILE, TRAJ_PATTERN, trajectories_name
@@ -66,6 +67,20 @@ def geometry_from_dict(d: Mapping[str, Any]) -> SceneGeometry:
     def box(b: Mapping[str, Any]) -> ObstacleBox:
         return ObstacleBox(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in b.items()})
 
+    def obj(o: Mapping[str, Any]) -> SceneObject:
+        return SceneObject(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in o.items()})
+
+    if "objects" not in d and "cube_pos" in d:  # written before objects were data: the cube (and stick)
+        h, stick = float(d["cube_half_size"]), d.get("stick")
+        objs = [dict(name="cube", shape="box", half_size=[h, h, h], position=d["cube_pos"], yaw=0.0,
+                     mass=d["cube_mass"], friction=d["cube_friction"], color=[0.85, 0.1, 0.1, 1.0],
+                     rests_on="stick" if stick else "table1")]
+        if stick:
+            objs.append(dict(name="stick", shape="box", half_size=stick["half_size"], position=stick["center"],
+                             yaw=stick.get("yaw", 0.0), mass=d.get("stick_mass", 0.0),
+                             friction=d.get("stick_friction", 0.0), color=stick.get("color", [0.75, 0.6, 0.35, 1.0]),
+                             rests_on="floor"))
+        d = dict(d, objects=objs)
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(SceneGeometry):
         if f.name not in d and f.default is not dataclasses.MISSING:
@@ -73,8 +88,8 @@ def geometry_from_dict(d: Mapping[str, Any]) -> SceneGeometry:
         v = d[f.name]
         if f.name in ("tables", "extras", "containers"):
             v = tuple(box(b) for b in v)
-        elif f.name == "stick":
-            v = None if v is None else box(v)
+        elif f.name == "objects":
+            v = tuple(obj(o) for o in v)
         elif isinstance(v, list):
             v = tuple(v)
         kw[f.name] = v
