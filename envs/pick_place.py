@@ -43,9 +43,10 @@ from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
-from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
+from mani_skill.utils.structs.types import SceneConfig, SimConfig
 
 from envs import robot_agent
+from envs.tiling import TILE_MARGIN, gpu_memory_config, tile_offsets, yaw_pitch_quat
 from realize.config import ConfigError
 from realize.world.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
 from realize.world.objects import FLOOR, SceneObject
@@ -56,35 +57,6 @@ from realize.robot.spec import RobotSpec
 
 ENV_ID = "RealizePickPlace-v1"
 EXIT = "exit"  # what a task goal's base_in names: the geometry's exit rectangle
-TILE_MARGIN = 3.0  # metres of empty floor between tiled copies
-# PhysX GPU contact buffers: ManiSkill's own Fetch task (OpenCabinetDrawer) raises them to 2**21
-# contacts and 2**19 patches; here they also grow with the copies, by this many contacts per copy
-# (not measured on a GPU yet: on overflow PhysX drops contacts with a printed warning only)
-GPU_CONTACTS_PER_COPY = 512
-
-
-def tile_offsets(n: int, extent: tuple[float, float], margin: float = TILE_MARGIN) -> np.ndarray:
-    """(n, 2) xy offsets of n copies laid out on a near-square grid without overlap."""
-    cols = max(1, math.ceil(math.sqrt(n)))
-    sx, sy = extent[0] + margin, extent[1] + margin
-    i = np.arange(n)
-    return np.stack([(i % cols) * sx, (i // cols) * sy], axis=1).astype(np.float64)
-
-
-def gpu_memory_config(num_envs: int) -> GPUMemoryConfig:
-    """PhysX GPU buffers for ``num_envs`` sub-scenes: ManiSkill's Fetch task's at least, and
-    ``GPU_CONTACTS_PER_COPY`` contacts (a quarter as many patches) per copy, in powers of two."""
-    contacts = max(2**21, 1 << math.ceil(math.log2(max(1, num_envs) * GPU_CONTACTS_PER_COPY)))
-    return GPUMemoryConfig(max_rigid_contact_count=contacts, max_rigid_patch_count=contacts // 4)
-
-
-def yaw_pitch_quat(yaw: float, pitch: float) -> list[float]:
-    """wxyz quaternion of R = Rz(yaw) @ Ry(pitch)."""
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    return [cy * cp, -sy * sp, cy * sp, sy * cp]
-
-
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizePickPlaceEnv(BaseEnv):
     SUPPORTED_ROBOTS: list = []  # any robot of configs/robot/ (or a RobotSpec): set per instance

@@ -34,7 +34,8 @@ from mani_skill.envs.scene import ManiSkillScene
 from mani_skill.envs.tasks.mobile_manipulation.open_cabinet_drawer import OpenCabinetDrawerEnv
 
 import realize.scene.backends as backends
-from envs.pick_place import RealizePickPlaceEnv, gpu_memory_config
+from envs.pick_place import RealizePickPlaceEnv
+from envs.tiling import gpu_memory_config
 from realize.config import ConfigError
 from realize.world.geometry import GeometryCfg, build_geometry
 from realize import physx_gpu

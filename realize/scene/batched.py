@@ -10,7 +10,8 @@ resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, 
     simulator once per state (cached until a step, reset, freeze or object move; ``state_changed``);
   * writes: base velocity commands, upper-joint targets, the gripper opening; ``step``
     advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
-  * step hooks (``add_step_hook``: a video writer renders there), per-copy object friction and the
+  * step hooks (``add_step_hook``: a video writer renders there), per-copy object friction and
+    mass, object pushes and teleports (``realize.scene.object_properties``), and the
     ``EnvOptions`` the task is built with (render camera, reset noise, forced randomization),
     for replay and validation; ``render`` gives copy 0's frame.
 What it doesn't: decide anything (controllers compute the targets, the rollout runs actions),
@@ -23,7 +24,7 @@ Whole-body joint vector ``q`` (n_dof): base x, base y, base yaw, then the robot'
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 import numpy as np
@@ -33,6 +34,7 @@ from realize.config import ConfigError
 from realize.robot.layout import BASE, BASE_XY, UPPER, YAW
 from realize.world.geometry import GeometryCfg, SceneGeometry
 from realize.scene.backends import open_backend
+from realize.scene.object_properties import ObjectProperties
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
 from realize.world.state import ObjectPose, SceneState
@@ -64,7 +66,7 @@ def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
     ).reshape(q.shape[:-1] + (3, 3))
 
 
-class BatchedScene:
+class BatchedScene(ObjectProperties):
     """N copies of the task's world, read and written as (N, ...) tensors.
 
     Args:
@@ -370,57 +372,6 @@ class BatchedScene:
         for hook, every in self._hooks:
             if self.step_count % every == 0:
                 hook(self.step_count)
-
-    # ------------------------------------------------------------------ perturbations, what-ifs, tests
-    def object_friction(self, name: str) -> torch.Tensor:
-        """(N, 2) static and dynamic friction of object ``name`` in each copy (float64; CPU backend)."""
-        return self._impl.object_friction(self.object_index(name))
-
-    def set_object_friction(self, name: str, factors: torch.Tensor | np.ndarray | Sequence[float]) -> torch.Tensor:
-        """Scale each copy's friction of object ``name`` (static and dynamic) by ``factors`` (N,)
-        from its configured value; returns the (N,) friction now set (float64).
-
-        PhysX combines the friction of two touching shapes by averaging (its default), so the
-        friction of an object-finger or object-table contact moves by half the object's change.
-        Set once per scene (a loop over the copies on CPU), not per step."""
-        k = self.object_index(name)
-        f = torch.as_tensor(np.asarray(factors, dtype=np.float64)).reshape(-1)
-        if len(f) != self.n_envs:
-            raise ConfigError(f"{len(f)} friction factors for {self.n_envs} copies")
-        if not bool(torch.isfinite(f).all()) or bool((f <= 0).any()):
-            raise ConfigError(f"friction factors must be finite and > 0, got {f.tolist()}")
-        values = float(self.geometry.objects[k].friction) * f
-        self._impl.set_object_friction(k, values)
-        return values
-
-    def object_mass(self, name: str) -> torch.Tensor:
-        """(N,) mass (kg) of object ``name`` in each copy (float64; CPU backend)."""
-        return self._impl.object_mass(self.object_index(name))
-
-    def set_object_mass(self, name: str, factors: torch.Tensor | np.ndarray | Sequence[float]) -> torch.Tensor:
-        """Scale each copy's mass (and inertia) of object ``name`` by ``factors`` (N,) from its
-        configured value; returns the (N,) masses now set (float64). Once per scene, not per step."""
-        k = self.object_index(name)
-        f = torch.as_tensor(np.asarray(factors, dtype=np.float64)).reshape(-1)
-        if len(f) != self.n_envs:
-            raise ConfigError(f"{len(f)} mass factors for {self.n_envs} copies")
-        if not bool(torch.isfinite(f).all()) or bool((f <= 0).any()):
-            raise ConfigError(f"mass factors must be finite and > 0, got {f.tolist()}")
-        values = float(self.geometry.objects[k].mass) * f
-        self._impl.set_object_mass(k, values)
-        return values
-
-    def push_object(self, name: str, copy: int, velocity: tuple[float, float, float]) -> None:
-        """Give one copy's object ``name`` a linear velocity (used to check that copies are independent)."""
-        self._impl.push_object(self.object_index(name), copy, velocity)
-        self.state_changed()
-
-    def place_object(self, name: str, positions: torch.Tensor) -> None:
-        """Teleport every copy's object ``name`` to ``positions`` (N, 3) in its copy's local frame,
-        axis-aligned and at rest (tests and what-if checks: where does an object dropped here end up?)."""
-        k = self.object_index(name)
-        self._impl.place_object(k, torch.as_tensor(positions, dtype=torch.float32).reshape(self.n_envs, 3).cpu())
-        self.state_changed()
 
     # ------------------------------------------------------------------ rendering
     def render(self) -> np.ndarray:
