@@ -86,10 +86,7 @@ class SceneGeometry:
         return tuple(o.name for o in self.objects)
 
     def object(self, name: str) -> SceneObject:
-        for o in self.objects:
-            if o.name == name:
-                return o
-        raise KeyError(f"scene has no object named {name!r}; objects: {list(self.object_names)}")
+        return _named(self.objects, name, "object")
 
     def object_index(self, name: str) -> int:
         """Position of object ``name`` in ``objects`` (the m axis of the scene's (N, m, ...) reads)."""
@@ -118,21 +115,23 @@ class SceneGeometry:
         return self.container_walls[self.containers.index(self.container(name))]
 
     def container(self, name: str) -> Box:
-        for c in self.containers:
-            if c.name == name:
-                return c
-        raise KeyError(f"scene has no container named {name!r}; containers: {[c.name for c in self.containers]}")
+        return _named(self.containers, name, "container")
 
     def table(self, name: str) -> Box:
-        for t in self.tables:
-            if t.name == name:
-                return t
-        raise KeyError(f"scene has no table named {name!r}; tables: {[t.name for t in self.tables]}")
+        return _named(self.tables, name, "table")
 
     @property
     def extent(self) -> tuple[float, float]:
         """Size (x, y) of the world rectangle; used to tile copies without overlap."""
         return (self.bounds_high[0] - self.bounds_low[0], self.bounds_high[1] - self.bounds_low[1])
+
+
+def _named(items: tuple[Any, ...], name: str, what: str) -> Any:
+    """The item of ``items`` called ``name`` (``KeyError`` naming the ones there are)."""
+    for it in items:
+        if it.name == name:
+            return it
+    raise KeyError(f"scene has no {what} named {name!r}; {what}s: {[it.name for it in items]}")
 
 
 def _in(lo: float, hi: float, why: str = "") -> Callable[[float], str | None]:

@@ -94,6 +94,24 @@ def _pose(d: Any, where: str) -> ObjectPose:
                       where=where)
 
 
+def _object_pose(pose: Any, key: str) -> ObjectPose:
+    if not isinstance(pose, ObjectPose):
+        raise ConfigError(f"{key} must be an ObjectPose")
+    return pose
+
+
+def _by_name(d: Any, field_name: str, what: str, where: str, check: Any) -> dict[str, Any]:
+    """``d`` as a dict of ``what`` name -> ``check(value, key)`` (a mapping with name keys)."""
+    if not isinstance(d, Mapping):
+        raise ConfigError(f"{where}: {field_name} must be a mapping of {what} name -> value")
+    out = {}
+    for name, v in d.items():
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{where}: {field_name} has a key {name!r} that is not a {what} name")
+        out[name] = check(v, f"{where}: {field_name}.{name}")
+    return out
+
+
 @dataclass(frozen=True)
 class SceneState:
     """One copy's state (module docstring); checked when built."""
@@ -108,24 +126,10 @@ class SceneState:
     def __post_init__(self) -> None:
         where = self.source or "state"
         object.__setattr__(self, "base", _floats(self.base, 3, f"{where}: base"))
-        if not isinstance(self.objects, Mapping):
-            raise ConfigError(f"{where}: objects must be a mapping of object name -> pose")
-        objects = {}
-        for name, pose in self.objects.items():
-            if not isinstance(name, str) or not name:
-                raise ConfigError(f"{where}: objects has a key {name!r} that is not an object name")
-            if not isinstance(pose, ObjectPose):
-                raise ConfigError(f"{where}: objects.{name} must be an ObjectPose")
-            objects[name] = pose
+        objects = _by_name(self.objects, "objects", "object", where, _object_pose)
         object.__setattr__(self, "objects", objects)
-        if not isinstance(self.joints, Mapping):
-            raise ConfigError(f"{where}: joints must be a mapping of joint name -> position")
-        joints = {}
-        for name, v in self.joints.items():
-            if not isinstance(name, str) or not name:
-                raise ConfigError(f"{where}: joints has a key {name!r} that is not a joint name")
-            joints[name] = _floats([v], 1, f"{where}: joints.{name}")[0]
-        object.__setattr__(self, "joints", joints)
+        object.__setattr__(self, "joints", _by_name(self.joints, "joints", "joint", where,
+                                                    lambda v, key: _floats([v], 1, key)[0]))
         _flag(self.gripper_closed, f"{where}: gripper_closed")
         if self.held is not None:
             if not isinstance(self.held, str) or self.held not in objects:
