@@ -130,7 +130,7 @@ def fig2(
         Line2D([], [], color=CYAN, lw=1.6, ls="--", label="best plan: end effector"),
         PathPatch(MplPath(np.zeros((1, 2))), facecolor=REGION_GREY, edgecolor=REGION_EDGE, label="parameter regions"),
         Patch(facecolor="black", edgecolor="black", label="tables and other obstacles"),
-        Line2D([], [], color="#e032c8", marker="s", ms=4, ls="none", label="cube"),
+        Line2D([], [], color="#e032c8", marker="s", ms=4, ls="none", label="objects"),
         Line2D([], [], color="0.3", marker="o", ms=4, ls="none", label="robot start"),
     ]
     if scene.padding > 0:  # draw_world outlines each obstacle grown by the A* padding

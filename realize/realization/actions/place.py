@@ -20,17 +20,17 @@ from realize.tasks.regions import Box, Region
 
 
 class Place(Manipulate):
-    """place(g_p): while holding the cube, fabric to the pre-place g_p on the hemisphere around
-    the place point, straight in, open the gripper, retreat to g_p.
+    """place(o, g_p): while holding object o, fabric to the pre-place g_p on the hemisphere
+    around the place point, straight in, open the gripper, retreat to g_p.
 
-    Or, with a 3-D box region, place(p): the parameter is the release point p of the cube's
-    centre itself (approached top-down from ``place_pre_height`` above). The point need not be
-    on a surface: a cube released in the air falls, or slides down a ramp, and the action
+    Or, with a 3-D box region, place(o, p): the parameter is the release point p of o's centre
+    itself (approached top-down from ``place_pre_height`` above). The point need not be on a
+    surface: an object released in the air falls, or slides down a ramp, and the action
     succeeds once it rests; the plan's goal decides whether it came to rest where it should.
 
     Success: the TCP reached the place point within ``reach_tolerance`` (paper ``ee_in(g_p)``),
-    the gripper let go (no finger contact with the cube) and the cube rests (speed below
-    ``rest_speed``).
+    the gripper let go (no finger contact with o) and o rests (speed below ``rest_speed``).
+    A plan that does not hold o when the action begins fails there (``not_holding``).
     """
 
     name = "place"
