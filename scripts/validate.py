@@ -3,7 +3,8 @@ and write the success share into RUN_DIR/result.json under `validation`.
 
 Usage: python scripts/validate.py RUN_DIR [--replicas 16] [--seed 0] [--friction LOW HIGH|none]
             [--mass LOW HIGH|none] [--no-randomize] [--object-noise M] [--object-yaw RAD] [--robot-noise M]
-            [--no-track] [--backend cpu|gpu|auto] [--dry-run] [--json]
+            [--no-track] [--candidates K [--min-success P]]
+            [--backend cpu|gpu|auto] [--dry-run] [--json]
 
 Perturbations: the run task's perturbation model (``perturbation`` in its task config,
 realize/tasks/perturbation.py: each object's xy and yaw where it rests, the robot start's xy,
@@ -21,6 +22,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
 from realize.app.replay import ReplayError  # noqa: E402
+from realize.app.candidate_validation import validate_candidates  # noqa: E402
 from realize.app.validation import validate  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
@@ -52,6 +54,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robot-noise", type=float, default=None, help="robot start xy noise (m), the task's if unset")
     ap.add_argument("--no-track", action="store_true",
                     help="aim at objects' config poses, not where they lie (controller.track_objects=false)")
+    ap.add_argument("--candidates", type=int, default=None, metavar="K",
+                    help="validate the K cheapest distinct feasible plans of the last iterations, not only the best, "
+                         "and name the one to return (realize/app/candidate_validation.py)")
+    ap.add_argument("--min-success", type=float, default=0.9,
+                    help="with --candidates: return the cheapest plan whose 95%% lower bound reaches this (default 0.9)")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
     ap.add_argument("--dry-run", action="store_true", help="report only, leave result.json unchanged")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -60,9 +67,12 @@ def main(argv: list[str] | None = None) -> int:
                      object_xy=args.object_noise, object_yaw=args.object_yaw, robot_xy=args.robot_noise)
     if args.no_randomize:
         overrides.update(object_xy=0.0, object_yaw=0.0, robot_xy=0.0)
+    track = False if args.no_track else None
     try:
+        if args.candidates is not None:
+            return _candidates(args, track, overrides)
         rep = validate(args.run_dir, args.replicas, args.seed, backend=args.backend, write=not args.dry_run,
-                       track_objects=False if args.no_track else None, **overrides)
+                       track_objects=track, **overrides)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -79,6 +89,26 @@ def main(argv: list[str] | None = None) -> int:
                   f"(result.json best_cost {rep.saved_cost})")
         print(f"wall time {rep.wall_time_s:.1f} s" + ("" if args.dry_run else f"; wrote validation to "
                                                        f"{args.run_dir / 'result.json'}"))
+    return 0
+
+
+def _candidates(args: argparse.Namespace, track: bool | None, overrides: dict) -> int:
+    rep = validate_candidates(args.run_dir, args.candidates, args.replicas, min_success=args.min_success,
+                              seed=args.seed, backend=args.backend, track_objects=track, write=not args.dry_run,
+                              **overrides)
+    if args.json:
+        print(json.dumps(rep.to_dict(), indent=2))
+        return 0
+    print(f"validation of {len(rep.candidates)} candidate(s) ({rep.backend}, seed {rep.seed}, {rep.replicas} replicas each):")
+    for j, c in enumerate(rep.candidates):
+        mark = "  <- returned" if j == rep.returned else ""
+        print(f"  {j}: cost {c.cost:.0f} (iteration {c.iteration}): success {c.success_share:.2f} "
+              f"[{c.ci95[0]:.2f}, {c.ci95[1]:.2f}]{mark}")
+        for reason, n in c.failures.items():
+            print(f"       {n:3d} x {reason}")
+    print(f"returned: candidate {rep.returned} ({rep.reason}, min_success {rep.min_success}); "
+          f"wall time {rep.wall_time_s:.1f} s" + ("" if args.dry_run else f"; wrote validation to "
+                                                  f"{args.run_dir / 'result.json'}"))
     return 0
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from realize.app.replay import ReplayError, best_z_rows, build_replay_spec, saved_plan
 from realize.config import ConfigError
@@ -32,7 +33,7 @@ from realize.tasks.perturbation import Perturbation
 from realize.run_dir.directory import RunDir
 from realize.scene import EnvOptions
 
-__all__ = ["ValidationReport", "validate", "write_validation"]
+__all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_replicas"]
 
 
 @dataclass
@@ -66,32 +67,12 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     ``seed``, the friction and mass factors are drawn from ``numpy.random.default_rng(seed)``.
     ``track_objects``: override the run's ``controller.track_objects`` (None: the run's).
     """
-    from realize.app.realizers import open_realization
-
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
         raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
-    spec = build_replay_spec(run, backend)
-    if track_objects is not None:
-        spec.rollout = dataclasses.replace(spec.rollout, track_objects=bool(track_objects))
-    try:
-        model = (perturbation or spec.task.perturbation).with_overrides(**overrides)
-    except (TypeError, ConfigError) as e:
-        raise ReplayError(f"perturbation: {e}") from None
-    options = EnvOptions(object_xy_noise=model.object_xy, object_yaw_noise=model.object_yaw,
-                         robot_xy_noise=model.robot_xy, randomize_resets=model.moves_start)
-    scene, (realizer,) = open_realization(spec, n_envs=replicas, env=options, seed=seed)
-    with scene:
-        f_friction, f_mass = model.draw_factors(scene.object_names, replicas, np.random.default_rng(seed))
-        # a [1, 1] range leaves the simulator untouched (the configured values, bit for bit)
-        friction = {o.name: (scene.set_object_friction(o.name, f_friction[o.name]).tolist()
-                             if model.friction != (1.0, 1.0) else [o.friction] * replicas)
-                    for o in scene.geometry.objects}
-        mass = {o.name: (scene.set_object_mass(o.name, f_mass[o.name]).tolist()
-                         if model.mass != (1.0, 1.0) else [o.mass] * replicas) for o in scene.geometry.objects}
-        res = realizer.rollout(best_z_rows(run, replicas))
-        used_backend = scene.backend
+    spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
+    res, friction, mass, used_backend = simulate_replicas(spec, best_z_rows(run, replicas), model, seed)
     ok = res.feasible.numpy()
     costs = res.cost.numpy().astype(np.float64)[ok]
     report = ValidationReport(
@@ -104,6 +85,43 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     if write:
         write_validation(run.run_dir, report)
     return report
+
+
+def replica_spec(run: Any, backend: str, perturbation: Perturbation | None, track_objects: bool | None,
+                 overrides: dict[str, Any]) -> tuple[Any, Perturbation]:
+    """The run's replay spec (``track_objects`` overriding its controller's) and the perturbation
+    model (``perturbation`` or the run task's, with ``overrides`` of its fields)."""
+    spec = build_replay_spec(run, backend)
+    if track_objects is not None:
+        spec.rollout = dataclasses.replace(spec.rollout, track_objects=bool(track_objects))
+    try:
+        model = (perturbation or spec.task.perturbation).with_overrides(**overrides)
+    except (TypeError, ConfigError) as e:
+        raise ReplayError(f"perturbation: {e}") from None
+    return spec, model
+
+
+def simulate_replicas(spec: Any, Z: torch.Tensor, model: Perturbation, seed: int
+                      ) -> tuple[Any, dict[str, list[float]], dict[str, list[float]], str]:
+    """Realize the rows of ``Z`` (one per copy) in one scene whose every reset draws from
+    ``model`` (seeded with ``seed``) and whose objects get friction and mass factors from
+    ``numpy.random.default_rng(seed)``: (rollout result, friction and mass per object and copy,
+    the backend)."""
+    from realize.app.realizers import open_realization
+
+    n = Z.shape[0]
+    options = EnvOptions(object_xy_noise=model.object_xy, object_yaw_noise=model.object_yaw,
+                         robot_xy_noise=model.robot_xy, randomize_resets=model.moves_start)
+    scene, (realizer,) = open_realization(spec, n_envs=n, env=options, seed=seed)
+    with scene:
+        f_friction, f_mass = model.draw_factors(scene.object_names, n, np.random.default_rng(seed))
+        # a [1, 1] range leaves the simulator untouched (the configured values, bit for bit)
+        friction = {o.name: (scene.set_object_friction(o.name, f_friction[o.name]).tolist()
+                             if model.friction != (1.0, 1.0) else [o.friction] * n)
+                    for o in scene.geometry.objects}
+        mass = {o.name: (scene.set_object_mass(o.name, f_mass[o.name]).tolist()
+                         if model.mass != (1.0, 1.0) else [o.mass] * n) for o in scene.geometry.objects}
+        return realizer.rollout(Z), friction, mass, scene.backend
 
 
 def write_validation(run_dir: str | Path, report: ValidationReport) -> None:

@@ -1,0 +1,141 @@
+"""Validate a run's K cheapest distinct plans under the task's perturbations and pick the one to return.
+
+What it does: ``validate_candidates`` takes, from the run's history (the lead candidate's in a
+top-k run), the K cheapest distinct feasible samples of its last ``iterations`` iterations,
+re-simulates each R times at once in one scene of K x R copies under the task's perturbation
+model (``realize.app.validation.simulate_replicas``), and reports for every candidate its
+nominal cost, success share, 95 % Wilson interval (``wilson_interval``), failure reasons and
+the mean cost of its successful replicas. The plan to return is the cheapest candidate whose
+interval's lower bound is at least ``min_success``, else the most robust one (highest success
+share, then cheapest). ``write`` stores it in ``result.json`` under ``validation``.
+What it doesn't: run inside the search (a run returns its nominal best; this is called after,
+by ``scripts/validate.py --candidates K``), or change ``best_z``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from realize.app.replay import ReplayError, saved_plan
+from realize.app.validation import replica_spec, simulate_replicas
+from realize.run_dir.directory import RunDir
+from realize.tasks.perturbation import Perturbation
+
+__all__ = ["CandidateResult", "CandidatesReport", "wilson_interval", "pick_candidates", "validate_candidates"]
+
+Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+
+
+def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of a success share ``successes / n`` (n >= 1)."""
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass
+class CandidateResult:
+    z: list[float]
+    cost: float  # nominal (the search's) cost
+    iteration: int  # where the search found it
+    success_share: float
+    ci95: tuple[float, float]
+    failures: dict[str, int]
+    cost_mean: float | None  # over its successful replicas
+
+
+@dataclass
+class CandidatesReport:
+    replicas: int
+    min_success: float
+    seed: int
+    perturbation: dict[str, Any]
+    candidates: list[CandidateResult]
+    returned: int  # index into candidates
+    reason: str  # "cheapest above min_success" or "most robust"
+    success_share: float  # the returned plan's
+    ci95: tuple[float, float]
+    backend: str
+    wall_time_s: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndarray, float, int]]:
+    """The ``k`` cheapest distinct feasible samples of the last ``iterations`` iterations of a
+    ``History``: (z, cost, iteration), cheapest first (ties: the later iteration first)."""
+    rows: list[tuple[float, int, np.ndarray]] = []
+    n = len(history)
+    for i in range(max(0, n - iterations), n):
+        it = history.per_iter[i]
+        ok = np.asarray(it["feasible"], dtype=bool)
+        for z, c in zip(np.asarray(it["Z"])[ok], np.asarray(it["cost"])[ok]):
+            rows.append((float(c), -i, z))
+    rows.sort(key=lambda r: (r[0], r[1]))
+    out: list[tuple[np.ndarray, float, int]] = []
+    for c, neg_i, z in rows:
+        if any(np.array_equal(z, o[0]) for o in out):
+            continue
+        out.append((z, c, -neg_i))
+        if len(out) == k:
+            break
+    return out
+
+
+def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int = 32, *, min_success: float = 0.9,
+                        iterations: int = 3, seed: int = 0, perturbation: Perturbation | None = None,
+                        backend: str = "cpu", track_objects: bool | None = None, write: bool = True,
+                        **overrides: Any) -> CandidatesReport:
+    """Validate the run's ``candidates`` cheapest distinct feasible plans, ``replicas`` each
+    (module docstring); perturbations as ``realize.app.validation.validate``'s."""
+    for name, v in (("candidates", candidates), ("replicas", replicas), ("iterations", iterations)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ReplayError(f"{name} = {v!r} must be an integer >= 1")
+    if not 0.0 <= float(min_success) <= 1.0:
+        raise ReplayError(f"min_success = {min_success!r} must be in [0, 1]")
+    t0 = time.perf_counter()
+    run = saved_plan(run_dir)
+    rd = RunDir(run.run_dir)
+    lead = run.leader.index if run.leader is not None else None
+    try:
+        history = rd.load_history(candidate=lead)
+    except (OSError, KeyError, ValueError) as e:
+        raise ReplayError(f"{rd.history_path(lead)}: the run's history cannot be read ({e})") from None
+    picked = pick_candidates(history, candidates, iterations)
+    if not picked:
+        raise ReplayError(f"{run.run_dir}: no feasible sample in its last {iterations} iteration(s) to validate")
+    spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
+    Z = torch.tensor(np.repeat(np.stack([z for z, _, _ in picked]), replicas, axis=0), dtype=torch.float64)
+    res, _, _, used_backend = simulate_replicas(spec, Z, model, seed)
+    ok = res.feasible.numpy().reshape(len(picked), replicas)
+    cost = res.cost.numpy().astype(np.float64).reshape(len(picked), replicas)
+    out = []
+    for j, (z, c, it) in enumerate(picked):
+        fails = Counter(f for f in res.failure[j * replicas:(j + 1) * replicas] if f)
+        good = cost[j][ok[j]]
+        out.append(CandidateResult(z=[float(v) for v in z], cost=c, iteration=it, success_share=float(ok[j].mean()),
+                                   ci95=wilson_interval(int(ok[j].sum()), replicas), failures=dict(sorted(fails.items())),
+                                   cost_mean=float(good.mean()) if len(good) else None))
+    above = [j for j, r in enumerate(out) if r.ci95[0] >= min_success]
+    if above:
+        ret, reason = min(above, key=lambda j: (out[j].cost, j)), "cheapest above min_success"
+    else:
+        ret, reason = min(range(len(out)), key=lambda j: (-out[j].success_share, out[j].cost, j)), "most robust"
+    report = CandidatesReport(replicas=replicas, min_success=float(min_success), seed=int(seed),
+                              perturbation=model.to_dict(), candidates=out, returned=ret, reason=reason,
+                              success_share=out[ret].success_share, ci95=out[ret].ci95, backend=used_backend,
+                              wall_time_s=time.perf_counter() - t0)
+    if write:
+        rd.add_to_result("validation", report.to_dict())
+    return report

@@ -1,0 +1,64 @@
+"""Validating a run's K cheapest distinct plans (``realize.app.candidate_validation``).
+
+* the 95 % Wilson interval equals scipy's (``binomtest(...).proportion_ci(method="wilson")``);
+* the candidates are the K cheapest distinct feasible samples of the last iterations;
+* on a real (small) run, the report is deterministic on CPU, returns the cheapest candidate whose
+  lower bound reaches ``min_success`` (else the most robust one) and lands in ``result.json``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import binomtest
+
+from helpers import realize_result
+from realize.app.candidate_validation import pick_candidates, validate_candidates, wilson_interval
+from realize.run_dir.history import History
+
+
+@pytest.mark.parametrize("k, n", [(0, 10), (10, 10), (5, 10), (61, 64), (1, 3), (30, 32)])
+def test_wilson_interval_is_scipys(k: int, n: int) -> None:
+    ci = binomtest(k, n).proportion_ci(method="wilson")
+    lo, hi = wilson_interval(k, n)
+    assert lo == pytest.approx(ci.low, abs=1e-12) and hi == pytest.approx(ci.high, abs=1e-12)
+
+
+def test_candidates_are_the_cheapest_distinct_feasible_samples_of_the_last_iterations() -> None:
+    h = History(["a", "b"])
+    its = [  # (Z, cost, feasible) per iteration
+        ([[0, 0], [1, 1], [2, 2]], [100.0, 50.0, 60.0], [True, True, False]),   # too early for iterations=2
+        ([[3, 3], [4, 4], [3, 3]], [90.0, 80.0, 90.0], [True, True, True]),     # [3, 3] twice
+        ([[5, 5], [6, 6], [7, 7]], [85.0, 70.0, 10.0], [True, True, False]),    # 10: infeasible
+    ]
+    for Z, cost, ok in its:
+        h.append({"Z": np.array(Z, float), "cost": np.array(cost), "feasible": np.array(ok)}, n_envs=3,
+                 success_share=float(np.mean(ok)), best_cost=min(c for c, f in zip(cost, ok) if f),
+                 mean=np.zeros(2), std=np.ones(2))
+    got = pick_candidates(h, 4, iterations=2)
+    assert [(z.tolist(), c, i) for z, c, i in got] == [([6, 6], 70.0, 2), ([4, 4], 80.0, 1), ([5, 5], 85.0, 2),
+                                                       ([3, 3], 90.0, 1)]
+    assert len(pick_candidates(h, 2, iterations=1)) == 2
+
+
+def test_candidate_validation_is_deterministic_and_written(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    realize_result("ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=3", "logging.rerun=false",
+                   "logging.progress=false", run_dir=run)
+    a = validate_candidates(run, candidates=2, replicas=3, min_success=0.5, seed=4, write=False)
+    b = validate_candidates(run, candidates=2, replicas=3, min_success=0.5, seed=4)
+    da, db = a.to_dict(), b.to_dict()
+    da.pop("wall_time_s"), db.pop("wall_time_s")
+    assert da == db  # same run, same seed: same replicas, same numbers
+    assert len(a.candidates) == 2 and a.candidates[0].cost <= a.candidates[1].cost
+    above = [j for j, c in enumerate(a.candidates) if c.ci95[0] >= 0.5]
+    if above:
+        assert a.returned == above[0] and a.reason == "cheapest above min_success"
+    else:
+        best = max(c.success_share for c in a.candidates)
+        assert a.candidates[a.returned].success_share == best and a.reason == "most robust"
+    saved = json.loads((run / "result.json").read_text())["validation"]
+    assert saved["returned"] == b.returned and len(saved["candidates"]) == 2
