@@ -2,8 +2,10 @@
 
 * the 95 % Wilson interval equals scipy's (``binomtest(...).proportion_ci(method="wilson")``);
 * the candidates are the K cheapest distinct feasible samples of the last iterations;
-* on a real (small) run, the report is deterministic on CPU, returns the cheapest candidate whose
-  lower bound reaches ``min_success`` (else the most robust one) and lands in ``result.json``.
+* a run with ``validation.replicas > 0`` validates its candidates after the search, into
+  ``result.json``, with the numbers a later call gives (deterministic on CPU), returning the
+  cheapest candidate whose lower bound reaches ``min_success`` (else the most robust one);
+  ``validation.replicas: 0`` (the default) turns it off.
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest
 
-from helpers import realize_result
+from helpers import compose_config, realize_result
+from realize.app.run_config import build_run_spec
+from realize.config import ConfigError
 from realize.app.candidate_validation import pick_candidates, validate_candidates, wilson_interval
 from realize.run_dir.history import History
 
@@ -44,21 +48,26 @@ def test_candidates_are_the_cheapest_distinct_feasible_samples_of_the_last_itera
     assert len(pick_candidates(h, 2, iterations=1)) == 2
 
 
-def test_candidate_validation_is_deterministic_and_written(tmp_path: Path) -> None:
+def test_a_run_validates_its_candidates_after_the_search_deterministically(tmp_path: Path) -> None:
     run = tmp_path / "run"
-    realize_result("ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=3", "logging.rerun=false",
-                   "logging.progress=false", run_dir=run)
-    a = validate_candidates(run, candidates=2, replicas=3, min_success=0.5, seed=4, write=False)
-    b = validate_candidates(run, candidates=2, replicas=3, min_success=0.5, seed=4)
-    da, db = a.to_dict(), b.to_dict()
-    da.pop("wall_time_s"), db.pop("wall_time_s")
-    assert da == db  # same run, same seed: same replicas, same numbers
-    assert len(a.candidates) == 2 and a.candidates[0].cost <= a.candidates[1].cost
-    above = [j for j, c in enumerate(a.candidates) if c.ci95[0] >= 0.5]
+    res = realize_result("ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=3", "logging.rerun=false",
+                         "logging.progress=false", "validation.replicas=3", "validation.candidates=2",
+                         "validation.min_success=0.5", run_dir=run)
+    saved = res["validation"]
+    again = validate_candidates(run, candidates=2, replicas=3, min_success=0.5, seed=3, write=False).to_dict()
+    saved.pop("wall_time_s"), again.pop("wall_time_s")
+    assert json.loads(json.dumps(again)) == saved  # the run's stage and a later call: the same replicas, numbers
+    cands = saved["candidates"]
+    assert len(cands) == 2 and cands[0]["cost"] <= cands[1]["cost"] and res["best_cost"] == cands[0]["cost"]
+    above = [j for j, c in enumerate(cands) if c["ci95"][0] >= 0.5]
     if above:
-        assert a.returned == above[0] and a.reason == "cheapest above min_success"
+        assert saved["returned"] == above[0] and saved["reason"] == "cheapest above min_success"
     else:
-        best = max(c.success_share for c in a.candidates)
-        assert a.candidates[a.returned].success_share == best and a.reason == "most robust"
-    saved = json.loads((run / "result.json").read_text())["validation"]
-    assert saved["returned"] == b.returned and len(saved["candidates"]) == 2
+        assert cands[saved["returned"]]["success_share"] == max(c["success_share"] for c in cands)
+        assert saved["reason"] == "most robust"
+
+
+def test_validation_is_off_by_default_and_checked() -> None:
+    assert build_run_spec(compose_config()).validation.replicas == 0
+    with pytest.raises(ConfigError, match="validation.min_success"):
+        build_run_spec(compose_config("validation.min_success=1.5"))

@@ -32,7 +32,8 @@ from realize.app.workers.errors import WorkerFailed
 
 __all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
 
-CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "experiment")
+CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation",
+                 "experiment")
 
 
 class SweepJobConfigError(CompactHydraException):

@@ -286,10 +286,30 @@ class _Assembly:
             status, exit_code, n_done = end.status, end.exit_code, end.iterations
         report = self.result.report
         feasible = bool(report.state.best_feasible)
+        if status == "done" and feasible and spec.validation is not None and spec.validation.replicas > 0:
+            self._validate()
         outcome = RunOutcome(run_dir, status, feasible, report.state.best_cost if feasible else math.inf, n_done,
                              self.clock.wall(), exit_code)
         self._print(outcome, report)
         return outcome
+
+    def _validate(self) -> None:
+        """``validation``: the run's candidates under the task's perturbations, into result.json
+        (after the search: a failure here is logged and leaves the run's results as they are)."""
+        from realize.app.candidate_validation import validate_candidates
+        from realize.app.replay import ReplayError
+
+        v = self.spec.validation
+        try:
+            rep = validate_candidates(self.run_dir, v.candidates, v.replicas, min_success=v.min_success,
+                                      iterations=v.iterations, seed=self.spec.seed)
+        except (ReplayError, ConfigError) as e:
+            log.warning("validation skipped: %s", e)
+            return
+        c = rep.candidates[rep.returned]
+        print(f"validation: {len(rep.candidates)} candidate(s) x {rep.replicas} replicas; returned {rep.returned} "
+              f"(cost {c.cost:.0f}, success {c.success_share:.2f}, 95 % [{c.ci95[0]:.2f}, {c.ci95[1]:.2f}], "
+              f"{rep.reason}); {rep.wall_time_s:.1f} s", flush=True)
 
     def _print(self, o: RunOutcome, report: SearchReport) -> None:
         spec = self.spec

@@ -1,7 +1,7 @@
 """The edge between Hydra and the library: a whole run config, checked once into a ``RunSpec``.
 
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
-the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers`` and the top-level keys
+the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers``, ``validation`` and the top-level keys
 ``seed``, ``device``, ``resume``, ``task_file``, ``task_origin``, ``replan_from``, ``replan``) and returns a
 ``RunSpec`` of validated objects (``TaskSpec`` (a replan's: the remaining actions, ``realize.app.replan``), ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
@@ -50,7 +50,7 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
 
 __all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
-GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers")
+GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",
                             "replan")
 DEVICES = ("auto", "cpu", "cuda")
@@ -123,6 +123,7 @@ class RunSpec:
     candidates: list[TaskSpec] = field(default_factory=list)
     budget: HalvingBudget | None = None
     warm_start: str | None = None  # an earlier run directory the search starts from (realize.search.warm_start)
+    validation: Any = None  # realize.app.candidate_validation.ValidationSettings (None: off)
     # replan_from: the plan's remaining actions from a given state (realize.app.replan); None otherwise
     replan: ReplanSpec | None = None
 
@@ -205,6 +206,12 @@ def _read_rollout(d: Any) -> Any:
         raise ConfigError(msg if msg.startswith("controller") else f"controller: {msg}") from None
 
 
+def _read_validation(d: Any) -> Any:
+    from realize.app.candidate_validation import ValidationSettings  # lazily: it pulls in replay
+
+    return ValidationSettings.from_mapping(d)
+
+
 def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
@@ -279,4 +286,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         budget=budget,
         warm_start=keys.warm_start,
         replan=replan,
+        validation=_read_validation(d.get("validation")),
     )
