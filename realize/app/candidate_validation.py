@@ -8,7 +8,7 @@ nominal cost, success share, 95 % Wilson interval (``wilson_interval``), failure
 the mean cost of its successful replicas. The plan to return is the cheapest candidate whose
 interval's lower bound is at least ``min_success``, else the most robust one (highest success
 share, then cheapest). ``write`` stores it in ``result.json`` under ``validation``.
-``ValidationSettings`` (the Hydra ``validation`` group) runs it after a run's search
+``realize.app.run_config.ValidationSettings`` (the Hydra ``validation`` group) runs it after a run's search
 (``realize.app.run``; ``validation.replicas=0``, the default, turns it off).
 What it doesn't: run inside the search, or change ``best_z`` (the nominal best stays the
 search's; ``validation.returned`` names the plan to execute).
@@ -27,28 +27,14 @@ import numpy as np
 import torch
 
 from realize.app.replay import ReplayError, saved_plan
-from realize.config import Settings, setting
 from realize.app.validation import replica_spec, simulate_replicas
 from realize.run_dir.directory import RunDir
 from realize.tasks.perturbation import Perturbation
 
-__all__ = ["ValidationSettings", "CandidateResult", "CandidatesReport", "wilson_interval", "pick_candidates",
+__all__ = ["CandidateResult", "CandidatesReport", "wilson_interval", "pick_candidates",
            "validate_candidates"]
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
-
-
-@dataclass
-class ValidationSettings(Settings):
-    """The Hydra ``validation`` group: validate the run's candidates after its search
-    (``realize.app.run``); ``replicas: 0`` turns it off."""
-
-    config_key = "validation"
-
-    replicas: int = setting(0, ge=0)  # R replicas of the task's perturbations per candidate (0: off)
-    candidates: int = setting(5, ge=1)  # K cheapest distinct feasible samples of the last iterations
-    min_success: float = setting(0.9, ge=0, le=1)  # return the cheapest whose 95 % lower bound reaches this
-    iterations: int = setting(3, ge=1)  # the last iterations the candidates come from
 
 
 def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:

@@ -48,7 +48,7 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
     from realize.world.state import SceneState
     from realize.tasks.spec import TaskSpec
 
-__all__ = ["LoggingSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
+__all__ = ["LoggingSettings", "ValidationSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",
@@ -102,6 +102,19 @@ class Placement:
 
 
 @dataclass
+class ValidationSettings(Settings):
+    """Hydra ``validation`` group: validate the run's candidates after its search
+    (``realize.app.candidate_validation``, called by ``realize.app.run``); ``replicas: 0`` turns it off."""
+
+    config_key = "validation"
+
+    replicas: int = setting(0, ge=0)  # R replicas of the task's perturbations per candidate (0: off)
+    candidates: int = setting(5, ge=1)  # K cheapest distinct feasible samples of the last iterations
+    min_success: float = setting(0.9, ge=0, le=1)  # return the cheapest whose 95 % lower bound reaches this
+    iterations: int = setting(3, ge=1)  # the last iterations the candidates come from
+
+
+@dataclass
 class RunSpec:
     """One run, validated. ``config`` is the plain resolved mapping it was built from."""
 
@@ -123,7 +136,7 @@ class RunSpec:
     candidates: list[TaskSpec] = field(default_factory=list)
     budget: HalvingBudget | None = None
     warm_start: str | None = None  # an earlier run directory the search starts from (realize.search.warm_start)
-    validation: Any = None  # realize.app.candidate_validation.ValidationSettings (None: off)
+    validation: ValidationSettings | None = None  # after the search (realize.app.candidate_validation); None: off
     # replan_from: the plan's remaining actions from a given state (realize.app.replan); None otherwise
     replan: ReplanSpec | None = None
 
@@ -206,12 +219,6 @@ def _read_rollout(d: Any) -> Any:
         raise ConfigError(msg if msg.startswith("controller") else f"controller: {msg}") from None
 
 
-def _read_validation(d: Any) -> Any:
-    from realize.app.candidate_validation import ValidationSettings  # lazily: it pulls in replay
-
-    return ValidationSettings.from_mapping(d)
-
-
 def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
@@ -286,5 +293,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         budget=budget,
         warm_start=keys.warm_start,
         replan=replan,
-        validation=_read_validation(d.get("validation")),
+        validation=ValidationSettings.from_mapping(d.get("validation")),
     )
