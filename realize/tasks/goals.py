@@ -85,9 +85,7 @@ def object_at_distance(p: Tensor, region: Region, tol: float) -> Tensor:
         c = torch.tensor(region.value[:k], dtype=q.dtype, device=q.device)
         return ((q - c).norm(dim=1) - tol).clamp(min=0.0).to(p)
     assert isinstance(region, Box)
-    lo = torch.tensor(region.low[:k], dtype=q.dtype, device=q.device) - tol
-    hi = torch.tensor(region.high[:k], dtype=q.dtype, device=q.device) + tol
-    return (torch.maximum(torch.minimum(q, hi), lo) - q).norm(dim=1).to(p)
+    return base_rectangle_distance(q, [v - tol for v in region.low[:k]], [v + tol for v in region.high[:k]]).to(p)
 
 
 def object_at(p: Tensor, speed: Tensor, region: Region, tol: float, rest_speed: float = REST_SPEED) -> Tensor:
@@ -103,7 +101,8 @@ def base_in_rectangle(xy: Tensor, low: Sequence[float], high: Sequence[float], t
 
 
 def base_rectangle_distance(xy: Tensor, low: Sequence[float], high: Sequence[float]) -> Tensor:
-    """(N,) distance (m) of base positions ``xy`` (N, 2) from the rectangle ``low``..``high``."""
+    """(N,) distance (m) of points ``xy`` (N, k) from the axis-aligned box ``low``..``high`` (k values
+    each; the base's (x, y) and a 2-D rectangle, or an object's centre and a 3-D box)."""
     lo = torch.tensor(low, dtype=xy.dtype, device=xy.device)
     hi = torch.tensor(high, dtype=xy.dtype, device=xy.device)
     return (torch.maximum(torch.minimum(xy, hi), lo) - xy).norm(dim=1)

@@ -61,6 +61,11 @@ def wrap_angle(a: Tensor) -> Tensor:
     return torch.remainder(a + math.pi, 2.0 * math.pi) - math.pi
 
 
+def _point_coord_names(dim: int) -> tuple[str, ...]:
+    """x, y, z for points of up to 3 columns, else z0, z1, ..."""
+    return ("x", "y", "z")[:dim] if dim <= 3 else tuple(f"z{i}" for i in range(dim))
+
+
 class Region(ABC):
     """One parameter region h(z) <= 0 in R^dim; all methods are batched over rows."""
 
@@ -217,7 +222,7 @@ class Box(Region, Settings):
 
     @property
     def coord_names(self) -> tuple[str, ...]:
-        return ("x", "y", "z")[: self.dim] if self.dim <= 3 else tuple(f"z{i}" for i in range(self.dim))
+        return _point_coord_names(self.dim)
 
     def _lh(self, like: Tensor) -> tuple[Tensor, Tensor]:
         return (
@@ -281,7 +286,7 @@ class Fixed(Region, Settings):
 
     @property
     def coord_names(self) -> tuple[str, ...]:
-        return ("x", "y", "z")[: self.dim] if self.dim <= 3 else tuple(f"z{i}" for i in range(self.dim))
+        return _point_coord_names(self.dim)
 
     def _v(self, like: Tensor) -> Tensor:
         return torch.tensor(self.value, dtype=like.dtype, device=like.device)

@@ -90,7 +90,10 @@ class SceneGeometry:
 
     def object_index(self, name: str) -> int:
         """Position of object ``name`` in ``objects`` (the m axis of the scene's (N, m, ...) reads)."""
-        return self.object_names.index(self.object(name).name)
+        names = self.object_names
+        if name not in names:
+            raise KeyError(f"scene has no object named {name!r}; objects: {list(names)}")
+        return names.index(name)
 
     @property
     def floor_objects(self) -> tuple[Box, ...]:
