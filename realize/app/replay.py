@@ -13,6 +13,14 @@ How it hooks into the rollout without copying it: the video writer is a step hoo
 ``PlanRealizer.rollout`` runs unchanged, for every scene variant (the scene picks its task).
 A top-k run (``task.planner.top_k > 1``) replays its leading candidate (the winner once
 decided): ``best_z`` belongs to that candidate's plan and parameters.
+
+Which parameters: a run whose ``result.json`` holds a candidate validation (``validation`` with
+``candidates`` and ``returned``, ``realize.app.candidate_validation``) returns the plan
+``validation.candidates[returned].z``, and ``replay`` runs that one (``returned_z``; its saved
+cost is that candidate's nominal cost; in a top-k run the candidates come from the leader's
+history, so they share ``best_z``'s plan). ``nominal=True`` replays the search's nominal
+``best_z`` instead, as does a run without that block (or with a single-plan ``validation``).
+``ReplayReport.plan`` and ``.candidate`` say which ran; ``best_z_rows(run)`` stays ``best_z``.
 What it doesn't: search (``realize.app.run``), perturb anything (``realize.app.validation``), or write
 to the run directory.
 
@@ -29,10 +37,11 @@ and gets the run's cost bit for bit; ``cost_diff`` reports either.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -51,9 +60,12 @@ from realize.scene import Camera, EnvOptions
 from realize.world.state import SceneState, save_state
 
 __all__ = [
-    "ReplayError", "VideoRecorder", "VideoReport", "ReplayReport",
-    "saved_plan", "build_replay_spec", "video_camera", "best_z_rows", "replay",
+    "ReplayError", "VideoRecorder", "VideoReport", "ReplayReport", "PlanChoice",
+    "saved_plan", "returned_z", "build_replay_spec", "video_camera", "best_z_rows", "replay",
 ]
+
+NOMINAL = "best_z"  # PlanChoice.source of the search's nominal best
+RETURNED = "validation.returned"  # PlanChoice.source of the plan the candidate validation returns
 
 
 class ReplayError(ValueError):
@@ -72,6 +84,52 @@ def saved_plan(run_dir: str | Path) -> BestPlan:
         return RunDir(run_dir).best_plan()
     except RunDirError as e:
         raise ReplayError(str(e)) from None
+
+
+@dataclass(frozen=True)
+class PlanChoice:
+    """The parameter vector a replay runs: ``source`` is ``"validation.returned"`` (``candidate``
+    indexes ``validation.candidates``) or ``"best_z"``; ``cost`` is the search's cost of it, and
+    ``why`` one line on the choice."""
+
+    z: list[float]
+    cost: float
+    source: str
+    candidate: int | None
+    why: str
+
+
+def returned_z(run: BestPlan, nominal: bool = False) -> PlanChoice:
+    """The plan the run returns: ``validation.candidates[validation.returned]`` of its
+    ``result.json`` when it holds a candidate validation, else (or with ``nominal``) ``best_z``.
+    ``ReplayError`` (naming the file; ``nominal=True`` goes around it) if that block is malformed."""
+    best = PlanChoice(list(run.best_z), run.best_cost, NOMINAL, None, "")
+    if nominal:
+        return dataclasses.replace(best, why="the search's nominal best_z, as asked")
+    d = RunDir(run.run_dir).result_json() or {}
+    v = d.get("validation")
+    if not isinstance(v, Mapping) or "returned" not in v or "candidates" not in v:
+        what = "no validation" if not isinstance(v, Mapping) else "a single-plan validation (no returned)"
+        return dataclasses.replace(best, why=f"the search's nominal best_z (result.json holds {what})")
+    where = f"{run.run_dir / RESULT_FILE}: validation"
+    cands, i = v["candidates"], v["returned"]
+    if not isinstance(cands, list) or isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(cands):
+        n = len(cands) if isinstance(cands, list) else 0
+        raise ReplayError(f"{where}: returned = {i!r} does not index its {n} candidates "
+                          "(nominal=True / --nominal replays best_z)")
+    c = cands[i]
+    z = c.get("z") if isinstance(c, Mapping) else None
+    if (not isinstance(z, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in z)
+            or len(z) != len(run.best_z)):
+        raise ReplayError(f"{where}: candidates[{i}].z is not {len(run.best_z)} numbers like best_z "
+                          "(nominal=True / --nominal replays best_z)")
+    cost = c.get("cost")
+    cost = float(cost) if isinstance(cost, (int, float)) and not isinstance(cost, bool) else math.inf
+    share = c.get("success_share")
+    tail = f", success {share:.2f}" if isinstance(share, (int, float)) else ""
+    return PlanChoice([float(x) for x in z], cost, RETURNED, i,
+                      f"validation candidate {i} of {len(cands)} (nominal cost {cost:.0f}{tail}; "
+                      f"{v.get('reason', '?')})")
 
 
 def build_replay_spec(run: BestPlan, backend: str = "cpu") -> RunSpec:
@@ -145,6 +203,9 @@ class ReplayReport:
     state_out: str | None = None  # where that state was written
     exact: ShardReplay | None = None  # the best sample re-run in its shard (cost, feasible, failure are its)
     notes: list[str] | None = None  # e.g. the run's task file has changed since (its own copy was used)
+    plan: str = NOMINAL  # which z ran: "validation.returned" or "best_z" (PlanChoice.source)
+    candidate: int | None = None  # its index into validation.candidates
+    plan_note: str = ""  # PlanChoice.why
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -154,8 +215,12 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
            width: int | None = 960, height: int | None = 720, eye: Sequence[float] | None = None,
            target: Sequence[float] | None = None, task_camera: bool = False, backend: str = "cpu",
            hold_s: float = 1.0, state_at: int | None = None, state_out: str | Path | None = None,
-           exact: bool = False, overview: bool = False) -> ReplayReport:
-    """Re-simulate the run's best plan in one copy; with ``video`` write an MP4 of it.
+           exact: bool = False, overview: bool = False, nominal: bool = False) -> ReplayReport:
+    """Re-simulate the run's plan in one copy; with ``video`` write an MP4 of it.
+
+    The plan is the one the run returns (``returned_z``: its validation's returned candidate
+    if it has one, else ``best_z``); ``nominal=True`` replays ``best_z``. The report's
+    ``saved_cost`` is the search's cost of the plan that ran.
 
     The video shows every ``every``-th control step at ``fps`` frames per second (the control
     rate is ``sim.control_freq``: at 20 Hz, ``every=2, fps=20`` plays at twice real time), then
@@ -178,6 +243,8 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
 
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
+    choice = returned_z(run, nominal)
+    run = dataclasses.replace(run, best_z=choice.z, best_cost=choice.cost)  # the plan to run, everywhere below
     spec = build_replay_spec(run, backend)
     if (state_at is None) != (state_out is None):
         raise ReplayError("state_at and state_out go together: the action to capture and the file to write")
@@ -199,7 +266,7 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
             raise ReplayError(str(e)) from None
         if video is None and state_at is None:
             return _report(run, spec, shard.cost, shard.feasible, shard.failure, shard.steps, spec.placement.backend,
-                           t0, shard=shard, notes=notes)
+                           t0, shard=shard, notes=notes, choice=choice)
     captured: list[SceneState] = []
     options = EnvOptions()
     recorder = None
@@ -247,15 +314,15 @@ def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float =
         save_state(captured[0], state_out)
     if shard is not None:
         return _report(run, spec, shard.cost, shard.feasible, shard.failure, shard.steps, scene.backend, t0,
-                       video=vid, state_at=state_at, state_out=state_out, shard=shard, notes=notes)
+                       video=vid, state_at=state_at, state_out=state_out, shard=shard, notes=notes, choice=choice)
     return _report(run, spec, float(res.cost[0]), bool(res.feasible[0]), res.failure[0], int(res.steps[0]),
-                   scene.backend, t0, video=vid, state_at=state_at, state_out=state_out, notes=notes)
+                   scene.backend, t0, video=vid, state_at=state_at, state_out=state_out, notes=notes, choice=choice)
 
 
 def _report(run: BestPlan, spec: RunSpec, cost: float, feasible: bool, failure: str, steps: int, backend: str,
             t0: float, *, video: VideoReport | None = None, state_at: int | None = None,
             state_out: str | Path | None = None, shard: ShardReplay | None = None,
-            notes: list[str] | None = None) -> ReplayReport:
+            notes: list[str] | None = None, choice: PlanChoice | None = None) -> ReplayReport:
     saved = run.best_cost if math.isfinite(run.best_cost) else None
     diff = None if saved is None else cost - saved
     return ReplayReport(
@@ -264,4 +331,6 @@ def _report(run: BestPlan, spec: RunSpec, cost: float, feasible: bool, failure: 
         steps=steps, n_envs_run=run.n_envs, backend=backend,
         wall_time_s=time.perf_counter() - t0, video=video, state_at=state_at,
         state_out=None if state_out is None else str(state_out), exact=shard, notes=notes or None,
+        plan=NOMINAL if choice is None else choice.source, candidate=None if choice is None else choice.candidate,
+        plan_note="" if choice is None else choice.why,
     )
