@@ -21,6 +21,9 @@ stepped by one call. ``realize.scene.BatchedScene`` hides which of the two is us
 wants the same initial state for every sample): each object's xy offset by up to
 ``object_xy_noise`` m and its yaw by up to ``object_yaw_noise`` rad (objects standing on the floor keep their pose; an object on
 another object stays above its top), and the robot's start xy by up to ``robot_xy_noise`` m.
+``reset(options=dict(offsets=...))`` gives each copy its own offsets instead of random ones
+(``robot_xy`` (N, 2); ``object_xy`` {name: (N, 2)}, ``object_yaw`` {name: (N,)}, copies in
+``BatchedScene`` order): the perturbed worlds of ``realize.tasks.worlds``.
 
 **Success conditions** (``evaluate``): the ``goal`` kwarg, written as a task config's goal
 (``realize.tasks.goal_spec``; ``base_in: exit`` is the exit rectangle); by default every object
@@ -290,6 +293,8 @@ class RealizePickPlaceEnv(BaseEnv):
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         g = self.geometry
         randomize = bool(options.get("randomize", False))
+        # explicit per-copy offsets (realize.tasks.worlds via BatchedScene.set_worlds) replace the random draws
+        offsets = options.get("offsets")
         names = list(self.agents[0].robot.active_joints_map.keys())
         rest = [self.robot_spec.rest_value(n) for n in names]
         ix, iy, iyaw = (names.index(j) for j in self.robot_spec.base.joints)
@@ -299,15 +304,21 @@ class RealizePickPlaceEnv(BaseEnv):
             b = len(env_idx)
             for c, agent in enumerate(self.agents):
                 off = torch.tensor(self.offsets[c], dtype=torch.float32)
+                copies = env_idx.cpu() * self.n_tiles + c  # this tile's copies (CPU: tile c; GPU: env_idx)
                 qpos = torch.tensor(rest, dtype=torch.float32).repeat(b, 1)
                 start = torch.tensor(g.robot_start[:2], dtype=torch.float32).repeat(b, 1)
-                if randomize:
+                if offsets is not None:
+                    start = start + offsets["robot_xy"][copies].to(start)
+                elif randomize:
                     start = start + (torch.rand(b, 2) * 2 - 1) * self.robot_xy_noise
                 poses = {}
                 for o in g.objects:  # objects on the floor (a stick) always start at their configured pose
                     xy = torch.tensor(o.position[:2], dtype=torch.float32).repeat(b, 1) + off
                     yaw = torch.full((b,), o.yaw)
-                    if randomize and o.rests_on != FLOOR:
+                    if offsets is not None:
+                        xy = xy + offsets["object_xy"][o.name][copies].to(xy)
+                        yaw = yaw + offsets["object_yaw"][o.name][copies].to(yaw)
+                    elif randomize and o.rests_on != FLOOR:
                         xy = xy + (torch.rand(b, 2) * 2 - 1) * self.object_xy_noise
                         yaw = yaw + (torch.rand(b) * 2 - 1) * self.object_yaw_noise
                     poses[o.name] = (xy, yaw)

@@ -1,15 +1,18 @@
-"""Validation replicas: re-simulate a run's best plan K times at once under small perturbations
-and write the success share into RUN_DIR/result.json under `validation`.
+"""Validation replicas: re-simulate the plan a run returns K times at once under small perturbations
+and write the success share into RUN_DIR/result.json under `plan_validation` (the plan: the one
+the run's candidate validation returned, else best_z; --nominal: best_z). With --candidates K:
+validate the run's K best distinct plans and pick the one to return, into `validation`.
 
 Usage: python scripts/validate.py RUN_DIR [--replicas 16] [--seed 0] [--friction LOW HIGH|none]
             [--mass LOW HIGH|none] [--no-randomize] [--object-noise M] [--object-yaw RAD] [--robot-noise M]
-            [--no-track] [--candidates K [--min-success P]]
+            [--no-track] [--nominal] [--candidates K [--min-success P]]
             [--backend cpu|gpu|auto] [--dry-run] [--json]
 
 Perturbations: the run task's perturbation model (``perturbation`` in its task config,
 realize/tasks/perturbation.py: each object's xy and yaw where it rests, the robot start's xy,
 each object's friction and mass scaled per replica by factors drawn uniformly from their ranges;
-CPU backend for friction and mass), any field overridden by the flags (``none``: unchanged).
+CPU backend for friction and mass), any field overridden by the flags (``none``: unchanged);
+replica r meets the r-th world of ``realize.tasks.worlds.draw_worlds(model, objects, K, seed)``.
 """
 
 from __future__ import annotations
@@ -59,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
                          "and name the one to return (realize/app/candidate_validation.py)")
     ap.add_argument("--min-success", type=float, default=0.9,
                     help="with --candidates: return the cheapest plan whose 95%% lower bound reaches this (default 0.9)")
+    ap.add_argument("--nominal", action="store_true",
+                    help="validate the search's nominal best_z, not the plan the run's validation returned")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
     ap.add_argument("--dry-run", action="store_true", help="report only, leave result.json unchanged")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -72,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.candidates is not None:
             return _candidates(args, track, overrides)
         rep = validate(args.run_dir, args.replicas, args.seed, backend=args.backend, write=not args.dry_run,
-                       track_objects=track, **overrides)
+                       track_objects=track, nominal=args.nominal, **overrides)
     except (ReplayError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -80,14 +85,15 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rep.to_dict(), indent=2))
     else:
         ok = round(rep.success_share * rep.replicas)
-        print(f"validation ({rep.backend}, seed {rep.seed}): {ok}/{rep.replicas} replicas reach the goal "
+        which = rep.plan + ("" if rep.candidate is None else f" [{rep.candidate}]")
+        print(f"validation of {which} ({rep.backend}, seed {rep.seed}): {ok}/{rep.replicas} replicas reach the goal "
               f"(success share {rep.success_share:.2f})")
         for reason, n in rep.failures.items():
             print(f"  {n:3d} x {reason}")
         if rep.cost_mean is not None:
             print(f"cost of the successful replicas {rep.cost_mean:.1f} +- {rep.cost_std:.1f} "
-                  f"(result.json best_cost {rep.saved_cost})")
-        print(f"wall time {rep.wall_time_s:.1f} s" + ("" if args.dry_run else f"; wrote validation to "
+                  f"(the plan's search cost {rep.saved_cost})")
+        print(f"wall time {rep.wall_time_s:.1f} s" + ("" if args.dry_run else f"; wrote plan_validation to "
                                                        f"{args.run_dir / 'result.json'}"))
     return 0
 

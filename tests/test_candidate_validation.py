@@ -43,7 +43,7 @@ def test_candidates_are_the_cheapest_distinct_feasible_samples_of_the_last_itera
                  success_share=float(np.mean(ok)), best_cost=min(c for c, f in zip(cost, ok) if f),
                  mean=np.zeros(2), std=np.ones(2))
     got = pick_candidates(h, 4, iterations=2)
-    assert [(z.tolist(), c, i) for z, c, i in got] == [([6, 6], 70.0, 2), ([4, 4], 80.0, 1), ([5, 5], 85.0, 2),
+    assert [(z.tolist(), c, i) for z, c, i, _ in got] == [([6, 6], 70.0, 2), ([4, 4], 80.0, 1), ([5, 5], 85.0, 2),
                                                        ([3, 3], 90.0, 1)]
     assert len(pick_candidates(h, 2, iterations=1)) == 2
 

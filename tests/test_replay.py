@@ -102,7 +102,7 @@ def test_randomized_reset_and_friction_per_copy() -> None:
 def test_validation_writes_result_json(run_dir: Path) -> None:
     rep = validate(run_dir, replicas=4, seed=3, friction=(0.8, 1.2))
     doc = json.loads((run_dir / RESULT_FILE).read_text())
-    v = doc["validation"]
+    v = doc["plan_validation"]
     assert v["replicas"] == 4 and v["seed"] == 3 and 0.0 <= v["success_share"] <= 1.0
     assert v["success_share"] == rep.success_share
     assert sum(v["failures"].values()) == round(4 * (1 - v["success_share"]))
@@ -125,15 +125,21 @@ def test_push_scene_gets_its_camera_and_noise(tmp_path: Path, monkeypatch: pytes
 
     opened, noise = realizers.open_realization, []
 
-    def open_and_note(*args, **kwargs):  # the noise the task that validation built reads back
+    def open_and_note(*args, **kwargs):  # the task that validation built and the worlds its copies meet
         scene, rs = opened(*args, **kwargs)
-        noise.append((scene.u.unwrapped.spec.id, scene.object_xy_noise, scene.robot_xy_noise))
+        w = kwargs.get("worlds")
+        if w is None:  # the replay below: the task's own world
+            return scene, rs
+        k = {n: i for i, n in enumerate(w.names)}
+        noise.append((scene.u.unwrapped.spec.id, float(np.abs(w.object_xy[:, k["cube"]]).max()),
+                      float(np.abs(w.object_xy[:, k["stick"]]).max()), float(np.abs(w.robot_xy).max())))
         return scene, rs
 
     monkeypatch.setattr(realizers, "open_realization", open_and_note)
     rep = validate(d, replicas=2, seed=1, friction=(1.0, 1.0), object_xy=0.004, robot_xy=0.01, write=False)
     assert (rep.perturbation["object_xy"], rep.perturbation["robot_xy"]) == (0.004, 0.01)
-    assert noise == [("RealizeMoveAndPush-v1", 0.004, 0.01)]
+    [(task_id, cube_xy, stick_xy, robot_xy)] = noise
+    assert task_id == "RealizeMoveAndPush-v1" and 0 < cube_xy <= 0.004 and stick_xy == 0.0 and 0 < robot_xy <= 0.01
     assert set(rep.friction) == {"stick", "cube"}  # no friction range: every object keeps its own
     assert rep.friction["stick"] == [0.8, 0.8] and rep.friction["cube"] == [1.0, 1.0]
     out = tmp_path / "push.mp4"

@@ -21,6 +21,7 @@ from realize.config import ConfigError
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene
 from realize.tasks.perturbation import Perturbation
+from realize.tasks.worlds import draw_worlds
 from realize.world.state import ObjectPose
 
 pytestmark = pytest.mark.usefixtures("torch_single_thread")
@@ -60,9 +61,8 @@ def test_perturbation_model_from_the_task_config() -> None:
 def test_friction_and_mass_factors_reach_each_copy() -> None:
     spec = build_run_spec(compose_config())
     model = Perturbation(friction=(0.5, 1.5), mass=(0.5, 2.0))
-    f_friction, f_mass = model.draw_factors(("cube",), 3, np.random.default_rng(7))
-    again = model.draw_factors(("cube",), 3, np.random.default_rng(7))
-    assert np.array_equal(f_friction["cube"], again[0]["cube"]) and np.array_equal(f_mass["cube"], again[1]["cube"])
+    w = draw_worlds(model, spec.geometry.objects, 3, seed=7)
+    f_friction, f_mass = {"cube": w.friction[:, 0]}, {"cube": w.mass[:, 0]}
     with BatchedScene(3, spec.geometry_cfg, spec.sim) as scene:
         scene.set_object_friction("cube", f_friction["cube"])
         masses = scene.set_object_mass("cube", f_mass["cube"])

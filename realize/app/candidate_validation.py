@@ -1,17 +1,20 @@
-"""Validate a run's K cheapest distinct plans under the task's perturbations and pick the one to return.
+"""Validate a run's K best distinct plans under the task's perturbations and pick the one to return.
 
 What it does: ``validate_candidates`` takes, from the run's history (the lead candidate's in a
-top-k run), the K cheapest distinct feasible samples of its last ``iterations`` iterations,
-re-simulates each R times at once in one scene of K x R copies under the task's perturbation
-model (``realize.app.validation.simulate_replicas``), and reports for every candidate its
-nominal cost, success share, 95 % Wilson interval (``wilson_interval``), failure reasons and
-the mean cost of its successful replicas. The plan to return is the cheapest candidate whose
-interval's lower bound is at least ``min_success``, else the most robust one (highest success
-share, then cheapest). ``write`` stores it in ``result.json`` under ``validation``.
-``realize.app.run_config.ValidationSettings`` (the Hydra ``validation`` group) runs it after a run's search
-(``realize.app.run``; ``validation.replicas=0``, the default, turns it off).
+top-k run), the K cheapest distinct feasible samples of its last ``iterations`` iterations (a
+robust search's: by success share over its worlds first, then cost), re-simulates each in the
+same R worlds (``realize.tasks.worlds.draw_worlds`` of the task's perturbation model, on the
+validation stream: other worlds than the search's) and once in the unperturbed world, all in one
+scene of K x (R + 1) copies (``realize.app.validation.simulate_worlds``), and reports for every
+candidate its search cost, nominal cost (re-simulated), success share, 95 % Wilson interval
+(``wilson_interval``), failure reasons and the mean cost of its successful replicas. The plan
+to return is the cheapest candidate whose interval's lower bound is at least ``min_success``,
+else the most robust one (highest success share, then cheapest). ``write`` stores it in
+``result.json`` under ``validation``. ``realize.app.run_config.ValidationSettings`` (the Hydra
+``validation`` group) runs it after a run's search (``realize.app.run``; ``validation.replicas=0``
+turns it off).
 What it doesn't: run inside the search, or change ``best_z`` (the nominal best stays the
-search's; ``validation.returned`` names the plan to execute).
+search's; ``validation.returned`` names the plan to execute: replay runs it).
 """
 
 from __future__ import annotations
@@ -27,7 +30,8 @@ import numpy as np
 import torch
 
 from realize.app.replay import ReplayError, saved_plan
-from realize.app.validation import replica_spec, simulate_replicas
+from realize.app.validation import replica_spec, simulate_worlds
+from realize.tasks.worlds import draw_worlds
 from realize.run_dir.directory import RunDir
 from realize.tasks.perturbation import Perturbation
 
@@ -55,6 +59,8 @@ class CandidateResult:
     ci95: tuple[float, float]
     failures: dict[str, int]
     cost_mean: float | None  # over its successful replicas
+    nominal_cost: float | None = None  # re-simulated in the unperturbed world (None: it failed there)
+    search_share: float | None = None  # a robust search's success share over its worlds (ce.replicas > 1)
 
 
 @dataclass
@@ -70,27 +76,31 @@ class CandidatesReport:
     ci95: tuple[float, float]
     backend: str
     wall_time_s: float
+    leader: int | None = None  # a top-k run: the candidate plan whose history the candidates came from
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
-def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndarray, float, int]]:
-    """The ``k`` cheapest distinct feasible samples of the last ``iterations`` iterations of a
-    ``History``: (z, cost, iteration), cheapest first (ties: the later iteration first)."""
-    rows: list[tuple[float, int, np.ndarray]] = []
+def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndarray, float, int, float | None]]:
+    """The ``k`` best distinct feasible samples of the last ``iterations`` iterations of a
+    ``History``: (z, cost, iteration, share), cheapest first (ties: the later iteration first).
+    A robust search's history (``share``: each sample's success share over its worlds) ranks
+    by share first, then cost, as the search did; ``share`` is None otherwise."""
+    rows: list[tuple[float, float, int, np.ndarray]] = []
     n = len(history)
     for i in range(max(0, n - iterations), n):
         it = history.per_iter[i]
         ok = np.asarray(it["feasible"], dtype=bool)
-        for z, c in zip(np.asarray(it["Z"])[ok], np.asarray(it["cost"])[ok]):
-            rows.append((float(c), -i, z))
-    rows.sort(key=lambda r: (r[0], r[1]))
-    out: list[tuple[np.ndarray, float, int]] = []
-    for c, neg_i, z in rows:
+        share = np.asarray(it["share"], dtype=np.float64) if "share" in it else np.full(len(ok), np.nan)
+        for z, c, sh in zip(np.asarray(it["Z"])[ok], np.asarray(it["cost"])[ok], share[ok]):
+            rows.append((-float(sh) if np.isfinite(sh) else 0.0, float(c), -i, z))
+    rows.sort(key=lambda r: (r[0], r[1], r[2]))
+    out: list[tuple[np.ndarray, float, int, float | None]] = []
+    for neg_share, c, neg_i, z in rows:
         if any(np.array_equal(z, o[0]) for o in out):
             continue
-        out.append((z, c, -neg_i))
+        out.append((z, c, -neg_i, -neg_share if "share" in history.per_iter[-neg_i] else None))
         if len(out) == k:
             break
     return out
@@ -119,17 +129,27 @@ def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int 
     if not picked:
         raise ReplayError(f"{run.run_dir}: no feasible sample in its last {iterations} iteration(s) to validate")
     spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
-    Z = torch.tensor(np.repeat(np.stack([z for z, _, _ in picked]), replicas, axis=0), dtype=torch.float64)
-    res, _, _, used_backend = simulate_replicas(spec, Z, model, seed)
-    ok = res.feasible.numpy().reshape(len(picked), replicas)
-    cost = res.cost.numpy().astype(np.float64).reshape(len(picked), replicas)
+    k = len(picked)
+    # world 0 is the unperturbed one (each candidate's nominal cost, one copy each, after the
+    # replicas); worlds 1..R are the perturbed ones, the same for every candidate
+    worlds = draw_worlds(model, spec.geometry.objects, replicas + 1, seed, nominal_first=True)
+    rows = np.concatenate([np.tile(np.arange(1, replicas + 1), k), np.zeros(k, dtype=np.int64)])
+    zs = np.stack([z for z, _, _, _ in picked])
+    Z = torch.tensor(np.concatenate([np.repeat(zs, replicas, axis=0), zs]), dtype=torch.float64)
+    res, used_backend = simulate_worlds(spec, Z, worlds.select(rows))
+    n = k * replicas
+    ok = res.feasible.numpy()[:n].reshape(k, replicas)
+    cost = res.cost.numpy().astype(np.float64)[:n].reshape(k, replicas)
+    nominal_ok, nominal_cost = res.feasible.numpy()[n:], res.cost.numpy().astype(np.float64)[n:]
     out = []
-    for j, (z, c, it) in enumerate(picked):
+    for j, (z, c, it, share) in enumerate(picked):
         fails = Counter(f for f in res.failure[j * replicas:(j + 1) * replicas] if f)
         good = cost[j][ok[j]]
         out.append(CandidateResult(z=[float(v) for v in z], cost=c, iteration=it, success_share=float(ok[j].mean()),
                                    ci95=wilson_interval(int(ok[j].sum()), replicas), failures=dict(sorted(fails.items())),
-                                   cost_mean=float(good.mean()) if len(good) else None))
+                                   cost_mean=float(good.mean()) if len(good) else None,
+                                   nominal_cost=float(nominal_cost[j]) if nominal_ok[j] else None,
+                                   search_share=share))
     above = [j for j, r in enumerate(out) if r.ci95[0] >= min_success]
     if above:
         ret, reason = min(above, key=lambda j: (out[j].cost, j)), "cheapest above min_success"
@@ -138,7 +158,7 @@ def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int 
     report = CandidatesReport(replicas=replicas, min_success=float(min_success), seed=int(seed),
                               perturbation=model.to_dict(), candidates=out, returned=ret, reason=reason,
                               success_share=out[ret].success_share, ci95=out[ret].ci95, backend=used_backend,
-                              wall_time_s=time.perf_counter() - t0)
+                              wall_time_s=time.perf_counter() - t0, leader=lead)
     if write:
         rd.add_to_result("validation", report.to_dict())
     return report

@@ -310,6 +310,13 @@ class _Assembly:
         print(f"validation: {len(rep.candidates)} candidate(s) x {rep.replicas} replicas; returned {rep.returned} "
               f"(cost {c.cost:.0f}, success {c.success_share:.2f}, 95 % [{c.ci95[0]:.2f}, {c.ci95[1]:.2f}], "
               f"{rep.reason}); {rep.wall_time_s:.1f} s", flush=True)
+        if self.spec.logging.rerun:
+            from realize.recording.validation_log import log_validation
+
+            try:
+                log_validation(self.run_dir, rep.to_dict())
+            except Exception as e:  # a recording must not fail a run whose results are written
+                log.warning("validation.rrd not written: %s", e)
 
     def _print(self, o: RunOutcome, report: SearchReport) -> None:
         spec = self.spec

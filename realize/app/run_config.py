@@ -248,6 +248,9 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
             raise ConfigError("task: no task given (choose task=<name> or task_file=<path.yaml>)")
     planner = PlannerSettings.from_mapping(task_d.get("planner"), f"{source}:planner")
     check_halving_budget(planner, ce, source)  # before the planner runs
+    if ce.replicas > 1 and planner.top_k > 1:
+        raise ConfigError(f"ce.replicas = {ce.replicas}: a robust search realizes one plan; {source}:planner.top_k = "
+                          f"{planner.top_k} searches several (set one of them to 1)")
     if keys.warm_start is not None and planner.top_k > 1:
         raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
                           f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
@@ -266,7 +269,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     from realize.app.workers.blocks import shard_rows
 
     split = shardable(placement.backend)
-    n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if split else ce.n_envs))
+    n_shards = len(shard_rows(ce.n_envs, sim.shard_rows if split else ce.n_envs, ce.replicas))
     worker_count(workers, n_shards, split, cores=n_shards)  # refuses what cannot work
     budget = None
     if planner.top_k > 1:

@@ -1,14 +1,14 @@
 """Validation replicas: a run's best plan re-simulated K times at once under the task's perturbations.
 
 What it does: ``validate`` builds one batched scene of K copies of the run's world (the run's
-task, geometry, physics, controllers) whose every reset applies the task's perturbation model
-(``TaskSpec.perturbation``, ``realize.tasks.perturbation``: each object's xy and yaw, the robot
-start's xy; any field can be overridden), gives each copy's objects their own friction and
-mass (the configured values times factors drawn from the model's ranges, object by object in
-the scene's order; CPU backend), realizes the best plan in all K copies, and reports the share
-that reaches the goal, the failure reasons and the cost of the successful ones.
-``write_validation`` stores the report in ``result.json`` under ``validation`` (read, add the
-key, write back atomically).
+task, geometry, physics, controllers), copy ``k`` in the ``k``-th world drawn from the task's
+perturbation model (``TaskSpec.perturbation``; any field can be overridden) by
+``realize.tasks.worlds.draw_worlds``: each object's xy and yaw, the robot start's xy, each
+object's friction and mass (CPU backend), realizes the best plan in all K copies, and reports
+the share that reaches the goal, the failure reasons and the cost of the successful ones.
+``simulate_worlds`` (one scene, one world per copy) is shared with the candidates' validation.
+``write_validation`` stores the report in ``result.json`` under ``plan_validation`` (read, add
+the key, write back atomically; the run's own candidates block, ``validation``, stays).
 What it doesn't: search, replay one copy or record video (``realize.app.replay``), or perturb
 anything the model does not name. The K replicas are not bit-identical even without
 perturbations: each copy sits at its own tile offset (float32 rounding differs).
@@ -27,13 +27,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from realize.app.replay import ReplayError, best_z_rows, build_replay_spec, saved_plan
+from realize.app.replay import ReplayError, build_replay_spec, returned_z, saved_plan
 from realize.config import ConfigError
 from realize.tasks.perturbation import Perturbation
 from realize.run_dir.directory import RunDir
-from realize.scene import EnvOptions
+from realize.tasks.worlds import Worlds, draw_worlds
 
-__all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_replicas"]
+__all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_worlds", "PLAN_VALIDATION"]
 
 
 @dataclass
@@ -51,6 +51,8 @@ class ValidationReport:
     saved_cost: float | None
     backend: str
     wall_time_s: float
+    plan: str = "best_z"  # which plan: "best_z" or "validation.returned" (realize.app.replay.returned_z)
+    candidate: int | None = None  # its index in the run's validation candidates
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -58,13 +60,15 @@ class ValidationReport:
 
 def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
              perturbation: Perturbation | None = None, backend: str = "cpu", write: bool = True,
-             track_objects: bool | None = None, **overrides: Any) -> ValidationReport:
-    """Re-simulate the best plan ``replicas`` times at once under perturbations; report the share
-    that reaches the goal and (``write``) store it in ``result.json`` under ``validation``.
+             track_objects: bool | None = None, nominal: bool = False, **overrides: Any) -> ValidationReport:
+    """Re-simulate the plan the run returns (``realize.app.replay.returned_z``: its candidate
+    validation's returned plan, else ``best_z``; ``nominal``: ``best_z``) ``replicas`` times at
+    once under perturbations; report the share that reaches the goal and (``write``) store it in
+    ``result.json`` under ``plan_validation`` (``validation`` is the run's candidates block).
 
     Perturbations: ``perturbation`` (None: the run task's model) with ``overrides`` of its fields
-    (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the reset randomization is seeded with
-    ``seed``, the friction and mass factors are drawn from ``numpy.random.default_rng(seed)``.
+    (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the worlds are
+    ``realize.tasks.worlds.draw_worlds(model, objects, replicas, seed)``.
     ``track_objects``: override the run's ``controller.track_objects`` (None: the run's).
     """
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
@@ -72,15 +76,21 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
-    res, friction, mass, used_backend = simulate_replicas(spec, best_z_rows(run, replicas), model, seed)
+    worlds = draw_worlds(model, spec.geometry.objects, replicas, seed)
+    plan = returned_z(run, nominal)
+    res, used_backend = simulate_worlds(spec, torch.tensor([plan.z] * replicas, dtype=torch.float64), worlds)
     ok = res.feasible.numpy()
     costs = res.cost.numpy().astype(np.float64)[ok]
+    objects = spec.geometry.objects
     report = ValidationReport(
         replicas=replicas, success_share=float(ok.mean()),
         failures=dict(sorted(Counter(f for f in res.failure if f).items())), seed=int(seed),
-        perturbation=model.to_dict(), track_objects=spec.rollout.track_objects, friction=friction, mass=mass,
+        perturbation=model.to_dict(), track_objects=spec.rollout.track_objects,
+        friction={o.name: (o.friction * worlds.friction[:, k]).tolist() for k, o in enumerate(objects)},
+        mass={o.name: (o.mass * worlds.mass[:, k]).tolist() for k, o in enumerate(objects)},
         cost_mean=float(costs.mean()) if len(costs) else None, cost_std=float(costs.std()) if len(costs) else None,
-        saved_cost=run.best_cost if math.isfinite(run.best_cost) else None, backend=used_backend, wall_time_s=time.perf_counter() - t0,
+        saved_cost=plan.cost if math.isfinite(plan.cost) else None, backend=used_backend,
+        wall_time_s=time.perf_counter() - t0, plan=plan.source, candidate=plan.candidate,
     )
     if write:
         write_validation(run.run_dir, report)
@@ -101,29 +111,19 @@ def replica_spec(run: Any, backend: str, perturbation: Perturbation | None, trac
     return spec, model
 
 
-def simulate_replicas(spec: Any, Z: torch.Tensor, model: Perturbation, seed: int
-                      ) -> tuple[Any, dict[str, list[float]], dict[str, list[float]], str]:
-    """Realize the rows of ``Z`` (one per copy) in one scene whose every reset draws from
-    ``model`` (seeded with ``seed``) and whose objects get friction and mass factors from
-    ``numpy.random.default_rng(seed)``: (rollout result, friction and mass per object and copy,
-    the backend)."""
+def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds) -> tuple[Any, str]:
+    """Realize the rows of ``Z`` (one per copy) in one scene whose copy ``k`` is the world
+    ``worlds[k]``: (rollout result, the backend)."""
     from realize.app.realizers import open_realization
 
-    n = Z.shape[0]
-    options = EnvOptions(object_xy_noise=model.object_xy, object_yaw_noise=model.object_yaw,
-                         robot_xy_noise=model.robot_xy, randomize_resets=model.moves_start)
-    scene, (realizer,) = open_realization(spec, n_envs=n, env=options, seed=seed)
+    scene, (realizer,) = open_realization(spec, n_envs=Z.shape[0], worlds=worlds)
     with scene:
-        f_friction, f_mass = model.draw_factors(scene.object_names, n, np.random.default_rng(seed))
-        # a [1, 1] range leaves the simulator untouched (the configured values, bit for bit)
-        friction = {o.name: (scene.set_object_friction(o.name, f_friction[o.name]).tolist()
-                             if model.friction != (1.0, 1.0) else [o.friction] * n)
-                    for o in scene.geometry.objects}
-        mass = {o.name: (scene.set_object_mass(o.name, f_mass[o.name]).tolist()
-                         if model.mass != (1.0, 1.0) else [o.mass] * n) for o in scene.geometry.objects}
-        return realizer.rollout(Z), friction, mass, scene.backend
+        return realizer.rollout(Z), scene.backend
+
+
+PLAN_VALIDATION = "plan_validation"  # result.json's key of a one-plan validation
 
 
 def write_validation(run_dir: str | Path, report: ValidationReport) -> None:
-    """Add ``validation`` to ``RUN_DIR/result.json`` (re-read just before, written atomically)."""
-    RunDir(run_dir).add_to_result("validation", report.to_dict())
+    """Add ``plan_validation`` to ``RUN_DIR/result.json`` (re-read just before, written atomically)."""
+    RunDir(run_dir).add_to_result(PLAN_VALIDATION, report.to_dict())

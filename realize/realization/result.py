@@ -43,6 +43,9 @@ class RolloutResult:
     wall_time_s: float = 0.0
     sim_steps: int = 0
     horizon_cost: float = math.nan  # cost of a plan cut by the horizon: max steps + final cost
+    share: Tensor | None = None  # robust search: each sample's success share over its worlds
+    world_cost: Tensor | None = None  # robust search: (N, R) each sample's cost in each world
+    world_feasible: Tensor | None = None  # robust search: (N, R) its success in each world
 
     def ordinary(self) -> RolloutResult:
         """A copy whose tensors are ordinary ones (a rollout runs in inference mode, whose tensors
@@ -53,7 +56,8 @@ class RolloutResult:
     def to_eval(self) -> EvalResult:
         return EvalResult(cost=self.cost.double(), feasible=self.feasible, progress=self.progress.double(),
                           distance=self.distance.double(),
-                          failure_cost=self.horizon_cost if math.isfinite(self.horizon_cost) else None)
+                          failure_cost=self.horizon_cost if math.isfinite(self.horizon_cost) else None,
+                          share=self.share)
 
 
 class TrajectoryRecorder:

@@ -147,7 +147,10 @@ class BatchedScene(ObjectProperties):
         with every target holding (not counted in ``step_count``): the closed fingers then press
         on it, and the contact forces that ``holds`` reads exist before the first action asks."""
         self._frozen.zero_()
-        self.env.reset(seed=seed, options=dict(randomize=randomize or self.options.randomize_resets))
+        options: dict[str, Any] = dict(randomize=randomize or self.options.randomize_resets)
+        if self._reset_offsets is not None:
+            options["offsets"] = self._reset_offsets
+        self.env.reset(seed=seed, options=options)
         self._impl.after_reset()
         if state is not None:
             self._restore(state)

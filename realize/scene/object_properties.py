@@ -2,7 +2,8 @@
 
 What it does: ``ObjectProperties``, a part of ``realize.scene.BatchedScene``: each copy's
 friction and mass of an object by name (scaled from its configured value by per-copy factors,
-once per scene: validation's perturbations), a push (one copy's object given a velocity: copies
+once per scene: validation's perturbations), the perturbed worlds of every copy
+(``set_worlds``: reset offsets, friction and mass; robust search and validation), a push (one copy's object given a velocity: copies
 are independent) and a teleport of every copy's object (where does an object dropped here end
 up?). Each goes through the backend's ``PhysicsBackend`` contract.
 What it doesn't: read or step the simulation (``BatchedScene``), or draw the factors
@@ -12,13 +13,16 @@ What it doesn't: read or step the simulation (``BatchedScene``), or draw the fac
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
 from realize.config import ConfigError
 from realize.world.geometry import SceneGeometry
+
+if TYPE_CHECKING:
+    from realize.tasks.worlds import Worlds
 
 __all__ = ["ObjectProperties"]
 
@@ -31,6 +35,33 @@ class ObjectProperties:
     _impl: Any
     n_envs: int
     geometry: SceneGeometry
+
+    _reset_offsets: dict[str, Any] | None = None  # BatchedScene.reset passes it to the task's reset
+
+    def set_worlds(self, worlds: Worlds | None) -> None:
+        """Give copy ``k`` the world ``worlds[k]`` (``realize.tasks.worlds``; one entry per copy,
+        objects by name): from the next ``reset`` on, its start offsets (robot xy, each object's xy
+        and yaw) replace the task's reset noise, and its friction and mass factors are set now
+        (the simulator is left untouched where every factor is 1). ``None``: back to the task's
+        own resets (friction and mass stay as set)."""
+        if worlds is None:
+            self._reset_offsets = None
+            return
+        if len(worlds) != self.n_envs:
+            raise ConfigError(f"{len(worlds)} worlds for {self.n_envs} copies")
+        if set(worlds.names) != set(self.geometry.object_names):
+            raise ConfigError(f"worlds for objects {list(worlds.names)}, the scene has {list(self.geometry.object_names)}")
+        k = {n: i for i, n in enumerate(worlds.names)}
+        t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+        self._reset_offsets = {"robot_xy": t(worlds.robot_xy),
+                               "object_xy": {n: t(worlds.object_xy[:, i]) for n, i in k.items()},
+                               "object_yaw": {n: t(worlds.object_yaw[:, i]) for n, i in k.items()}}
+        if worlds.changes_friction:
+            for n, i in k.items():
+                self.set_object_friction(n, worlds.friction[:, i])
+        if worlds.changes_mass:
+            for n, i in k.items():
+                self.set_object_mass(n, worlds.mass[:, i])
 
     def object_index(self, name: str) -> int:  # pragma: no cover - BatchedScene's
         raise NotImplementedError

@@ -53,6 +53,9 @@ class EvalResult:
     ``distance`` are only used to rank infeasible samples and may be ``None``.
     ``failure_cost`` is what an infeasible sample costs for robust kNN scoring (e.g. the
     rollout's horizon); only read with ``knn_robust > 0`` and no ``CEConfig.failure_cost``.
+    ``share`` (N,) (robust search, ``realize.search.ce.risk``): each sample's success share over
+    its worlds; feasible samples then rank by share first, then cost. ``None``: share 1 for
+    every feasible sample.
     """
 
     cost: Tensor
@@ -60,6 +63,7 @@ class EvalResult:
     progress: Tensor | None = None
     distance: Tensor | None = None
     failure_cost: float | None = None
+    share: Tensor | None = None  # robust search: each sample's success share over its worlds
 
     def to_cpu(self, n: int, dtype: torch.dtype) -> EvalResult:
         """Validate shapes against ``n`` and return a CPU copy in ``dtype`` (bool feasibility)."""
@@ -78,6 +82,7 @@ class EvalResult:
             progress=None if self.progress is None else vec(self.progress, "progress", dtype),
             distance=None if self.distance is None else vec(self.distance, "distance", dtype),
             failure_cost=self.failure_cost,
+            share=None if self.share is None else vec(self.share, "share", dtype),
         )
 
 

@@ -77,6 +77,9 @@ class CheckpointSink:
                 "action_success": res.action_success,
                 "goal": res.goal,
                 "steps": res.steps,
+                "share": rec.share,  # robust search only (None values are not stored)
+                "world_cost": res.world_cost,
+                "world_feasible": res.world_feasible,
             },
             n_envs=rec.n_envs,
             success_share=rec.success_share,

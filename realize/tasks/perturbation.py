@@ -10,9 +10,9 @@ default, so a task without the key gets the seed world's model) says, per replic
   * ``friction`` and ``mass`` ``[low, high]``: every object's friction and mass times a factor
     ``U(low, high)``, drawn object by object (``[1, 1]``: unchanged; CPU backend only, PhysX GPU
     fixes materials and masses when the scene is built).
-The start-state part reaches the ManiSkill task as its reset noise (``env_options``); the
-factors are drawn by ``draw_factors`` from one seeded generator, so a replica set repeats.
-Validation (``realize.app.validation``, ``scripts/validate.py``) reads it from the run's task.
+``realize.tasks.worlds.draw_worlds`` draws worlds from it (one seeded generator, so a set of
+worlds repeats); the robust search (``ce.replicas``), the validation of a run's candidates and
+``scripts/validate.py`` all read it from the run's task.
 What it doesn't: apply anything to a simulator (``realize.scene.BatchedScene`` does), or decide
 how many replicas run (callers do).
 """
@@ -23,7 +23,6 @@ import math
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
-import numpy as np
 
 from realize.config import Settings, setting
 
@@ -54,18 +53,6 @@ class Perturbation(Settings):
     @property
     def moves_start(self) -> bool:
         return self.object_xy > 0 or self.object_yaw > 0 or self.robot_xy > 0
-
-    def draw_factors(self, names: list[str] | tuple[str, ...], replicas: int,
-                     rng: np.random.Generator) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """(friction, mass) factors per object name, (replicas,) each: friction for every object
-        first, then mass, object by object (a range of [1, 1] draws nothing)."""
-        out = []
-        for lo, hi in (self.friction, self.mass):
-            if lo == hi == 1.0:
-                out.append({n: np.ones(replicas) for n in names})
-            else:
-                out.append({n: rng.uniform(lo, hi, size=replicas) for n in names})
-        return out[0], out[1]
 
 
 NONE = Perturbation(object_xy=0.0, object_yaw=0.0, robot_xy=0.0, friction=(1.0, 1.0), mass=(1.0, 1.0))

@@ -48,16 +48,20 @@ class RowBlock:
         return f"rows {self.first}-{self.stop - 1} of {self.total}"
 
 
-def split_rows(total: int, n: int) -> list[RowBlock]:
-    """``n`` contiguous blocks covering ``0 .. total - 1``, sizes differing by at most one."""
-    if not 1 <= n <= total:
-        raise ValueError(f"cannot split {total} rows into {n} blocks (need 1 <= n <= rows)")
-    return [RowBlock(s.start, s.stop, total) for s in deal_rows(total, n)]
+def split_rows(total: int, n: int, unit: int = 1) -> list[RowBlock]:
+    """``n`` contiguous blocks covering ``0 .. total - 1``, sizes differing by at most one
+    ``unit`` (each a whole number of units)."""
+    if not 1 <= n <= total // unit:
+        raise ValueError(f"cannot split {total} rows into {n} blocks of whole {unit}-row units")
+    return [RowBlock(s.start, s.stop, total) for s in deal_rows(total, n, unit)]
 
 
-def shard_rows(n: int, rows: int) -> list[RowBlock]:
-    """The shards of ``n`` copies with at most ``rows`` copies each."""
-    return split_rows(n, -(-n // rows))
+def shard_rows(n: int, rows: int, unit: int = 1) -> list[RowBlock]:
+    """The shards of ``n`` copies with at most ``rows`` copies each, each a whole number of
+    ``unit``-copy samples (a robust search's sample fills ``unit`` = ``ce.replicas`` copies; a
+    shard holds one sample at least)."""
+    groups = n // unit
+    return split_rows(n, -(-groups // max(1, rows // unit)), unit)
 
 
 def group_shards(shards: Sequence[RowBlock], n_workers: int) -> list[list[RowBlock]]:
@@ -66,13 +70,17 @@ def group_shards(shards: Sequence[RowBlock], n_workers: int) -> list[list[RowBlo
     return [list(shards[g.first:g.stop]) for g in groups]
 
 
-def deal_rows(m: int, n_shards: int) -> list[slice]:
+def deal_rows(m: int, n_shards: int, unit: int = 1) -> list[slice]:
     """The rows of an ``m``-row batch each of ``n_shards`` shards realizes: contiguous, in order,
-    sizes differing by at most one (empty where ``m < n_shards``)."""
-    base, extra = divmod(m, n_shards)
+    sizes differing by at most one ``unit`` (whole units; empty where there are fewer units than
+    shards). ``unit``: the copies of one sample (``ce.replicas``), which stay in one shard, each
+    at its world's copy (``realize.tasks.worlds.Worlds.tile``)."""
+    if m % unit:
+        raise ValueError(f"a batch of {m} rows is not a whole number of {unit}-row samples")
+    base, extra = divmod(m // unit, n_shards)
     out, first = [], 0
     for k in range(n_shards):
-        stop = first + base + (1 if k < extra else 0)
+        stop = first + (base + (1 if k < extra else 0)) * unit
         out.append(slice(first, stop))
         first = stop
     return out
@@ -84,9 +92,9 @@ def check_batch(Z: Tensor, n_envs: int) -> None:
         raise ValueError(f"{Z.shape[0]} samples but the run has only {n_envs} copies (ce.n_envs)")
 
 
-def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]]) -> list[list[Tensor]]:
+def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]], unit: int = 1) -> list[list[Tensor]]:
     """Per worker (a group of consecutive shards), the parts of ``Z`` its shards realize."""
-    parts = [Z[s] for s in deal_rows(Z.shape[0], sum(len(g) for g in groups))]
+    parts = [Z[s] for s in deal_rows(Z.shape[0], sum(len(g) for g in groups), unit)]
     out, k = [], 0
     for g in groups:
         out.append(parts[k:k + len(g)])

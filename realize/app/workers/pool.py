@@ -4,7 +4,8 @@ What it does: ``RolloutPool`` is what the loop talks to (``rollout(candidate, Z,
 ``close``, ``n_envs``, ``backend``, ``n_workers``); ``open_pool(spec, tasks, log_dir)`` cuts the
 run's copies into shards (``sim.shard_rows``, CPU backend; one scene on GPU), decides the
 worker count (``workers``) and opens the shards in this process (``InProcessPool``, one worker)
-or in worker processes (``realize.app.workers.process``) or Ray actors (``realize.app.workers.ray_pool``).
+or in worker processes (``realize.app.workers.process``) or Ray actors (``realize.app.workers.ray_pool``);
+a robust search's pool (``ce.replicas > 1``) is wrapped in ``realize.app.workers.replicas.ReplicaPool``.
 What it doesn't: simulate (``realize.app.workers.worker``), or know the search.
 """
 
@@ -60,7 +61,8 @@ class InProcessPool:
 
     def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
         check_batch(Z, self.n_envs)
-        return self.worker.rollout(candidate, [Z[s] for s in deal_rows(Z.shape[0], len(self.worker.shards))], record)
+        parts = [Z[s] for s in deal_rows(Z.shape[0], len(self.worker.shards), self.worker.unit)]
+        return self.worker.rollout(candidate, parts, record)
 
     def close(self) -> None:
         self.worker.close()
@@ -77,7 +79,7 @@ def run_shards(spec: RunSpec, n_envs: int | None = None) -> list[RowBlock]:
     from realize.scene.backends import shardable
 
     n = spec.ce.n_envs if n_envs is None else n_envs
-    return shard_rows(n, spec.sim.shard_rows if shardable(spec.placement.backend) else n)
+    return shard_rows(n, spec.sim.shard_rows if shardable(spec.placement.backend) else n, spec.ce.replicas)
 
 
 def _process_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], log_dir: Path | None) -> RolloutPool:
@@ -131,5 +133,11 @@ def open_pool(spec: RunSpec, tasks: Sequence[TaskSpec] | None = None, *, log_dir
     tasks = [spec.task] if tasks is None else list(tasks)
     shards = run_shards(spec, n_envs)
     if not shardable(spec.placement.backend):
-        return InProcessPool(spec, tasks, shards)
-    return _OPENERS[spec.workers.backend](spec, tasks, shards, log_dir)
+        pool: RolloutPool = InProcessPool(spec, tasks, shards)
+    else:
+        pool = _OPENERS[spec.workers.backend](spec, tasks, shards, log_dir)
+    if spec.ce.replicas > 1:  # robust search: each sample in ce.replicas worlds, folded back to one row
+        from realize.app.workers.replicas import ReplicaPool
+
+        return ReplicaPool(pool, spec.ce.replicas, spec.ce.risk, spec.ce.cvar_alpha)
+    return pool

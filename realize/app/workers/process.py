@@ -154,6 +154,7 @@ class ProcessPool:
                  physx_threads: int | None, log_dir: Path | None = None, start_timeout_s: float = 600.0) -> None:
         self.groups = [list(g) for g in groups]
         self.n_envs = self.groups[-1][-1].stop
+        self.unit = spec.ce.replicas  # a robust search's sample: its copies stay in one shard
         self.n_workers = len(self.groups)
         self._spec, self._tasks, self._threads = spec, list(tasks), physx_threads
         self._log_dir, self._timeout = log_dir, start_timeout_s
@@ -255,7 +256,7 @@ class ProcessPool:
         """Realize the ``M <= n_envs`` rows of ``Z``: each worker its shards' rows, joined in order."""
         check_batch(Z, self.n_envs)
         t0 = time.perf_counter()
-        per_worker = worker_parts(Z.detach().cpu(), self.groups)
+        per_worker = worker_parts(Z.detach().cpu(), self.groups, self.unit)
         jobs = {k: parts for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
         for k, parts in jobs.items():
             _send(self.slots[k].conn, ("rollout", candidate, parts, record))

@@ -233,6 +233,7 @@ class RayPool:
         self._ray = ray = _ray()
         self.groups = [list(g) for g in groups]
         self.n_envs = self.groups[-1][-1].stop
+        self.unit = spec.ce.replicas  # a robust search's sample: its copies stay in one shard
         self.n_workers = len(self.groups)
         self.log_location = "each actor's worker-*.err in its node's Ray session logs (/tmp/ray/session_latest/logs)"
         self._timeout = settings.start_timeout_s
@@ -347,7 +348,7 @@ class RayPool:
         ray = self._ray
         check_batch(Z, self.n_envs)
         t0 = time.perf_counter()
-        per_worker = worker_parts(Z.detach().cpu(), self.groups)
+        per_worker = worker_parts(Z.detach().cpu(), self.groups, self.unit)
         # each part copied out of Z: a view would send Z's whole storage to every actor
         jobs = {k: [p.clone() for p in parts] for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
         pending = {self.slots[k].actor.rollout.remote(candidate, parts, record): k for k, parts in jobs.items()}

@@ -16,11 +16,12 @@ import torch
 
 from realize.config import ConfigError, Settings, setting
 
-__all__ = ["CEConfig", "FALLBACKS", "SCHEDULES", "DTYPES"]
+__all__ = ["CEConfig", "FALLBACKS", "SCHEDULES", "DTYPES", "RISKS"]
 
 FALLBACKS = ("progress", "feasible_only", "keep")
 SCHEDULES = ("constant", "linear")
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
+RISKS = ("mean", "cvar")
 
 
 @dataclass
@@ -54,6 +55,12 @@ class CEConfig(Settings):
     from that run's final distribution, its std times ``warm_widen``, with a share
     ``warm_uniform_share`` of uniform samples so that a changed world is still explored.
 
+    Robust search (``replicas`` = R > 1, ``realize.search.ce.risk``): each sample is realized in
+    R perturbed worlds (the task's perturbation model; the same R worlds for every sample of the
+    run), so an iteration draws ``n_envs / R`` samples (the budget counts copies). Samples rank
+    by their success share over the worlds first, then by ``risk`` of their successful worlds'
+    costs: ``"mean"``, or ``"cvar"`` (the mean of the worst ``cvar_alpha`` share of them).
+
     ``dtype``: the search's bookkeeping dtype (sampling, ranking, refits). ``keep_samples``:
     keep each iteration's ``Z`` in its record.
     """
@@ -80,6 +87,9 @@ class CEConfig(Settings):
     warm_uniform_share: float = setting(0.2, ge=0, lt=1, help="warm start: share of iteration 0 drawn uniformly")
     dtype: str = setting("float64", choices=tuple(DTYPES))
     keep_samples: bool = True
+    replicas: int = setting(1, ge=1, help="robust search: each sample in this many perturbed worlds (1 = off)")
+    risk: str = setting("mean", choices=RISKS, help="robust search: a sample's cost over its successful worlds")
+    cvar_alpha: float = setting(0.25, gt=0, le=1, help="risk=cvar: the share of worst successful worlds averaged")
 
     def check(self, where: str) -> None:
         if self.schedule == "linear":
@@ -115,12 +125,31 @@ class CEConfig(Settings):
                 f"{where}.n_modes ({self.n_modes}) must be <= {where}.n_elite ({self.n_elite}): "
                 "each mode is fitted to a cluster of elites"
             )
-        n_min, i_min = min((self.n_envs_at(i), i) for i in range(self.iterations))
+        n_min, i_min = min((self.samples_at(i), i) for i in range(self.iterations))
         if self.knn_robust > n_min:
             raise ConfigError(
                 f"{where}.knn_robust ({self.knn_robust}) must be <= the number of samples at every iteration "
                 f"(only {n_min} at iteration {i_min})"
             )
+        if self.replicas > 1:
+            self._check_replicas(where)
+
+    def _check_replicas(self, where: str) -> None:
+        R = self.replicas
+        for key in ("n_envs", "n_envs_end"):
+            v = getattr(self, key)
+            if v is not None and v % R:
+                raise ConfigError(f"{where}.{key} = {v} is invalid with {where}.replicas = {R}: the copies "
+                                  f"({where}.{key}) must be a multiple of the worlds each sample meets")
+        n_min = min(self.samples_at(i) for i in range(self.iterations))
+        if self.n_elite > n_min:
+            raise ConfigError(f"{where}.n_elite = {self.n_elite} is invalid with {where}.replicas = {R}: only "
+                              f"{n_min} samples ({where}.n_envs / {where}.replicas) in an iteration")
+
+    def samples_at(self, iteration: int) -> int:
+        """Samples drawn at ``iteration``: the copies ``n_envs_at(iteration)`` over ``replicas``
+        (robust search: each sample fills ``replicas`` copies, one per world)."""
+        return self.n_envs_at(iteration) // self.replicas
 
     def n_envs_at(self, iteration: int) -> int:
         """Number of samples drawn at ``iteration`` (0-based) under the schedule."""

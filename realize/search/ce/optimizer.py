@@ -156,7 +156,7 @@ class CrossEntropyOptimizer:
         if self._pending is None:
             t0 = time.perf_counter()
             s = self._state
-            Z = self._sample(self.config.n_envs_at(s.iteration))
+            Z = self._sample(self.config.samples_at(s.iteration))
             drawn = Batch(Z, None, _clone(s.mean), _clone(s.std), _clone(s.weights))
             self._pending = (drawn, t0)
         b = self._pending[0]
@@ -174,7 +174,7 @@ class CrossEntropyOptimizer:
         cfg, s = self.config, self._state
         n = Z.shape[0]
         r = result.to_cpu(n, self.dtype)
-        order = rank_samples(r.cost, r.feasible, r.progress, r.distance)
+        order = rank_samples(r.cost, r.feasible, r.progress, r.distance, r.share)
         best_order = order  # the true best single sample comes first here
         n_feas = int(r.feasible.sum())
         robust = None
@@ -206,7 +206,7 @@ class CrossEntropyOptimizer:
             mean=_clone(s.mean),
             std=_clone(s.std),
             n_feasible=n_feas,
-            success_share=n_feas / n,
+            success_share=n_feas / n if r.share is None else float(r.share.mean()),
             best_cost=s.best_cost if s.best_feasible else math.inf,
             iteration_best_cost=float(feas_cost.min()) if n_feas else math.inf,
             elite_cost_min=float(elite_feas.min()) if elite_feas.numel() else math.nan,
@@ -218,6 +218,7 @@ class CrossEntropyOptimizer:
             weights=_clone(s.weights),
             best_idx=int(best_order[0]),
             robust_cost=robust,
+            share=None if r.share is None else r.share.clone(),
         )
         s.iteration += 1
         s.rng_state = self._gen.get_state()
@@ -333,19 +334,23 @@ class CrossEntropyOptimizer:
     def _update_best(self, Z: Tensor, r: EvalResult, top: int) -> None:
         """Keep the batch's best single sample if it beats the best of all iterations."""
         s = self._state
+        share = 1.0 if r.share is None else float(r.share[top])
         cand = sort_key(
             bool(r.feasible[top]),
             float(r.cost[top]),
             math.nan if r.progress is None else float(r.progress[top]),
             math.nan if r.distance is None else float(r.distance[top]),
+            share,
         )
-        if s.best_z is None or cand < sort_key(s.best_feasible, s.best_cost, s.best_progress, s.best_distance):
+        best = sort_key(s.best_feasible, s.best_cost, s.best_progress, s.best_distance, s.best_share)
+        if s.best_z is None or cand < best:
             s.best_z = Z[top].clone()
             s.best_cost = float(r.cost[top])
             s.best_feasible = bool(r.feasible[top])
             s.best_progress = math.nan if r.progress is None else float(r.progress[top])
             s.best_distance = math.nan if r.distance is None else float(r.distance[top])
             s.best_iteration = s.iteration
+            s.best_share = share
 
 
 def _clone(v: Tensor | None) -> Tensor | None:

@@ -1,8 +1,8 @@
 """Ranking a batch and choosing its elites; the single-normal refit and the kNN-robust score.
 
 What it does:
-  * ``rank_samples``: feasible rows by cost first, then infeasible rows by (progress desc,
-    distance asc, cost asc), stable; ``sort_key`` is the same order for one sample;
+  * ``rank_samples``: feasible rows by cost first (a robust search's: by success share over
+    its worlds, then cost), then infeasible rows by (progress desc, distance asc, cost asc), stable; ``sort_key`` is the same order for one sample;
   * ``robust_order``: with ``knn_robust = k > 0`` feasible rows are re-ranked by the mean cost
     of their ``k`` nearest samples (``knn_mean``, in the normalised space; an infeasible
     neighbour counts as the failure cost), infeasible rows keep the fallback order;
@@ -34,29 +34,34 @@ def stable_argsort(key: Tensor, order: Tensor) -> Tensor:
 
 
 def rank_samples(
-    cost: Tensor, feasible: Tensor, progress: Tensor | None = None, distance: Tensor | None = None
+    cost: Tensor, feasible: Tensor, progress: Tensor | None = None, distance: Tensor | None = None,
+    share: Tensor | None = None,
 ) -> Tensor:
-    """Indices ``(N,)`` best first: feasible rows by cost, then infeasible rows by
-    (progress desc, distance asc, cost asc). Ties keep the original order (stable)."""
+    """Indices ``(N,)`` best first: feasible rows by (share desc, cost asc), then infeasible rows
+    by (progress desc, distance asc, cost asc). Ties keep the original order (stable).
+    ``share`` (robust search's success share over worlds; ``None``: every feasible row 1)."""
     n = cost.shape[0]
     c = torch.nan_to_num(cost, nan=math.inf)
     zero = torch.zeros_like(c)
     p = zero if progress is None else torch.where(feasible, zero, -torch.nan_to_num(progress, nan=-math.inf))
     d = zero if distance is None else torch.where(feasible, zero, torch.nan_to_num(distance, nan=math.inf))
+    keys = [c, d, p]
+    if share is not None:
+        keys.append(torch.where(feasible, -share.to(c), zero))
     order = torch.arange(n)
-    for key in (c, d, p, (~feasible).to(torch.int8)):  # least significant first
+    for key in (*keys, (~feasible).to(torch.int8)):  # least significant first
         order = stable_argsort(key, order)
     return order
 
 
-def sort_key(feasible: bool, cost: float, progress: float, distance: float) -> tuple[float, ...]:
+def sort_key(feasible: bool, cost: float, progress: float, distance: float, share: float = 1.0) -> tuple[float, ...]:
     """Scalar lexicographic key matching ``rank_samples`` (smaller is better)."""
     c = math.inf if math.isnan(cost) else cost
     if feasible:
-        return (0.0, 0.0, 0.0, c)
+        return (0.0, -share, 0.0, 0.0, c)
     p = -math.inf if math.isnan(progress) else progress
     d = math.inf if math.isnan(distance) else distance
-    return (1.0, -p, d, c)
+    return (1.0, 0.0, -p, d, c)
 
 
 def knn_mean(X: Tensor, values: Tensor, k: int) -> Tensor:

@@ -65,6 +65,7 @@ class CEState:
     best_progress: float = -math.inf
     best_distance: float = math.inf
     best_iteration: int = -1
+    best_share: float = 1.0  # robust search: the best sample's success share over its worlds
     converged: bool = False
     weights: Tensor | None = None
 
@@ -83,6 +84,7 @@ class CEState:
             "best_progress": _f2j(self.best_progress),
             "best_distance": _f2j(self.best_distance),
             "best_iteration": self.best_iteration,
+            "best_share": _f2j(self.best_share),
             "converged": self.converged,
         }
         if self.weights is not None:
@@ -107,6 +109,7 @@ class CEState:
             best_progress=float(d.get("best_progress", -math.inf)),
             best_distance=float(d.get("best_distance", math.inf)),
             best_iteration=int(d.get("best_iteration", -1)),
+            best_share=float(d.get("best_share", 1.0)),
             converged=bool(d.get("converged", False)),
             weights=t(d.get("weights")),
         )
@@ -125,6 +128,7 @@ class CEState:
             best_progress=self.best_progress,
             best_distance=self.best_distance,
             best_iteration=self.best_iteration,
+            best_share=self.best_share,
             converged=self.converged,
             weights=_clone(self.weights),
         )
@@ -161,7 +165,9 @@ class IterationRecord:
     ``None``). ``best_idx`` is the batch's best single sample (feasible by cost, else the
     fallback order), which with ``knn_robust`` need not be ``elite_idx[0]``; ``robust_cost`` (N,)
     is the kNN score used to rank the feasible elites (``None`` when ``knn_robust`` is 0).
-    ``n_envs`` is the batch size (``CEConfig.n_envs_at(iteration)``).
+    ``n_envs`` is the batch size (``CEConfig.samples_at(iteration)``). A robust search
+    (``ce.replicas > 1``) keeps each sample's success share over its worlds in ``share`` (N,),
+    and ``success_share`` is then the share of successful copies (their mean).
     """
 
     iteration: int
@@ -189,6 +195,7 @@ class IterationRecord:
     weights: Tensor | None = None
     best_idx: int = -1
     robust_cost: Tensor | None = None
+    share: Tensor | None = None  # robust search: each sample's success share over its worlds
 
     def summary(self, candidate: int | None = None) -> IterationSummary:
         """This iteration's numbers without the per-sample tensors (``result.json``'s series and
