@@ -37,7 +37,8 @@ SAME = ("best_cost", "success_per_iter", "best_cost_per_iter", "best_z", "n_feas
 
 
 def run_once(workers: int, overrides: list[str], out: Path) -> dict:
-    cmd = [sys.executable, "-m", "realize", "experiment=seed_paper", f"workers.n={workers}", "logging.progress=false",
+    cmd = [sys.executable, "-m", "realize", "experiment=seed_paper", f"workers.n={workers}", "validation=off",
+           "logging.progress=false",
            "logging.rerun=false", *overrides, f"hydra.run.dir={out}"]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)

@@ -12,7 +12,8 @@ Perturbations: the run task's perturbation model (``perturbation`` in its task c
 realize/tasks/perturbation.py: each object's xy and yaw where it rests, the robot start's xy,
 each object's friction and mass scaled per replica by factors drawn uniformly from their ranges;
 CPU backend for friction and mass), any field overridden by the flags (``none``: unchanged);
-replica r meets the r-th world of ``realize.tasks.worlds.draw_worlds(model, objects, K, seed)``.
+replica r meets world r of ``realize.tasks.worlds.draw_worlds(model, objects, K + 1, seed, nominal_first=True)``
+(world 0: the unperturbed one), the worlds a run's candidates met for the same seed.
 """
 
 from __future__ import annotations

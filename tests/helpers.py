@@ -1,5 +1,6 @@
 """What several test files share (a plain module: pytest does not collect it; fixtures are in
-``conftest.py``): the app's composed config, the ``realize`` command in a subprocess, the tiny
+``conftest.py``): the app's composed config and the ``realize`` command in a subprocess (both
+with ``validation=off`` unless a test chooses a validation), the tiny
 run of the command tests, the seed task's known plans, the scripts as modules."""
 
 from __future__ import annotations
@@ -19,6 +20,15 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 # ------------------------------------------------------------------------------ config, command
+def quiet_validation(args: tuple[str, ...] | list[str]) -> list[str]:
+    """``validation=off`` first unless ``args`` choose a validation themselves: a run validates its
+    candidates by default (64 x 5 replicas), which the tests' small runs do not need; the tests of
+    validation ask for it."""
+    if any(str(a).lstrip("+~").startswith("validation") for a in args):
+        return []
+    return ["validation=off"]
+
+
 def compose_config(*overrides: str, cpu: bool = True, plain: bool = True, hydra_cfg: bool = False,
                    job_name: str = "tests") -> Any:
     """The app's config (``configs/config.yaml`` + defaults + ``overrides``), ``device=cpu``
@@ -30,7 +40,8 @@ def compose_config(*overrides: str, cpu: bool = True, plain: bool = True, hydra_
     from realize.paths import CONFIG_DIR
 
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name=job_name):
-        cfg = compose(config_name="config", overrides=[*(["device=cpu"] if cpu else []), *overrides],
+        cfg = compose(config_name="config", overrides=[*(["device=cpu"] if cpu else []), *quiet_validation(overrides),
+                                                       *overrides],
                       return_hydra_config=hydra_cfg)
     if not plain:
         return cfg
@@ -46,7 +57,7 @@ def realize_cli(*args: str, cwd: Path = REPO, timeout: float | None = None, env:
     added to the environment: the CompletedProcess (text output captured) after at most
     ``timeout`` s, or with ``background=True`` the running Popen (``popen``: stdout, stderr, ...)."""
     env = dict(os.environ, **(env or {}), PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    cmd = [sys.executable, "-m", "realize", *args]
+    cmd = [sys.executable, "-m", "realize", *quiet_validation(args), *args]
     if background:
         return subprocess.Popen(cmd, cwd=cwd, env=env, text=True, **popen)
     return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)

@@ -48,6 +48,15 @@ def test_candidates_are_the_cheapest_distinct_feasible_samples_of_the_last_itera
     assert len(pick_candidates(h, 2, iterations=1)) == 2
 
 
+def test_a_robust_searchs_candidates_rank_by_share_first() -> None:
+    h = History(["a"])
+    Z, cost, ok, share = [[0], [1], [2], [3]], [100.0, 200.0, 150.0, 50.0], [True, True, True, False], [0.5, 1.0, 1.0, 0.0]
+    h.append({"Z": np.array(Z, float), "cost": np.array(cost), "feasible": np.array(ok), "share": np.array(share)},
+             n_envs=4, success_share=0.625, best_cost=150.0, mean=np.zeros(1), std=np.ones(1))
+    got = pick_candidates(h, 3, iterations=1)
+    assert [(z.tolist(), c, sh) for z, c, _, sh in got] == [([2], 150.0, 1.0), ([1], 200.0, 1.0), ([0], 100.0, 0.5)]
+
+
 def test_a_run_validates_its_candidates_after_the_search_deterministically(tmp_path: Path) -> None:
     run = tmp_path / "run"
     res = realize_result("ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=3", "logging.rerun=false",

@@ -135,6 +135,7 @@ def test_a_robust_run_meets_its_worlds_and_repeats(tmp_path: Path) -> None:
     res = realize_result(*args, run_dir=tmp_path / "a")
     again = realize_result(*args, run_dir=tmp_path / "b")
     assert res["best_z"] == again["best_z"] and res["success_per_iter"] == again["success_per_iter"]
+    assert res["robust"]["replicas"] == 2 and res["robust"]["risk"] == "mean"
     with np.load(tmp_path / "a" / "history.npz") as h:
         assert h["Z_000"].shape[0] == 4 and h["share_000"].shape == (4,)
         wc = h["world_cost_000"]

@@ -65,7 +65,7 @@ __all__ = ["run", "RunOutcome", "RESUME_ALLOWED_PREFIXES"]
 log = logging.getLogger("realize")
 
 # overrides a resumed run accepts (everything else comes from the run's saved config)
-RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "workers.", "hydra.")
+RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "workers.", "hydra.", "validation")
 
 
 @dataclass
@@ -100,18 +100,18 @@ def plain_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequence[str]) -> dict[str, Any]:
-    """The config a resumed run uses: the saved one, with the current ``logging`` and ``workers``
-    groups (neither changes a run's numbers: a run may go on with other workers, e.g. on
-    another machine)."""
+    """The config a resumed run uses: the saved one, with the current ``logging``, ``workers``
+    and ``validation`` groups (none changes the search's numbers: a run may go on with other
+    workers, e.g. on another machine, and validate its candidates once it ends)."""
     extra = [o for o in overrides if not str(o).lstrip("+~").startswith(RESUME_ALLOWED_PREFIXES)]
     if extra:
         raise ConfigError(
             f"resume: a resumed run uses its saved config; drop the override(s) {extra} "
-            "(only logging.* and workers.* may change)"
+            "(only logging.*, workers.* and validation.* may change)"
         )
     cfg = dict(ckpt.config)
     cfg["resume"] = current.get("resume")
-    for group in ("logging", "workers"):
+    for group in ("logging", "workers", "validation"):
         if group in current:
             cfg[group] = current[group]
     return cfg
@@ -232,6 +232,9 @@ class _Assembly:
                           error=error, info=self.info, halving=report.halving)
         if spec.replan is not None:  # where this run replanned from
             doc.extra["replan"] = spec.replan.to_json(warm_start=self.info.warm_start)
+        if spec.ce.replicas > 1:  # a robust search: best_cost is the risk cost over the worlds
+            doc.extra["robust"] = {"replicas": spec.ce.replicas, "risk": spec.ce.risk, "cvar_alpha": spec.ce.cvar_alpha,
+                                   "best_share": report.state.best_share}
         return doc
 
     def _sinks(self, histories: dict[int | None, History], records: list[IterationSummary]) -> list[Sink]:

@@ -3,7 +3,8 @@
 What it does: ``validate`` builds one batched scene of K copies of the run's world (the run's
 task, geometry, physics, controllers), copy ``k`` in the ``k``-th world drawn from the task's
 perturbation model (``TaskSpec.perturbation``; any field can be overridden) by
-``realize.tasks.worlds.draw_worlds``: each object's xy and yaw, the robot start's xy, each
+``realize.tasks.worlds.draw_worlds`` (the worlds a run's candidates met for the same seed):
+each object's xy and yaw, the robot start's xy, each
 object's friction and mass (CPU backend), realizes the best plan in all K copies, and reports
 the share that reaches the goal, the failure reasons and the cost of the successful ones.
 ``simulate_worlds`` (one scene, one world per copy) is shared with the candidates' validation.
@@ -67,8 +68,9 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     ``result.json`` under ``plan_validation`` (``validation`` is the run's candidates block).
 
     Perturbations: ``perturbation`` (None: the run task's model) with ``overrides`` of its fields
-    (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the worlds are
-    ``realize.tasks.worlds.draw_worlds(model, objects, replicas, seed)``.
+    (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the worlds are worlds 1..R of
+    ``realize.tasks.worlds.draw_worlds(model, objects, replicas + 1, seed, nominal_first=True)``,
+    those the run's candidates were validated in for the same seed.
     ``track_objects``: override the run's ``controller.track_objects`` (None: the run's).
     """
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
@@ -76,7 +78,10 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
-    worlds = draw_worlds(model, spec.geometry.objects, replicas, seed)
+    # worlds 1..R of the draw the candidates' validation makes (its world 0 is the unperturbed one):
+    # the same seed puts a plan here in the worlds its run's candidates met
+    worlds = draw_worlds(model, spec.geometry.objects, replicas + 1, seed, nominal_first=True).select(
+        np.arange(1, replicas + 1))
     plan = returned_z(run, nominal)
     res, used_backend = simulate_worlds(spec, torch.tensor([plan.z] * replicas, dtype=torch.float64), worlds)
     ok = res.feasible.numpy()
