@@ -16,6 +16,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
 from realize.figures.fig2 import fig2  # noqa: E402
+from realize.figures.common import report_written  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,13 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="PNG path (the CSV goes beside it)")
     ap.add_argument("--max-plans", type=int, default=None, help="draw at most this many plans per panel")
     args = ap.parse_args(argv)
-    try:
-        png, csv = fig2(args.run_dir, args.iterations, out_png=args.out, max_plans=args.max_plans)
-    except (FileNotFoundError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    print(f"wrote {png}\nwrote {csv}")
-    return 0
+    return report_written(lambda: fig2(args.run_dir, args.iterations, out_png=args.out, max_plans=args.max_plans))
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
 from realize.figures.fig3 import fig3  # noqa: E402
+from realize.figures.common import report_written  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -24,13 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="PNG path (the CSV goes beside it)")
     ap.add_argument("--no-final", action="store_true", help="leave out the distribution refit after the last iteration")
     args = ap.parse_args(argv)
-    try:
-        png, csv = fig3(args.run_dir, out_png=args.out, show_final=not args.no_final)
-    except (FileNotFoundError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    print(f"wrote {png}\nwrote {csv}")
-    return 0
+    return report_written(lambda: fig3(args.run_dir, out_png=args.out, show_final=not args.no_final))
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
 from realize.figures.fig4 import fig4, find_run_dirs  # noqa: E402
+from realize.figures.common import report_written  # noqa: E402
 from realize.figures.launch import launch_runs, run_status  # noqa: E402
 
 
@@ -62,13 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     not_done = [d for d in dirs if run_status(d) not in ("done", "unknown")]
     for d in not_done:
         print(f"fig4: warning: {d} has status {run_status(d)!r}; its series may be incomplete", file=sys.stderr)
-    try:
-        png, csv = fig4(dirs, out)
-    except (FileNotFoundError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    print(f"{len(dirs)} runs\nwrote {png}\nwrote {csv}")
-    return 0
+    return report_written(lambda: fig4(dirs, out), prefix=f"{len(dirs)} runs\n")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
 from realize.figures.fig_validation import fig_validation  # noqa: E402
+from realize.figures.common import report_written  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,13 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
     ap.add_argument("--out", type=Path, default=None, help="PNG path (the CSV goes beside it)")
     args = ap.parse_args(argv)
-    try:
-        png, csv = fig_validation(args.run_dir, out_png=args.out)
-    except (FileNotFoundError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    print(f"wrote {png}\nwrote {csv}")
-    return 0
+    return report_written(lambda: fig_validation(args.run_dir, out_png=args.out))
 
 
 if __name__ == "__main__":

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Sequence
+import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ from realize.run_dir.names import SCENE_FILE  # noqa: E402
 from realize.run_dir.scene_files import SceneInfo  # noqa: E402
 from realize.tasks.topdown import obstacle_outline, padded_outline, region_outlines  # noqa: E402
 
-__all__ = ["plt", "CYAN", "REGION_GREY", "REGION_EDGE", "DPI", "require_scene", "write_csv", "fmt", "draw_world",
+__all__ = ["plt", "CYAN", "REGION_GREY", "REGION_EDGE", "DPI", "require_scene", "report_written", "write_csv", "fmt", "draw_world",
            "set_world_limits"]
 
 CYAN = "#00c8e6"
@@ -49,6 +50,19 @@ def require_scene(rd: RunDir, who: str) -> SceneInfo:
         raise FileNotFoundError(f"{who}: {rd.path} has no {SCENE_FILE} and its result.json config does not "
                                 "describe the scene (task.params, scene)")
     return scene
+
+
+def report_written(make: Callable[[], tuple[Path, Path]], prefix: str = "") -> int:
+    """A figure script's ending: ``make()`` writes the PNG and its CSV; print both paths (after
+    ``prefix``) and return 0, or print the one-line error of a missing or unreadable input and
+    return 1."""
+    try:
+        png, csv = make()
+    except (FileNotFoundError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    print(f"{prefix}wrote {png}\nwrote {csv}")
+    return 0
 
 
 def write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
