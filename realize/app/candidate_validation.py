@@ -4,8 +4,8 @@ What it does: ``validate_candidates`` takes, from the run's history (the lead ca
 top-k run), the K cheapest distinct feasible samples of its last ``iterations`` iterations (a
 robust search's: by success share over its worlds first, then cost), re-simulates each in the
 same R worlds (``realize.tasks.worlds.draw_worlds`` of the task's perturbation model, on the
-validation stream: other worlds than the search's) and once in the unperturbed world, all in one
-scene of K x (R + 1) copies (``realize.app.validation.simulate_worlds``), and reports for every
+validation stream: other worlds than the search's) and once in the unperturbed world, K x (R + 1)
+copies in the run's shards on its workers (``realize.app.validation.simulate_worlds``), and reports for every
 candidate its search cost, nominal cost (re-simulated), success share, 95 % Wilson interval
 (``wilson_interval``), failure reasons and the mean cost of its successful replicas. The plan
 to return is the cheapest candidate whose interval's lower bound is at least ``min_success``,
@@ -129,21 +129,20 @@ def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int 
     if not picked:
         raise ReplayError(f"{run.run_dir}: no feasible sample in its last {iterations} iteration(s) to validate")
     spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
-    k = len(picked)
-    # world 0 is the unperturbed one (each candidate's nominal cost, one copy each, after the
-    # replicas); worlds 1..R are the perturbed ones, the same for every candidate
-    worlds = draw_worlds(model, spec.geometry.objects, replicas + 1, seed, nominal_first=True)
-    rows = np.concatenate([np.tile(np.arange(1, replicas + 1), k), np.zeros(k, dtype=np.int64)])
+    k, u = len(picked), replicas + 1
+    # candidate j fills copies j*u .. j*u + R: world 0, the unperturbed one (its nominal cost), then
+    # the perturbed worlds 1..R, the same for every candidate
+    worlds = draw_worlds(model, spec.geometry.objects, u, seed, nominal_first=True)
     zs = np.stack([z for z, _, _, _ in picked])
-    Z = torch.tensor(np.concatenate([np.repeat(zs, replicas, axis=0), zs]), dtype=torch.float64)
-    res, used_backend = simulate_worlds(spec, Z, worlds.select(rows))
-    n = k * replicas
-    ok = res.feasible.numpy()[:n].reshape(k, replicas)
-    cost = res.cost.numpy().astype(np.float64)[:n].reshape(k, replicas)
-    nominal_ok, nominal_cost = res.feasible.numpy()[n:], res.cost.numpy().astype(np.float64)[n:]
+    Z = torch.tensor(np.repeat(zs, u, axis=0), dtype=torch.float64)
+    res, used_backend = simulate_worlds(spec, Z, worlds.tile(k * u))
+    ok_all = res.feasible.numpy().reshape(k, u)
+    cost_all = res.cost.numpy().astype(np.float64).reshape(k, u)
+    ok, cost = ok_all[:, 1:], cost_all[:, 1:]
+    nominal_ok, nominal_cost = ok_all[:, 0], cost_all[:, 0]
     out = []
     for j, (z, c, it, share) in enumerate(picked):
-        fails = Counter(f for f in res.failure[j * replicas:(j + 1) * replicas] if f)
+        fails = Counter(f for f in res.failure[j * u + 1:(j + 1) * u] if f)
         good = cost[j][ok[j]]
         out.append(CandidateResult(z=[float(v) for v in z], cost=c, iteration=it, success_share=float(ok[j].mean()),
                                    ci95=wilson_interval(int(ok[j].sum()), replicas), failures=dict(sorted(fails.items())),

@@ -137,6 +137,9 @@ class RunSpec:
     budget: HalvingBudget | None = None
     warm_start: str | None = None  # an earlier run directory the search starts from (realize.search.warm_start)
     validation: ValidationSettings | None = None  # after the search (realize.app.candidate_validation); None: off
+    # copy k of the run's scene meets worlds[k] (realize.tasks.worlds; validation's scenes); None: the
+    # task's world, or with ce.replicas > 1 the robust search's worlds (realize.app.workers.replicas)
+    worlds: Any = None
     # replan_from: the plan's remaining actions from a given state (realize.app.replan); None otherwise
     replan: ReplanSpec | None = None
 

@@ -7,7 +7,8 @@ perturbation model (``TaskSpec.perturbation``; any field can be overridden) by
 each object's xy and yaw, the robot start's xy, each
 object's friction and mass (CPU backend), realizes the best plan in all K copies, and reports
 the share that reaches the goal, the failure reasons and the cost of the successful ones.
-``simulate_worlds`` (one scene, one world per copy) is shared with the candidates' validation.
+``simulate_worlds`` (one world per copy, the copies in the run's shards on its workers) is
+shared with the candidates' validation.
 ``write_validation`` stores the report in ``result.json`` under ``plan_validation`` (read, add
 the key, write back atomically; the run's own candidates block, ``validation``, stays).
 What it doesn't: search, replay one copy or record video (``realize.app.replay``), or perturb
@@ -17,6 +18,7 @@ perturbations: each copy sits at its own tile offset (float32 rounding differs).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -117,13 +119,23 @@ def replica_spec(run: Any, backend: str, perturbation: Perturbation | None, trac
 
 
 def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds) -> tuple[Any, str]:
-    """Realize the rows of ``Z`` (one per copy) in one scene whose copy ``k`` is the world
-    ``worlds[k]``: (rollout result, the backend)."""
-    from realize.app.realizers import open_realization
+    """Realize the rows of ``Z`` (one per copy) in a scene whose copy ``k`` is the world
+    ``worlds[k]``, cut into the run's shards (``sim.shard_rows``) on the run's workers (every
+    core: ``workers``; the numbers depend on the shards only): (rollout result, the backend)."""
+    from realize.app.workers.pool import open_pool
 
-    scene, (realizer,) = open_realization(spec, n_envs=Z.shape[0], worlds=worlds)
-    with scene:
-        return realizer.rollout(Z), scene.backend
+    n = Z.shape[0]
+    if len(worlds) != n:
+        raise ReplayError(f"{len(worlds)} worlds for {n} plans")
+    vspec = copy.copy(spec)
+    vspec.ce = dataclasses.replace(spec.ce, n_envs=n, n_envs_end=None, schedule="constant", n_elite=1, replicas=1,
+                                   knn_robust=0, n_modes=1)
+    vspec.worlds = worlds
+    pool = open_pool(vspec, [spec.task])
+    try:
+        return pool.rollout(None, Z), pool.backend
+    finally:
+        pool.close()
 
 
 PLAN_VALIDATION = "plan_validation"  # result.json's key of a one-plan validation

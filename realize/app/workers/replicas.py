@@ -2,7 +2,8 @@
 
 What it does: ``search_worlds(spec)`` draws the run's R = ``ce.replicas`` worlds from its task's
 perturbation model (``realize.tasks.worlds.draw_worlds``, seeded by the run's seed on the search
-stream), the same in every worker; the shard workers put copy ``k`` in world ``k % R``.
+stream), the same in every worker; the shard workers put copy ``k`` in world ``k % R``
+(``shard_worlds``; or in ``spec.worlds[k]`` where a caller, validation, gives one world per copy).
 ``ReplicaPool`` wraps any ``RolloutPool``: a batch of n samples is rolled out as n x R copies
 (sample ``i`` in copies ``i*R .. i*R + R - 1``, one per world) and folded back to n rows
 (``realize.search.ce.risk.fold_worlds``): cost, feasibility, progress and distance over the
@@ -17,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from torch import Tensor
 
 from realize.realization.result import RolloutResult
@@ -26,13 +28,23 @@ from realize.tasks.worlds import SEARCH_STREAM, Worlds, draw_worlds
 if TYPE_CHECKING:
     from realize.app.run_config import RunSpec
 
-__all__ = ["search_worlds", "ReplicaPool", "fold_result"]
+__all__ = ["search_worlds", "shard_worlds", "ReplicaPool", "fold_result"]
 
 
 def search_worlds(spec: RunSpec) -> Worlds:
     """The R = ``ce.replicas`` worlds a robust search's samples meet."""
     return draw_worlds(spec.task.perturbation, spec.geometry.objects, spec.ce.replicas, spec.seed,
                        stream=SEARCH_STREAM)
+
+
+def shard_worlds(spec: RunSpec, first: int, stop: int) -> Worlds | None:
+    """The worlds of copies ``first .. stop - 1`` of a run's scene: ``spec.worlds`` (one per
+    copy) where set, else a robust search's (copy ``k``: world ``k % R``), else None (the task's)."""
+    if spec.worlds is not None:
+        return spec.worlds.select(np.arange(first, stop))
+    if spec.ce.replicas > 1:
+        return search_worlds(spec).tile(stop - first, first=first)
+    return None
 
 
 def fold_result(res: RolloutResult, replicas: int, risk: str, alpha: float) -> RolloutResult:

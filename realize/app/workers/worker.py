@@ -6,7 +6,8 @@ for each of its shards (``realize.app.workers.blocks``), with the given PhysX th
 ``rollout`` realizes one part of a batch per shard (``realize.app.workers.blocks.deal_rows``),
 shard after shard, and returns their ``RolloutResult`` joined, on the CPU. A robust search's
 shards (``ce.replicas`` = R > 1) put copy ``k`` in world ``k % R`` of the run's worlds
-(``realize.app.workers.replicas.search_worlds``; every shard a whole number of samples). A shard's scene and controllers see only that shard's rows, so a
+(``realize.app.workers.replicas.shard_worlds``; every shard a whole number of samples), a
+validation's in the world it gives each copy (``RunSpec.worlds``). A shard's scene and controllers see only that shard's rows, so a
 row's numbers are the same in whichever worker its shard sits.
 What it doesn't: talk to the search or to other workers (``realize.app.workers.process``,
 ``realize.app.workers.ray_pool``), or choose the shards (``realize.app.workers.blocks``).
@@ -48,20 +49,19 @@ class ShardWorker:
     def __init__(self, spec: RunSpec, tasks: Sequence[TaskSpec], shards: Sequence[RowBlock],
                  physx_threads: int | None = None) -> None:
         from realize.app.realizers import open_realization
-        from realize.app.workers.replicas import search_worlds
+        from realize.app.workers.replicas import shard_worlds
 
         t0 = time.perf_counter()
         self.shards = list(shards)
         self.first, self.stop = self.shards[0].first, self.shards[-1].stop
         wspec = worker_spec(spec, physx_threads)
         self.unit = spec.ce.replicas  # a robust search's sample fills this many copies, one per world
-        worlds = search_worlds(spec) if self.unit > 1 else None
         self.scenes: list[Any] = []
         self.realizers: list[list[Any]] = []
         try:
             for shard in self.shards:
                 scene, realizers = open_realization(wspec, tasks, n_envs=shard.size,
-                                                    worlds=None if worlds is None else worlds.tile(shard.size))
+                                                    worlds=shard_worlds(spec, shard.first, shard.stop))
                 self.scenes.append(scene)
                 self.realizers.append(realizers)
         except BaseException:
