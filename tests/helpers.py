@@ -57,7 +57,7 @@ def realize_cli(*args: str, cwd: Path = REPO, timeout: float | None = None, env:
     added to the environment: the CompletedProcess (text output captured) after at most
     ``timeout`` s, or with ``background=True`` the running Popen (``popen``: stdout, stderr, ...)."""
     env = dict(os.environ, **(env or {}), PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    cmd = [sys.executable, "-m", "realize", *quiet_validation(args), *args]
+    cmd = [sys.executable, "-m", "realize", *args, *quiet_validation(args)]
     if background:
         return subprocess.Popen(cmd, cwd=cwd, env=env, text=True, **popen)
     return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
