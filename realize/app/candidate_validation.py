@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from realize.app.replay import ReplayError, saved_plan
-from realize.app.validation import replica_spec, simulate_worlds
+from realize.app.validation import replica_spec, simulate_worlds, validation_log_dir
 from realize.tasks.worlds import draw_worlds
 from realize.run_dir.directory import RunDir
 from realize.tasks.perturbation import Perturbation
@@ -135,7 +135,7 @@ def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int 
     worlds = draw_worlds(model, spec.geometry.objects, u, seed, nominal_first=True)
     zs = np.stack([z for z, _, _, _ in picked])
     Z = torch.tensor(np.repeat(zs, u, axis=0), dtype=torch.float64)
-    res, used_backend = simulate_worlds(spec, Z, worlds.tile(k * u))
+    res, used_backend = simulate_worlds(spec, Z, worlds.tile(k * u), validation_log_dir(run.run_dir))
     ok_all = res.feasible.numpy().reshape(k, u)
     cost_all = res.cost.numpy().astype(np.float64).reshape(k, u)
     ok, cost = ok_all[:, 1:], cost_all[:, 1:]

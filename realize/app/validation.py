@@ -34,9 +34,11 @@ from realize.app.replay import ReplayError, build_replay_spec, returned_z, saved
 from realize.config import ConfigError
 from realize.tasks.perturbation import Perturbation
 from realize.run_dir.directory import RunDir
+from realize.run_dir.names import WORKER_LOG_DIR
 from realize.tasks.worlds import Worlds, draw_worlds
 
-__all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_worlds", "PLAN_VALIDATION"]
+__all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_worlds", "PLAN_VALIDATION",
+           "validation_log_dir"]
 
 
 @dataclass
@@ -85,7 +87,8 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     worlds = draw_worlds(model, spec.geometry.objects, replicas + 1, seed, nominal_first=True).select(
         np.arange(1, replicas + 1))
     plan = returned_z(run, nominal)
-    res, used_backend = simulate_worlds(spec, torch.tensor([plan.z] * replicas, dtype=torch.float64), worlds)
+    res, used_backend = simulate_worlds(spec, torch.tensor([plan.z] * replicas, dtype=torch.float64), worlds,
+                                        validation_log_dir(run.run_dir))
     ok = res.feasible.numpy()
     costs = res.cost.numpy().astype(np.float64)[ok]
     objects = spec.geometry.objects
@@ -118,10 +121,11 @@ def replica_spec(run: Any, backend: str, perturbation: Perturbation | None, trac
     return spec, model
 
 
-def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds) -> tuple[Any, str]:
+def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds, log_dir: Path | None = None) -> tuple[Any, str]:
     """Realize the rows of ``Z`` (one per copy) in a scene whose copy ``k`` is the world
     ``worlds[k]``, cut into the run's shards (``sim.shard_rows``) on the run's workers (every
-    core: ``workers``; the numbers depend on the shards only): (rollout result, the backend)."""
+    core: ``workers``; the numbers depend on the shards only; worker processes log into
+    ``log_dir``): (rollout result, the backend)."""
     from realize.app.workers.pool import open_pool
 
     n = Z.shape[0]
@@ -131,7 +135,7 @@ def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds) -> tuple[Any, st
     vspec.ce = dataclasses.replace(spec.ce, n_envs=n, n_envs_end=None, schedule="constant", n_elite=1, replicas=1,
                                    knn_robust=0, n_modes=1)
     vspec.worlds = worlds
-    pool = open_pool(vspec, [spec.task])
+    pool = open_pool(vspec, [spec.task], log_dir=log_dir)
     try:
         return pool.rollout(None, Z), pool.backend
     finally:
@@ -139,6 +143,11 @@ def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds) -> tuple[Any, st
 
 
 PLAN_VALIDATION = "plan_validation"  # result.json's key of a one-plan validation
+
+
+def validation_log_dir(run_dir: str | Path) -> Path:
+    """Where a validation's worker processes log: ``RUN_DIR/workers/validation``."""
+    return Path(run_dir) / WORKER_LOG_DIR / "validation"
 
 
 def write_validation(run_dir: str | Path, report: ValidationReport) -> None:
