@@ -30,8 +30,7 @@ import numpy as np
 import torch
 
 from realize.app.replay import ReplayError, saved_plan
-from realize.app.validation import replica_spec, simulate_worlds, validation_log_dir
-from realize.tasks.worlds import draw_worlds
+from realize.app.validation import replica_spec, simulate_worlds, validation_log_dir, validation_worlds
 from realize.run_dir.directory import RunDir
 from realize.tasks.perturbation import Perturbation
 
@@ -132,7 +131,7 @@ def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int 
     k, u = len(picked), replicas + 1
     # candidate j fills copies j*u .. j*u + R: world 0, the unperturbed one (its nominal cost), then
     # the perturbed worlds 1..R, the same for every candidate
-    worlds = draw_worlds(model, spec.geometry.objects, u, seed, nominal_first=True)
+    worlds = validation_worlds(model, spec.geometry.objects, replicas, seed)
     zs = np.stack([z for z, _, _, _ in picked])
     Z = torch.tensor(np.repeat(zs, u, axis=0), dtype=torch.float64)
     res, used_backend = simulate_worlds(spec, Z, worlds.tile(k * u), validation_log_dir(run.run_dir))

@@ -47,6 +47,7 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
     from realize.scene.settings import SimSettings
     from realize.world.state import SceneState
     from realize.tasks.spec import TaskSpec
+    from realize.tasks.worlds import Worlds
 
 __all__ = ["LoggingSettings", "ValidationSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
@@ -104,7 +105,9 @@ class Placement:
 @dataclass
 class ValidationSettings(Settings):
     """Hydra ``validation`` group: validate the run's candidates after its search
-    (``realize.app.candidate_validation``, called by ``realize.app.run``); ``replicas: 0`` turns it off."""
+    (``realize.app.candidate_validation``, called by ``realize.app.run``); ``replicas: 0`` turns it off.
+    The group's file (``configs/validation/default.yaml``) turns it on with 64; the dataclass
+    default, off, is what a config without the group gets (a run recorded before it existed)."""
 
     config_key = "validation"
 
@@ -139,7 +142,7 @@ class RunSpec:
     validation: ValidationSettings | None = None  # after the search (realize.app.candidate_validation); None: off
     # copy k of the run's scene meets worlds[k] (realize.tasks.worlds; validation's scenes); None: the
     # task's world, or with ce.replicas > 1 the robust search's worlds (realize.app.workers.replicas)
-    worlds: Any = None
+    worlds: Worlds | None = None
     # replan_from: the plan's remaining actions from a given state (realize.app.replan); None otherwise
     replan: ReplanSpec | None = None
 

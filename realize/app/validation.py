@@ -38,7 +38,7 @@ from realize.run_dir.names import WORKER_LOG_DIR
 from realize.tasks.worlds import Worlds, draw_worlds
 
 __all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_worlds", "PLAN_VALIDATION",
-           "validation_log_dir"]
+           "validation_log_dir", "validation_worlds"]
 
 
 @dataclass
@@ -73,8 +73,8 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
 
     Perturbations: ``perturbation`` (None: the run task's model) with ``overrides`` of its fields
     (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the worlds are worlds 1..R of
-    ``realize.tasks.worlds.draw_worlds(model, objects, replicas + 1, seed, nominal_first=True)``,
-    those the run's candidates were validated in for the same seed.
+    ``validation_worlds(model, objects, replicas, seed)``, those the run's candidates were
+    validated in for the same seed.
     ``track_objects``: override the run's ``controller.track_objects`` (None: the run's).
     """
     if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
@@ -82,10 +82,8 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
-    # worlds 1..R of the draw the candidates' validation makes (its world 0 is the unperturbed one):
-    # the same seed puts a plan here in the worlds its run's candidates met
-    worlds = draw_worlds(model, spec.geometry.objects, replicas + 1, seed, nominal_first=True).select(
-        np.arange(1, replicas + 1))
+    # the perturbed worlds 1..R the run's candidates met for the same seed (world 0 is the unperturbed one)
+    worlds = validation_worlds(model, spec.geometry.objects, replicas, seed).select(np.arange(1, replicas + 1))
     plan = returned_z(run, nominal)
     res, used_backend = simulate_worlds(spec, torch.tensor([plan.z] * replicas, dtype=torch.float64), worlds,
                                         validation_log_dir(run.run_dir))
@@ -105,6 +103,13 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     if write:
         write_validation(run.run_dir, report)
     return report
+
+
+def validation_worlds(model: Perturbation, objects: Any, replicas: int, seed: int) -> Worlds:
+    """The R + 1 worlds a validation draws: world 0 the unperturbed one, worlds 1..R from
+    ``model`` (validation's stream of ``realize.tasks.worlds.draw_worlds``); one plan's check and
+    the candidates' validation use the same ones for the same seed."""
+    return draw_worlds(model, objects, replicas + 1, seed, nominal_first=True)
 
 
 def replica_spec(run: Any, backend: str, perturbation: Perturbation | None, track_objects: bool | None,

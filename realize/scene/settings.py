@@ -5,8 +5,9 @@ What it does:
     contact force that counts as holding an object. Bounds and choices are field metadata
     (``realize.config.setting``); ``sim_freq`` must be a multiple of ``control_freq`` (``check``).
   * ``EnvOptions``: what the ManiSkill task is built and reset with besides geometry and physics:
-    the render ``Camera`` (videos), the reset noise amplitudes (validation perturbations) and
-    whether every reset randomizes. Defaults leave the task as registered.
+    the render ``Camera`` (videos), the task's own reset noise amplitudes and whether every
+    reset randomizes (the perturbed worlds of validation and robust search are given per copy
+    instead: ``BatchedScene.set_worlds``). Defaults leave the task as registered.
 What it doesn't: build anything (``realize.scene.backends`` does), or know which backend runs.
 """
 

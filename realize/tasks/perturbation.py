@@ -50,9 +50,6 @@ class Perturbation(Settings):
         """A copy with the given fields replaced (``None`` values keep this model's)."""
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
 
-    @property
-    def moves_start(self) -> bool:
-        return self.object_xy > 0 or self.object_yaw > 0 or self.robot_xy > 0
 
 
 NONE = Perturbation(object_xy=0.0, object_yaw=0.0, robot_xy=0.0, friction=(1.0, 1.0), mass=(1.0, 1.0))
