@@ -105,7 +105,7 @@ def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndar
     return out
 
 
-def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int = 32, *, min_success: float = 0.9,
+def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int = 64, *, min_success: float = 0.9,
                         iterations: int = 3, seed: int = 0, perturbation: Perturbation | None = None,
                         backend: str = "cpu", track_objects: bool | None = None, write: bool = True,
                         **overrides: Any) -> CandidatesReport:
