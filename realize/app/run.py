@@ -58,6 +58,7 @@ from realize.sinks.files import CheckpointSink, ResultSink, RunClock
 from realize.sinks.progress import ProgressSink
 from realize.sinks.rerun import RerunSink, recording_name
 from realize.sinks.trajectories import TrajectorySink
+from realize.recording.validation_log import VALIDATION_RRD, log_validation
 from realize.search.warm_start import WarmStart, load_warm_start
 
 __all__ = ["run", "RunOutcome", "RESUME_ALLOWED_PREFIXES"]
@@ -314,8 +315,6 @@ class _Assembly:
               f"(cost {c.cost:.0f}, success {c.success_share:.2f}, 95 % [{c.ci95[0]:.2f}, {c.ci95[1]:.2f}], "
               f"{rep.reason}); {rep.wall_time_s:.1f} s", flush=True)
         if self.spec.logging.rerun:
-            from realize.recording.validation_log import log_validation
-
             try:
                 log_validation(self.run_dir, rep.to_dict())
             except Exception as e:  # a recording must not fail a run whose results are written
@@ -333,6 +332,7 @@ class _Assembly:
             f"best cost {cost}; feasible {o.feasible}; wall time {o.wall_time_s:.1f} s\n"
             f"results: {o.run_dir / RESULT_FILE} (also {hist}, {CHECKPOINT_FILE}"
             + (f", {rrd}" if spec.logging.rerun else "")
+            + (f", {VALIDATION_RRD}" if (o.run_dir / VALIDATION_RRD).is_file() else "")
             + ")",
             flush=True,
         )
