@@ -1,8 +1,9 @@
 """Validate a run's K best distinct plans under the task's perturbations and pick the one to return.
 
 What it does: ``validate_candidates`` takes, from the run's history (the lead candidate's in a
-top-k run), the K cheapest distinct feasible samples of its last ``iterations`` iterations (a
-robust search's: by success share over its worlds first, then cost), re-simulates each in the
+top-k run), the K cheapest distinct feasible samples of its last ``iterations`` iterations and
+the run's best sample where it came earlier (a robust search's: by success share over its worlds
+first, then cost), re-simulates each in the
 same R worlds (``realize.tasks.worlds.draw_worlds`` of the task's perturbation model, on the
 validation stream: other worlds than the search's) and once in the unperturbed world, K x (R + 1)
 copies in the run's shards on its workers (``realize.app.validation.simulate_worlds``), and reports for every
@@ -83,18 +84,29 @@ class CandidatesReport:
 
 def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndarray, float, int, float | None]]:
     """The ``k`` best distinct feasible samples of the last ``iterations`` iterations of a
-    ``History``: (z, cost, iteration, share), cheapest first (ties: the later iteration first).
-    A robust search's history (``share``: each sample's success share over its worlds) ranks
-    by share first, then cost, as the search did; ``share`` is None otherwise."""
-    rows: list[tuple[float, float, int, np.ndarray]] = []
+    ``History``, and the best feasible sample of the whole run wherever it lies (the search's
+    ``best_z``: an earlier iteration's cheapest plan is a candidate too): (z, cost, iteration,
+    share), cheapest first (ties: the later iteration first). A robust search's history
+    (``share``: each sample's success share over its worlds) ranks by share first, then cost, as
+    the search did; ``share`` is None otherwise."""
     n = len(history)
-    for i in range(max(0, n - iterations), n):
+
+    def rows_of(i: int) -> list[tuple[float, float, int, np.ndarray]]:
         it = history.per_iter[i]
         ok = np.asarray(it["feasible"], dtype=bool)
         share = np.asarray(it["share"], dtype=np.float64) if "share" in it else np.full(len(ok), np.nan)
-        for z, c, sh in zip(np.asarray(it["Z"])[ok], np.asarray(it["cost"])[ok], share[ok]):
-            rows.append((-float(sh) if np.isfinite(sh) else 0.0, float(c), -i, z))
-    rows.sort(key=lambda r: (r[0], r[1], r[2]))
+        return [(-float(sh) if np.isfinite(sh) else 0.0, float(c), -i, z)
+                for z, c, sh in zip(np.asarray(it["Z"])[ok], np.asarray(it["cost"])[ok], share[ok])]
+
+    def key(r: tuple[float, float, int, np.ndarray]) -> tuple[float, float, int]:
+        return r[0], r[1], r[2]
+
+    first = max(0, n - iterations)
+    rows = [r for i in range(first, n) for r in rows_of(i)]
+    earlier = [r for i in range(first) for r in rows_of(i)]
+    if earlier:
+        rows.append(min(earlier, key=key))
+    rows.sort(key=key)
     out: list[tuple[np.ndarray, float, int, float | None]] = []
     for neg_share, c, neg_i, z in rows:
         if any(np.array_equal(z, o[0]) for o in out):
