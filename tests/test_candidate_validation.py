@@ -6,7 +6,8 @@
 * a run with ``validation.replicas > 0`` validates its candidates after the search, into
   ``result.json``, with the numbers a later call gives (deterministic on CPU), returning the
   cheapest candidate whose lower bound reaches ``min_success`` (else the most robust one);
-  ``validation.replicas: 0`` (the default) turns it off.
+  validation is on by default (64 worlds x 5 candidates), ``validation=off`` or
+  ``validation.replicas=0`` turns it off (the other tests' runs do: ``helpers.quiet_validation``).
 """
 
 from __future__ import annotations
@@ -16,11 +17,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from scipy.stats import binomtest
 
 from helpers import compose_config, realize_result
 from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
 from realize.app.candidate_validation import pick_candidates, validate_candidates, wilson_interval
 from realize.run_dir.history import History
 
@@ -101,7 +104,12 @@ def test_a_run_validates_its_candidates_after_the_search_deterministically(tmp_p
         assert saved["reason"] == "most robust"
 
 
-def test_validation_is_off_by_default_and_checked() -> None:
-    assert build_run_spec(compose_config()).validation.replicas == 0
+def test_validation_is_on_by_default_off_by_choice_and_checked() -> None:
+    defaults = yaml.safe_load((CONFIG_DIR / "config.yaml").read_text())["defaults"]
+    assert {"validation": "default"} in defaults  # what a run without overrides gets
+    on = build_run_spec(compose_config("validation=default")).validation
+    assert (on.replicas, on.candidates, on.min_success) == (64, 5, 0.9)
+    assert build_run_spec(compose_config("validation=off")).validation.replicas == 0
+    assert build_run_spec(compose_config("validation.replicas=0")).validation.replicas == 0
     with pytest.raises(ConfigError, match="validation.min_success"):
         build_run_spec(compose_config("validation.min_success=1.5"))
