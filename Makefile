@@ -10,11 +10,16 @@ setup:
 run: setup
 	$(PY) -m realize experiment=seed_paper $(ARGS)
 
+# test files run in parallel, one file per process (its module fixtures built once), one process
+# per core up to 4: 7.4 -> 4.3 min on 2 cores. TEST_JOBS=0 runs them in this process.
+TEST_JOBS ?= auto
+PARALLEL = $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --maxprocesses 4 --dist loadfile)
+
 test: setup
-	$(PY) -m pytest -m "not slow" -q --durations=20 $(ARGS)
+	$(PY) -m pytest -m "not slow" -q --durations=20 $(PARALLEL) $(ARGS)
 
 test-all: setup
-	$(PY) -m pytest -q $(ARGS)
+	$(PY) -m pytest -q $(PARALLEL) $(ARGS)
 
 bench: setup
 	$(PY) scripts/bench_sim.py --quick
