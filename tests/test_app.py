@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 import realize.scene
-from helpers import TINY, cfg_of, expect_config_error, plain, realize_cli, tiny
+from helpers import TINY, cfg_of, compose_config, expect_config_error, plain, realize_cli, tiny
 from realize.app.cli import preflight
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
@@ -215,6 +215,8 @@ def test_resume_with_corrupt_checkpoint(tmp_path: Path, no_sim: None) -> None:
         (["-m", "ce=seed_paper,bogus"], ["ce=bogus"]),
         (["ce.foo=1"], ["ce.foo"]),
         (["ce.n_envs=[1"], ["ce.n_envs=[1"]),
+        (["experiment=ramp_ablation", "ablation=knn9"], ["ablation=knn9", "knn5", "uniform10"]),
+        (["ablation=knn5"], ["ablation", "+ablation=knn5"]),  # no preset chose the group
     ],
 )
 def test_preflight_errors(args: list[str], needles: list[str]) -> None:
@@ -222,6 +224,13 @@ def test_preflight_errors(args: list[str], needles: list[str]) -> None:
         preflight(args)
     for n in needles:
         assert n in str(ei.value)
+
+
+def test_an_ablation_arm_is_chosen_on_the_command_line() -> None:
+    args = ["experiment=ramp_ablation", "ablation=knn5"]
+    assert preflight(args) == args
+    assert compose_config(*args)["ce"]["knn_robust"] == 5
+    assert compose_config("experiment=ramp_ablation")["ce"]["knn_robust"] == 0  # the baseline arm
 
 
 def test_cli_bad_input_exit_code_and_one_line(tmp_path: Path) -> None:

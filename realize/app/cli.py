@@ -33,7 +33,7 @@ from realize.app.workers.errors import WorkerFailed
 __all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
 
 CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation",
-                 "experiment")
+                 "experiment", "ablation")
 
 
 class SweepJobConfigError(CompactHydraException):
