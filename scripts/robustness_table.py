@@ -6,9 +6,9 @@ Usage: python scripts/robustness_table.py [--presets seed_paper ramp wall move_a
 
 For each preset and seed: `python -m realize experiment=PRESET seed=S OVERRIDES` into
 OUT/PRESET_sS (its validation stage picks the plan to return from its 5 best under 64 perturbed
-worlds, validation seed 0), then `scripts/validate.py` on the same run: the search's nominal best
-(`--nominal`) in those worlds ("before"), and both plans in 64 other worlds (validation seed 1,
-"held out": worlds no choice was made in). Prints one markdown row per run; `--reuse` keeps
+worlds, drawn with the run's seed S), then `scripts/validate.py` on the same run: the search's
+nominal best (`--nominal`) in those worlds ("before"), and both plans in 64 other worlds (drawn
+with seed S + 1, "held out": worlds no choice was made in). Prints one markdown row per run; `--reuse` keeps
 finished runs. A seed-paper run takes 3-4 min on 2 cores, a ramp run 3-5 min.
 """
 
@@ -30,6 +30,7 @@ def _json(out: str) -> dict:
 def _validate(run: Path, replicas: int, seed: int, nominal: bool) -> dict:
     cmd = [sys.executable, str(REPO / "scripts" / "validate.py"), str(run), "--replicas", str(replicas), "--seed",
            str(seed), "--dry-run", "--json"] + (["--nominal"] if nominal else [])
+    print(f"robustness_table: {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
     p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
     if p.returncode != 0:
         raise SystemExit(f"robustness_table: {' '.join(cmd)} failed:\n{p.stderr[-2000:]}")
@@ -51,13 +52,13 @@ def row(preset: str, seed: int, out: Path, replicas: int, overrides: list[str], 
             raise SystemExit(f"robustness_table: {' '.join(cmd)} failed:\n{p.stderr[-2000:]}")
     d = json.loads(result.read_text())
     v = d.get("validation")
-    before = _validate(run, replicas, 0, nominal=True)
-    held_nominal = _validate(run, replicas, 1, nominal=True)
+    before = _validate(run, replicas, seed, nominal=True)  # the worlds the run chose in
+    held_nominal = _validate(run, replicas, seed + 1, nominal=True)
     if not v:
         return (f"| {preset} | {seed} | {d['best_cost']:.0f} | {_share(before)} | {_share(held_nominal)} | - | - | - | - "
                 f"| {d['wall_time_s']:.0f} s |")
     c = v["candidates"][v["returned"]]
-    held = _validate(run, replicas, 1, nominal=False)
+    held = _validate(run, replicas, seed + 1, nominal=False)
     lo, hi = c["ci95"]
     return (f"| {preset} | {seed} | {d['best_cost']:.0f} | {_share(before)} | {_share(held_nominal)} | {c['cost']:.0f} "
             f"| {round(c['success_share'] * v['replicas'])}/{v['replicas']} [{lo:.2f}, {hi:.2f}] | {_share(held)} "

@@ -3,17 +3,22 @@ and write the success share into RUN_DIR/result.json under `plan_validation` (th
 the run's candidate validation returned, else best_z; --nominal: best_z). With --candidates K:
 validate the run's K best distinct plans and pick the one to return, into `validation`.
 
-Usage: python scripts/validate.py RUN_DIR [--replicas 16] [--seed 0] [--friction LOW HIGH|none]
+Usage: python scripts/validate.py RUN_DIR [--replicas R] [--seed S] [--friction LOW HIGH|none]
             [--mass LOW HIGH|none] [--no-randomize] [--object-noise M] [--object-yaw RAD] [--robot-noise M]
-            [--no-track] [--nominal] [--candidates K [--min-success P]]
+            [--no-track] [--nominal] [--candidates [K] [--min-success P]]
             [--backend cpu|gpu|auto] [--dry-run] [--json]
+
+R and S default to the run's (its validation.replicas, its seed): the worlds the run chose its
+plan in; another --seed gives held-out worlds. --candidates without K redoes the run's own
+validation (its K, min_success and iterations as well) and rewrites `validation`, the plan a
+replay executes (--dry-run: report only).
 
 Perturbations: the run task's perturbation model (``perturbation`` in its task config,
 realize/tasks/perturbation.py: each object's xy and yaw where it rests, the robot start's xy,
 each object's friction and mass scaled per replica by factors drawn uniformly from their ranges;
 CPU backend for friction and mass), any field overridden by the flags (``none``: unchanged);
 replica r meets world r of ``realize.tasks.worlds.draw_worlds(model, objects, K + 1, seed, nominal_first=True)``
-(world 0: the unperturbed one), the worlds a run's candidates met for the same seed.
+(world 0: the unperturbed one), the worlds a run's candidates met for the same seed and K.
 """
 
 from __future__ import annotations
@@ -46,8 +51,10 @@ def _range(ap: argparse.ArgumentParser, values: list[str] | None, flag: str) -> 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
-    ap.add_argument("--replicas", type=int, default=16, help="K copies simulated at once (default 16)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the perturbations (default 0)")
+    ap.add_argument("--replicas", type=int, default=None,
+                    help="worlds per plan, simulated at once (default: the run's validation.replicas, 64 if it had none)")
+    ap.add_argument("--seed", type=int, default=None,
+                    help="seed of the worlds (default: the run's seed, the worlds its candidates met)")
     ap.add_argument("--friction", nargs="+", default=None, metavar="LOW HIGH",
                     help="object friction factor range, or 'none' (default: the task's perturbation model)")
     ap.add_argument("--mass", nargs="+", default=None, metavar="LOW HIGH",
@@ -58,11 +65,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robot-noise", type=float, default=None, help="robot start xy noise (m), the task's if unset")
     ap.add_argument("--no-track", action="store_true",
                     help="aim at objects' config poses, not where they lie (controller.track_objects=false)")
-    ap.add_argument("--candidates", type=int, default=None, metavar="K",
-                    help="validate the K cheapest distinct feasible plans of the last iterations, not only the best, "
-                         "and name the one to return (realize/app/candidate_validation.py)")
-    ap.add_argument("--min-success", type=float, default=0.9,
-                    help="with --candidates: return the cheapest plan whose 95%% lower bound reaches this (default 0.9)")
+    ap.add_argument("--candidates", type=int, nargs="?", const=0, default=None, metavar="K",
+                    help="validate the K cheapest distinct feasible plans of the last iterations (no K: the run's "
+                         "validation.candidates), not only the best, name the one to return and rewrite the run's "
+                         "validation block (realize/app/candidate_validation.py)")
+    ap.add_argument("--min-success", type=float, default=None,
+                    help="with --candidates: return the cheapest plan whose 95%% lower bound reaches this "
+                         "(default: the run's validation.min_success)")
     ap.add_argument("--nominal", action="store_true",
                     help="validate the search's nominal best_z, not the plan the run's validation returned")
     ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
@@ -100,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _candidates(args: argparse.Namespace, track: bool | None, overrides: dict) -> int:
-    rep = validate_candidates(args.run_dir, args.candidates, args.replicas, min_success=args.min_success,
+    rep = validate_candidates(args.run_dir, args.candidates or None, args.replicas, min_success=args.min_success,
                               seed=args.seed, backend=args.backend, track_objects=track, write=not args.dry_run,
                               **overrides)
     if args.json:

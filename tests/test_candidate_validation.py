@@ -25,6 +25,8 @@ from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 from realize.app.candidate_validation import pick_candidates, validate_candidates, wilson_interval
+from realize.app.validation import run_validation
+from realize.run_dir.directory import BestPlan
 from realize.run_dir.history import History
 
 
@@ -91,9 +93,10 @@ def test_a_run_validates_its_candidates_after_the_search_deterministically(tmp_p
                          "logging.progress=false", "validation.replicas=3", "validation.candidates=2",
                          "validation.min_success=0.5", run_dir=run)
     saved = res["validation"]
-    again = validate_candidates(run, candidates=2, replicas=3, min_success=0.5, seed=3, write=False).to_dict()
+    again = validate_candidates(run, write=False).to_dict()  # every setting the run's: its validation, its seed
     saved.pop("wall_time_s"), again.pop("wall_time_s")
     assert json.loads(json.dumps(again)) == saved  # the run's stage and a later call: the same replicas, numbers
+    assert (saved["replicas"], saved["seed"], saved["min_success"]) == (3, 3, 0.5)
     cands = saved["candidates"]
     assert len(cands) == 2 and cands[0]["cost"] <= cands[1]["cost"] and res["best_cost"] == cands[0]["cost"]
     above = [j for j, c in enumerate(cands) if c["ci95"][0] >= 0.5]
@@ -102,6 +105,18 @@ def test_a_run_validates_its_candidates_after_the_search_deterministically(tmp_p
     else:
         assert cands[saved["returned"]]["success_share"] == max(c["success_share"] for c in cands)
         assert saved["reason"] == "most robust"
+
+
+def test_a_later_check_defaults_to_the_runs_validation_and_seed() -> None:
+    def run_with(config: dict) -> BestPlan:
+        return BestPlan(Path("."), config, [], [], 0.0, True, None, None, "done", None)
+
+    v, seed = run_validation(run_with({"seed": 7, "validation": {"replicas": 8, "candidates": 2, "min_success": 0.5}}))
+    assert (v.replicas, v.candidates, v.min_success, seed) == (8, 2, 0.5, 7)
+    group = yaml.safe_load((CONFIG_DIR / "validation" / "default.yaml").read_text())
+    for off in ({"seed": 2, "validation": {"replicas": 0}}, {"seed": 2}):  # off, or recorded before validation
+        v, seed = run_validation(run_with(off))
+        assert (v.replicas, v.candidates, seed) == (group["replicas"], group["candidates"], 2)
 
 
 def test_validation_is_on_by_default_off_by_choice_and_checked() -> None:

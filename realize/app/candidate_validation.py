@@ -31,7 +31,8 @@ import numpy as np
 import torch
 
 from realize.app.replay import ReplayError, saved_plan
-from realize.app.validation import replica_spec, simulate_worlds, validation_log_dir, validation_worlds
+from realize.app.validation import (replica_spec, run_validation, simulate_worlds, validation_log_dir,
+                                    validation_worlds)
 from realize.run_dir.directory import RunDir
 from realize.tasks.perturbation import Perturbation
 
@@ -117,19 +118,28 @@ def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndar
     return out
 
 
-def validate_candidates(run_dir: str | Path, candidates: int = 5, replicas: int = 64, *, min_success: float = 0.9,
-                        iterations: int = 3, seed: int = 0, perturbation: Perturbation | None = None,
-                        backend: str = "cpu", track_objects: bool | None = None, write: bool = True,
+def validate_candidates(run_dir: str | Path, candidates: int | None = None, replicas: int | None = None, *,
+                        min_success: float | None = None, iterations: int | None = None, seed: int | None = None,
+                        perturbation: Perturbation | None = None, backend: str = "cpu",
+                        track_objects: bool | None = None, write: bool = True,
                         **overrides: Any) -> CandidatesReport:
     """Validate the run's ``candidates`` cheapest distinct feasible plans, ``replicas`` each
-    (module docstring); perturbations as ``realize.app.validation.validate``'s."""
+    (module docstring); perturbations as ``realize.app.validation.validate``'s. A setting left
+    None is the run's (``realize.app.validation.run_validation``: its ``validation`` group, its
+    seed), so the call redoes the run's own validation."""
+    t0 = time.perf_counter()
+    run = saved_plan(run_dir)
+    settings, run_seed = run_validation(run)
+    candidates = settings.candidates if candidates is None else candidates
+    replicas = settings.replicas if replicas is None else replicas
+    min_success = settings.min_success if min_success is None else min_success
+    iterations = settings.iterations if iterations is None else iterations
+    seed = run_seed if seed is None else seed
     for name, v in (("candidates", candidates), ("replicas", replicas), ("iterations", iterations)):
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise ReplayError(f"{name} = {v!r} must be an integer >= 1")
     if not 0.0 <= float(min_success) <= 1.0:
         raise ReplayError(f"min_success = {min_success!r} must be in [0, 1]")
-    t0 = time.perf_counter()
-    run = saved_plan(run_dir)
     rd = RunDir(run.run_dir)
     lead = run.leader.index if run.leader is not None else None
     try:

@@ -3,9 +3,10 @@
 What it does: ``validate`` builds one batched scene of K copies of the run's world (the run's
 task, geometry, physics, controllers), copy ``k`` in the ``k``-th world drawn from the task's
 perturbation model (``TaskSpec.perturbation``; any field can be overridden) by
-``realize.tasks.worlds.draw_worlds`` (the worlds a run's candidates met for the same seed):
+``realize.tasks.worlds.draw_worlds`` (by default the run's seed and replica count: the worlds
+its candidates met, ``run_validation``):
 each object's xy and yaw, the robot start's xy, each
-object's friction and mass (CPU backend), realizes the best plan in all K copies, and reports
+object's friction and mass (CPU backend), realizes the plan the run returns in all K copies (``nominal``: ``best_z``), and reports
 the share that reaches the goal, the failure reasons and the cost of the successful ones.
 ``simulate_worlds`` (one world per copy, the copies in the run's shards on its workers) is
 shared with the candidates' validation.
@@ -30,15 +31,19 @@ from typing import Any
 import numpy as np
 import torch
 
+import yaml
+
 from realize.app.replay import ReplayError, build_replay_spec, returned_z, saved_plan
+from realize.app.run_config import ValidationSettings
 from realize.config import ConfigError
 from realize.tasks.perturbation import Perturbation
-from realize.run_dir.directory import RunDir
+from realize.paths import CONFIG_DIR
+from realize.run_dir.directory import BestPlan, RunDir
 from realize.run_dir.names import WORKER_LOG_DIR
 from realize.tasks.worlds import Worlds, draw_worlds
 
 __all__ = ["ValidationReport", "validate", "write_validation", "replica_spec", "simulate_worlds", "PLAN_VALIDATION",
-           "validation_log_dir", "validation_worlds"]
+           "validation_log_dir", "validation_worlds", "run_validation"]
 
 
 @dataclass
@@ -63,7 +68,7 @@ class ValidationReport:
         return asdict(self)
 
 
-def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
+def validate(run_dir: str | Path, replicas: int | None = None, seed: int | None = None, *,
              perturbation: Perturbation | None = None, backend: str = "cpu", write: bool = True,
              track_objects: bool | None = None, nominal: bool = False, **overrides: Any) -> ValidationReport:
     """Re-simulate the plan the run returns (``realize.app.replay.returned_z``: its candidate
@@ -75,12 +80,18 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     (``object_xy=0.03``, ``friction=(1.0, 1.0)``, ...); the worlds are worlds 1..R of
     ``validation_worlds(model, objects, replicas, seed)``, those the run's candidates were
     validated in for the same seed.
+    ``replicas``, ``seed``: None takes the run's (``run_validation``: its ``validation.replicas``,
+    its seed), so the check meets the worlds the run chose its plan in; another seed gives
+    held-out worlds.
     ``track_objects``: override the run's ``controller.track_objects`` (None: the run's).
     """
-    if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
-        raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
+    settings, run_seed = run_validation(run)
+    replicas = settings.replicas if replicas is None else replicas
+    seed = run_seed if seed is None else seed
+    if isinstance(replicas, bool) or not isinstance(replicas, int) or replicas < 1:
+        raise ReplayError(f"replicas = {replicas!r} must be an integer >= 1")
     spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
     # the perturbed worlds 1..R the run's candidates met for the same seed (world 0 is the unperturbed one)
     worlds = validation_worlds(model, spec.geometry.objects, replicas, seed).select(np.arange(1, replicas + 1))
@@ -103,6 +114,18 @@ def validate(run_dir: str | Path, replicas: int = 16, seed: int = 0, *,
     if write:
         write_validation(run.run_dir, report)
     return report
+
+
+def run_validation(run: BestPlan) -> tuple[ValidationSettings, int]:
+    """The ``validation`` settings the run validated its candidates with, and its seed: the
+    defaults that put a later check in the worlds the run's candidates met. A run with
+    validation off (or recorded before it existed) gets the group file's settings
+    (``configs/validation/default.yaml``)."""
+    v = ValidationSettings.from_mapping(run.config.get("validation"))
+    if v.replicas == 0:
+        v = ValidationSettings.from_mapping(yaml.safe_load((CONFIG_DIR / "validation" / "default.yaml").read_text()))
+    seed = run.config.get("seed", 0)
+    return v, int(seed) if isinstance(seed, int) and not isinstance(seed, bool) else 0
 
 
 def validation_worlds(model: Perturbation, objects: Any, replicas: int, seed: int) -> Worlds:
