@@ -1,8 +1,9 @@
 """The edge between Hydra and the library: a whole run config, checked once into a ``RunSpec``.
 
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
-the groups ``task``, ``scene``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers``, ``validation`` and the top-level keys
-``seed``, ``device``, ``resume``, ``task_file``, ``task_origin``, ``replan_from``, ``replan``) and returns a
+the groups ``task``, ``scene``, ``robot``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers``, ``validation`` and
+the top-level keys ``seed``, ``device``, ``resume``, ``task_file``, ``task_origin``, ``warm_start``, ``replan_from``,
+``replan``) and returns a
 ``RunSpec`` of validated objects (``TaskSpec`` (a replan's: the remaining actions, ``realize.app.replan``), ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
 tensors live and the search's dtype). Every problem raises ``realize.config.ConfigError`` with

@@ -11,7 +11,7 @@ What it does:
     side of the line between them, 1.7-1.95 m away during grasp and place (with ``FOLLOW_FOVY``
     a 4.5 cm cube is then about 25 px wide in a 960 x 720 frame); eye and target are
     smoothed from frame to frame;
-  * ``Caption``: the label ``2/5 grasp(Cube_g)   step 412   20.6 s``, the current action
+  * ``Caption``: the label ``2/5 grasp(cube, Cube_g)   step 412   20.6 s``, the current action
     following the rollout's ``action_hook`` (``Caption.on_action``).
 What it doesn't: run the rollout (``realize.app.replay``), or choose a fixed camera (the scene's
 ``EnvOptions.camera``; a fixed eye/target disables the follow camera).

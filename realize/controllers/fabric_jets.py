@@ -8,7 +8,8 @@ velocity ``J qd`` and true curvature ``qd^T (d^2 x / dq^2) qd``, by forward-mode
 (``torch.func.jvp``, vmapped over joint directions) or in closed form (``sphere_jets``).
 Everything is batched over N plans, device- and dtype-agnostic and differentiable.
 What it doesn't: combine the leaves into accelerations (``realize.controllers.fabrics``), or
-know a particular robot (``realize.robot.kinematics`` implements ``FabricKinematics`` for Fetch).
+know a particular robot (``realize.robot.kinematics`` implements ``FabricKinematics`` for any
+robot from its robot config).
 """
 
 from __future__ import annotations

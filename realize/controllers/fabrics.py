@@ -53,10 +53,10 @@ and ``valid = False`` in the returned ``(N,)`` mask.
 What it does not do
 -------------------
 No dynamic fabrics (moving obstacles, reference-path tracking), no
-self-collision, capsule or cuboid leaves, no orientation goals and no
-secondary goals. The obstacle leaf coordinate is pluggable
-(``obstacle_distance``), so signed-distance maps for other shapes (boxes) can
-be added without touching the fabric. Like the reference, the leaves have no
+self-collision or capsule leaves, no orientation goals and no secondary
+goals. The obstacle leaf coordinate is pluggable (``obstacle_distance``):
+spheres here, boxes through ``realize.controllers.obstacles.BoxDistance``
+(the whole-body fabric's tables and walls), without touching the fabric. Like the reference, the leaves have no
 distance cut-off, and a goal reached exactly gives zero attractor force (the
 reference gives NaN there).
 """

@@ -7,9 +7,7 @@ Modules (one job each):
   * ``context``: ``StepContext``, what one control step knows (scene reads, the fabric, the
     grid) and the command buffers the templates write;
   * ``actions``: the action templates (one module each) and their registry ``TEMPLATES``;
-  * ``goals``: the goal predicates psi_g (used by the rollout and by the ManiSkill tasks'
-    ``evaluate()``);
   * ``result``: ``RolloutResult``; ``rollout``: the rollout phases and ``PlanRealizer``.
-This package's ``__init__`` imports nothing, so importing ``goals`` stays light (the tasks in
-``envs`` import it).
+The goal predicates psi_g live in ``realize.tasks.goals`` (the ManiSkill tasks' ``evaluate()``
+uses them too). This package's ``__init__`` imports nothing, so importing one module stays light.
 """

@@ -17,7 +17,7 @@ What it does
 What it doesn't: open the URDF (``realize.robot.urdf``), compute kinematics
 (``realize.robot.kinematics``) or build the simulated robot (``envs.robot_agent``).
 The whole-body vector ``q`` of every robot is ``[x, y, yaw, *upper.joints]``
-(``realize.robot.layout.BodyLayout``).
+(the slices of ``realize.robot.layout``: ``BASE``, ``UPPER``, ...).
 """
 
 from __future__ import annotations
