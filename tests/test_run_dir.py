@@ -30,9 +30,9 @@ def test_float_encoding_round_trip() -> None:
     assert decode_float(None, INF) == INF and math.isnan(decode_float(None)) and decode_float(2) == 2.0
     # the strings of checkpoints written before this encoding
     assert decode_float("inf") == INF and decode_float("-inf") == -INF and math.isnan(decode_float("nan"))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"expected a number, got True"):  # a bool is no number in JSON
         decode_float(True)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"expected a number, got \[1\.0\]"):
         decode_float([1.0])
     assert encode_floats([[1.0, NAN], [INF, 2.0]]) == [[1.0, None], [None, 2.0]]
     back = decode_floats([[1.0, None], None])  # a null entry is a float without a value
