@@ -48,7 +48,7 @@ def test_groups_are_consecutive_whole_shards() -> None:
     shards = shard_rows(300, 100)
     groups = group_shards(shards, 2)
     assert [len(g) for g in groups] == [2, 1] and [s for g in groups for s in g] == shards
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"cannot split 3 rows into 4 blocks"):
         split_rows(3, 4)
 
 
