@@ -216,7 +216,7 @@ def test_step_hooks_env_options_and_friction() -> None:
         assert (off.max(dim=1).values > 1e-4).all()  # randomized although reset() did not ask
         mu = s.set_object_friction("cube", [0.5, 2.0])
         assert torch.allclose(s.object_friction("cube"), torch.stack([mu, mu], dim=1).to(torch.float64))
-        with pytest.raises(ConfigError):
+        with pytest.raises(ConfigError, match=r"1 friction factors for 2 copies"):
             s.set_object_friction("cube", [1.0])
-        with pytest.raises(ConfigError):
+        with pytest.raises(ConfigError, match=r"every = 0 is invalid"):
             s.add_step_hook(seen.append, every=0)
