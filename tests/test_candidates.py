@@ -184,11 +184,36 @@ def test_ties_keep_planner_order_and_stop_callback() -> None:
 
 
 def test_converged_candidates_leave_their_iterations_to_the_winner() -> None:
+    """Only the loser converges (after its first iteration); the budget rule gives the winner the
+    nominal final iterations plus the loser's unspent round iterations: the run spends T in all."""
     cfg = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=0, converge_std=0.5, min_std=0.01)
-    sh = SuccessiveHalving(specs(2), cfg, plan_budget(2, 10, 16))  # m = 3
-    sh.run(fake([1.0, 2.0]))
-    assert sh.spent_iterations <= 10 and sh.spent_samples == 16 * sh.spent_iterations
-    assert sh.winner == 0
+    # the winner: parameters over +-100, a cost that ignores them (seeded noise in [1, 1.1)), so its
+    # elites are random draws and their std (~58 at first) stays far above converge_std
+    wide = CandidateSpec("wide", ParamLayout({"P0": Box([-100.0] * 2, [100.0] * 2)}), n_actions=3)
+    noise = torch.Generator().manual_seed(0)
+    loser = fake([0.0, 2.0])  # 2 + ||Z||^2 over [-1, 1]^4: elites near 0, converged at once
+
+    def evaluate(i: int, Z: torch.Tensor) -> EvalResult:
+        calls.append(i)
+        if i == 1:
+            return loser(i, Z)
+        n = Z.shape[0]
+        return EvalResult(cost=1.0 + 0.1 * torch.rand(n, generator=noise, dtype=F64),
+                          feasible=torch.ones(n, dtype=torch.bool))
+
+    b = plan_budget(2, 10, 16)
+    assert (b.round_iterations, b.final_iterations) == (3, 4)  # round 0: 3 each; winner 4 more
+    calls: list[int] = []
+    sh = SuccessiveHalving([wide, specs(2)[1]], cfg, b)
+    won = sh.run(evaluate)
+    w, l = sh.candidates
+    assert l.state.converged and l.iterations == 1 and l.dropped_round == 0  # 2 of its 3 unspent
+    assert not w.state.converged and won.index == 0 and sh.winner == 0
+    # the winner: its 3 round iterations + 4 nominal final ones + the loser's 2 unspent ones
+    assert w.iterations == b.total_iterations - l.iterations == 3 + 4 + 2
+    assert calls == [0, 0, 0, 1] + [0] * 6
+    assert sh.spent_iterations == b.total_iterations and sh.spent_samples == b.total_samples == 160
+    assert w.samples == 16 * 9 and l.samples == 16
 
 
 def test_bad_construction() -> None:
