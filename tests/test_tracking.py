@@ -66,11 +66,18 @@ def test_friction_and_mass_factors_reach_each_copy() -> None:
     with BatchedScene(3, spec.geometry_cfg, spec.sim) as scene:
         scene.set_object_friction("cube", f_friction["cube"])
         masses = scene.set_object_mass("cube", f_mass["cube"])
-        assert np.allclose(scene.object_friction("cube")[:, 0].numpy(), 1.0 * f_friction["cube"], rtol=1e-6)
-        assert np.allclose(scene.object_mass("cube").numpy(), 0.05 * f_mass["cube"], rtol=1e-6)
+        friction, mass = scene.object_friction("cube").clone(), scene.object_mass("cube").clone()
+        assert np.ptp(w.friction[:, 0]) > 0.05 and np.ptp(w.mass[:, 0]) > 0.05  # copies differ
+        assert np.allclose(friction[:, 0].numpy(), 1.0 * f_friction["cube"], rtol=1e-6)
+        assert np.allclose(mass.numpy(), 0.05 * f_mass["cube"], rtol=1e-6)
         assert np.allclose(masses.numpy(), 0.05 * f_mass["cube"])
         # a heavier cube falls as fast, but squeezes the table harder: all copies still rest
         scene.reset()
         for _ in range(5):
             scene.step()
         assert (scene.object_velocity("cube")[:, :3].norm(dim=1) < 0.01).all()
+        # ... and reset() keeps each copy's own friction (static and dynamic) and mass
+        assert torch.equal(scene.object_friction("cube"), friction)
+        assert torch.equal(scene.object_mass("cube"), mass)
+        assert np.allclose(scene.object_friction("cube").numpy(), np.stack([f_friction["cube"]] * 2, 1), rtol=1e-6)
+        assert np.allclose(scene.object_mass("cube").numpy(), 0.05 * f_mass["cube"], rtol=1e-6)
