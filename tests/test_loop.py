@@ -5,6 +5,8 @@ clearly, and an interrupt ends the run as ``interrupted``. No simulator."""
 
 from __future__ import annotations
 
+import inspect
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +21,8 @@ from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.app.loop import search_loop
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
-from realize.search.protocol import EvalResult, Searcher
+from realize.search.ce.state import IterationRecord
+from realize.search.protocol import Batch, EvalResult, SearchReport, Searcher
 from realize.sinks.base import Iteration, SinkError, SinkSet
 
 F64 = torch.float64
@@ -84,11 +87,53 @@ def scene_of(n_plans: int, calls: list):
     return pool, (lambda: pool)
 
 
-def test_both_searchers_implement_the_protocol() -> None:
-    ce = CrossEntropyOptimizer(LAYOUT, CEConfig(n_envs=8, n_elite=2, iterations=2))
-    sh = SuccessiveHalving([CandidateSpec("a", LAYOUT, 1), CandidateSpec("b", LAYOUT, 1)],
-                           CEConfig(n_envs=8, n_elite=2, iterations=4), plan_budget(2, 4, 8))
-    assert isinstance(ce, Searcher) and isinstance(sh, Searcher)
+def one_plan() -> CrossEntropyOptimizer:
+    return CrossEntropyOptimizer(LAYOUT, CEConfig(n_envs=8, n_elite=2, iterations=3))
+
+
+def two_plans() -> SuccessiveHalving:  # T = 4: m = 1, round 0 runs each once, the winner 2 more
+    return SuccessiveHalving([CandidateSpec("a", LAYOUT, 1), CandidateSpec("b", LAYOUT, 1)],
+                             CEConfig(n_envs=8, n_elite=2, iterations=4), plan_budget(2, 4, 8))
+
+
+@pytest.mark.parametrize("make, order", [(one_plan, [None] * 3), (two_plans, [0, 1, 0, 0])])
+def test_both_searchers_keep_the_protocol(make, order: list) -> None:
+    """Each searcher has the Protocol's members with its parameters (isinstance on a runtime
+    Protocol only checks names), and a run driven through them alone gives what the Protocol
+    says: Batches of (N, D) samples naming their candidate, records, reports, ``done`` at the
+    end, and a JSON ``state_dict`` that a fresh searcher resumes from with the same samples."""
+    s = make()
+    assert isinstance(s, Searcher)
+    for name in ("done", "iterations_done"):
+        assert isinstance(inspect.getattr_static(type(s), name), property), name
+    for name in ("ask", "tell", "report", "state_dict", "load_state_dict"):
+        want, got = (inspect.signature(getattr(c, name)).parameters.values() for c in (Searcher, type(s)))
+        assert [(p.name, p.kind, p.default is p.empty) for p in got] == \
+               [(p.name, p.kind, p.default is p.empty) for p in want], name
+
+    def evaluate(b: Batch) -> EvalResult:  # candidate 1 is worse: candidate 0 wins the halving
+        return EvalResult(cost=(b.Z**2).sum(1) + 10.0 * (b.candidate == 1), feasible=torch.ones(8, dtype=torch.bool))
+
+    Zs, seen = [], []
+    assert not s.done and s.iterations_done == 0
+    while (b := s.ask()) is not None:
+        assert isinstance(b, Batch) and b.Z.shape == (8, 2) and b.Z.dtype == F64
+        rec = s.tell(evaluate(b))
+        Zs.append(b.Z.clone()), seen.append(b.candidate)
+        assert isinstance(rec, IterationRecord) and rec.n_envs == 8
+        assert s.iterations_done == len(seen) and isinstance(s.report(), SearchReport)
+        if len(seen) == 1:
+            state = json.dumps(s.state_dict(), allow_nan=False)  # plain JSON data
+    assert s.done and s.ask() is None and seen == order
+
+    again = make()
+    again.load_state_dict(json.loads(state))
+    assert again.iterations_done == 1 and not again.done
+    rest = []
+    while (b := again.ask()) is not None:
+        again.tell(evaluate(b))
+        rest.append(b.Z)
+    assert len(rest) == len(Zs) - 1 and all(torch.equal(a, z) for a, z in zip(rest, Zs[1:]))
 
 
 def test_sinks_see_every_iteration_in_order_and_close_with_the_status(tmp_path: Path) -> None:
