@@ -5,7 +5,8 @@ device ("Tensor on device cpu is not on the expected device meta!"), as CUDA ref
 tensor. So the whole-body fabric (``realize.controllers.whole_body``) and the rollout context's
 fabric bookkeeping (``realize.realization.context``) are built and stepped on ``meta`` here: a
 constant made on the CPU and combined with a device tensor fails these tests with the device
-mix named. On the CPU the constants the fix builds differently are compared with the old way.
+mix named. On the CPU the constants built there (each point's last moving dof, the gripper points) are checked
+against a search of the masks and the robot's TCP offsets.
 What it doesn't: check values on a device (``scripts/gpu_check.py`` does that on CUDA).
 """
 
@@ -20,7 +21,6 @@ import torch
 DOF = 11  # the default robot's whole-body joints (fetch_omni: base 3 + torso + 7 arm)
 from realize.controllers.whole_body import WholeBodyFabric
 from realize.world.geometry import GeometryCfg, RampCfg, build_geometry
-from realize.robot.jacobians import prefix_ends
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
 
@@ -91,10 +91,21 @@ def test_rollout_context_fabric_bookkeeping_on_meta(geometry) -> None:
     assert ctx.fab_state.q.device == META and ctx.base_cmd.device == META and ctx.fab_invalid.device == META
 
 
-def test_prefix_ends_built_on_the_cpu_equal_the_masks_own() -> None:
+def _last_moving_dof(mask: torch.Tensor) -> torch.Tensor:
+    """Per point, the highest dof index whose mask entry is set (-1: none): by search, not by count."""
+    idx = torch.arange(mask.shape[-1]).expand_as(mask)
+    return torch.where(mask > 0.5, idx, torch.full_like(idx, -1)).amax(-1)
+
+
+def test_prefix_ends_built_on_the_cpu_are_each_points_last_moving_dof() -> None:
     fab = WholeBodyFabric(build_geometry(GeometryCfg()), dtype=torch.float64)
-    assert torch.equal(fab.kin._jets_ends, prefix_ends(fab.kin._jets_mask))
-    assert torch.equal(fab.map._ends, prefix_ends(fab.map._mask))
+    n_dof = fab.kin._jets_mask.shape[-1]
+    for ends, mask in ((fab.kin._jets_ends, fab.kin._jets_mask), (fab.map._ends, fab.map._mask)):
+        assert ends.device.type == "cpu" and ends.dtype == torch.long
+        assert torch.equal(ends, _last_moving_dof(mask))
+    # the gripper hangs at the end of the one serial chain: every dof moves it, the last one last
+    assert int(fab.kin._jets_ends[0]) == n_dof - 1 and torch.equal(fab.map._ends[:3], torch.full((3,), n_dof - 1))
+    assert int(fab.kin._jets_ends.min()) < n_dof - 1  # and some sphere (the base's) is not moved by the arm
     # the three attracted gripper points: the TCP, one behind it, one beside it
     L = fab.cfg.axis_length
     expected = fab.kin.tcp_offset + torch.tensor([[0.0, 0.0, 0.0], [-L, 0.0, 0.0], [0.0, L, 0.0]], dtype=torch.float64)
