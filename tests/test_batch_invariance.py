@@ -5,13 +5,13 @@ result for one plan must be a function of that plan's inputs alone, bit for bit.
 products do not guarantee that (MKL on an AMD EPYC gives a row different last bits depending on
 the other rows and its position); the fabric and the kinematics are written so that they do.
 Checked here on random subsets, in shuffled order, against the full batch, in float32 (the
-rollout's dtype) and float64, with torch on one thread as in the rollout and on the default
-thread count.
+rollout's dtype) and float64, with torch on one thread as in the rollout and on several.
 """
 
 from __future__ import annotations
 
 import math
+import os
 
 import pytest
 import torch
@@ -46,11 +46,13 @@ def _states(dtype: torch.dtype, seed: int) -> tuple[torch.Tensor, torch.Tensor, 
     return q.to(dtype), qd.to(dtype), pos.to(dtype)
 
 
-@pytest.fixture(params=[1, None], ids=["1-thread", "default-threads"])
+@pytest.fixture(params=[1, "many"], ids=["1-thread", "many-threads"])
 def threads(request):
+    """torch on one thread, or on several (set here: a CPU scene built earlier in this process
+    leaves torch on one thread, so "the default" would be one thread too)."""
     before = torch.get_num_threads()
-    if request.param is not None:
-        torch.set_num_threads(request.param)
+    torch.set_num_threads(1 if request.param == 1 else min(8, max(2, os.cpu_count() or 2)))
+    assert (torch.get_num_threads() > 1) == (request.param != 1)
     yield
     torch.set_num_threads(before)
 
