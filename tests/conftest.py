@@ -23,7 +23,12 @@ def no_sim(monkeypatch: pytest.MonkeyPatch) -> None:
     """Fail the test if anything builds a simulator."""
     import realize.scene
 
-    def boom(*a, **k):
-        raise AssertionError("a simulator was built for an invalid config")
+    class NoScene:
+        def __init__(self, *a, **k) -> None:
+            raise AssertionError("a simulator was built for an invalid config")
 
-    monkeypatch.setattr(realize.scene, "BatchedScene", boom)
+        @classmethod
+        def from_spec(cls, *a, **k) -> None:
+            raise AssertionError("a simulator was built for an invalid config")
+
+    monkeypatch.setattr(realize.scene, "BatchedScene", NoScene)

@@ -144,7 +144,7 @@ def test_a_warm_start_at_the_optimum_beats_a_cold_start_of_the_same_budget():
     assert hot.best_cost < 0.05 < cold.best_cost
 
 
-def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path):
+def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path, no_sim):
     from realize.app.run import run
 
     cfg = compose_config(f"warm_start={tmp_path / 'nowhere'}", "ce.n_envs=4", "ce.n_elite=2", "ce.iterations=1")
