@@ -7,9 +7,10 @@
 * folding R worlds per sample equals a per-sample loop (mean and CVaR), and the ranking puts a
   sample's success share before its cost;
 * shards and batch parts keep a sample's copies together, each at its world's copy;
-* a robust run (``ce.replicas=2``) meets two different worlds, keeps each sample's share and
-  per-world results in its history, and repeats bit for bit on CPU; ``ce.replicas`` refuses
-  what cannot work in one line.
+* a robust pool realizes each sample in every one of its R worlds, and the worlds differ (the
+  same plan costs differently in them); a robust run (``ce.replicas=2``, through that pool) keeps each
+  sample's share and per-world results in its history and repeats bit for bit on CPU;
+  ``ce.replicas`` refuses what cannot work in one line.
 """
 
 from __future__ import annotations
