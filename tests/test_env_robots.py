@@ -35,7 +35,12 @@ def test_every_task_with_every_robot(env_id: str, robot: str) -> None:
         assert np.array_equal(_flat(first), _flat(second))
         qpos = u.agents[0].robot.get_qpos()[0]
         rest = torch.tensor([u.robot_spec.rest_value(n) for n in names])
-        assert torch.allclose(qpos[3:], rest[3:], atol=1e-5)  # the base starts at the task's start pose
+        assert torch.allclose(qpos[3:], rest[3:], atol=1e-5)  # the arm (and torso) at the robot's rest pose
+        # the base at the task's start pose: planar joints at zero, the articulation's root there
+        assert torch.allclose(qpos[:3], torch.zeros(3), atol=1e-5)
+        start = u.geometry.robot_start
+        root = u.agents[0].robot.pose.p[0]
+        assert torch.allclose(root[:2].cpu(), torch.tensor(start[:2], dtype=root.dtype), atol=1e-5)
         env.action_space.seed(0)
         for _ in range(5):
             obs, reward, terminated, truncated, info = env.step(env.action_space.sample())

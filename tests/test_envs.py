@@ -1,10 +1,13 @@
-"""Every ManiSkill task this project registers works with ``gym.make(id)`` and its defaults.
+"""The ManiSkill tasks this project registers: the registry, refused geometries, the lean robot.
 
-As ManiSkill's own env tests do: make the env (only ``render_mode`` set, so that ``render`` has
-something to return), ``reset(seed=0)`` twice gives equal observations, 5 random steps,
-``render()``, ``close()``. The ids come from ManiSkill's registry (every env whose class lives in
-the ``envs`` package), not from a hand-written list. Plus: a geometry of a variant a task does
-not build is refused by name before any scene is built.
+* the registry lists every task whose class lives in the ``envs`` package (the ids
+  ``test_env_robots.py`` makes with every robot: ``gym.make``, ``reset(seed=0)`` twice, 5 random
+  steps, ``render()``, ``close()``, as ManiSkill's own env tests do);
+* a geometry of a variant a task does not build is refused by name before any scene is built;
+* the lean robot (``sim.lean_robot``) keeps the full robot's joints and link poses, and dropping
+  a moving or inner link is refused;
+* the simulator settings reach what they name: robot solver iterations, hand collision shapes
+  (masses kept), the PhysX scene settings.
 """
 
 from __future__ import annotations
