@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from realize.robot.spec import load_robot_spec
 from realize.robot.urdf import source_urdf
 
@@ -97,7 +99,7 @@ def test_cuda_asked_for_without_cuda_is_one_line(tmp_path: Path) -> None:
     import torch
 
     if torch.cuda.is_available():
-        return
+        pytest.skip("a CUDA device is here: the check runs instead of refusing")
     p = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path)], cwd=REPO, capture_output=True,
                        text=True, timeout=60)
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "no CUDA device" in p.stderr
