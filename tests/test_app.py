@@ -361,26 +361,56 @@ def test_resume_refuses_changed_settings(uninterrupted: Path, no_sim: None) -> N
     assert (uninterrupted / RESULT_FILE).read_text() == before  # the run's result is untouched
 
 
+def _checkpoint_iteration(run_dir: Path) -> int | None:
+    try:
+        return int(json.loads((run_dir / CHECKPOINT_FILE).read_text())["iteration"])
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 def test_sigint_subprocess_then_resume(tmp_path: Path, uninterrupted: Path) -> None:
+    """Ctrl-C to the command mid-run: it exits 130 with an ``interrupted`` result, and resuming
+    gives the uninterrupted run. The interrupt cannot miss the run: the process is frozen
+    (SIGSTOP) while the test reads its checkpoint, and SIGINT is sent while it is still frozen
+    at a checkpoint of 1 or 2 of its 3 iterations, so it lands before the last iteration ends."""
+    total = 3
     run_dir = tmp_path / "run"
     p = realize_cli(*RESUME, f"hydra.run.dir={run_dir}", cwd=tmp_path, background=True, stdout=subprocess.PIPE,
                     stderr=subprocess.PIPE)
-    deadline = time.time() + 180
-    while time.time() < deadline and p.poll() is None:
-        try:
-            if json.loads((run_dir / CHECKPOINT_FILE).read_text())["iteration"] >= 1:
+    at, ended = None, None
+    try:
+        deadline = time.time() + 180
+        while time.time() < deadline and at is None:
+            os.kill(p.pid, signal.SIGSTOP)
+            _, status = os.waitpid(p.pid, os.WUNTRACED)  # until it is stopped (or has ended)
+            if not os.WIFSTOPPED(status):
+                ended = status
                 break
-        except (OSError, ValueError, KeyError):
-            pass
-        time.sleep(0.05)
-    p.send_signal(signal.SIGINT)
-    _, err = p.communicate(timeout=120)
+            k = _checkpoint_iteration(run_dir)
+            if k is not None and k >= 1:
+                at = k
+                if k < total:
+                    p.send_signal(signal.SIGINT)  # pending until it runs again
+            os.kill(p.pid, signal.SIGCONT)
+            time.sleep(0.05)
+        assert ended is None, f"the run ended (wait status {ended}) before the test could interrupt it"
+        assert at is not None, "no checkpoint within 180 s"
+        assert at < total, f"the frozen run had already done all {total} iterations: the signal would miss"
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.returncode is None and ended is None:
+            p.kill()
+            p.communicate()
+    assert p.returncode == 130, err[-3000:]
     res = json.loads((run_dir / RESULT_FILE).read_text())
-    if res["iterations_done"] < 3:  # the signal arrived during the run
-        assert p.returncode == 130, err
-        assert res["interrupted"] is True and res["status"] == "interrupted"
-        r = realize_cli(f"resume={run_dir}", "logging.progress=false", cwd=tmp_path, timeout=240)
-        assert r.returncode == 0, r.stderr
+    assert res["interrupted"] is True and res["status"] == "interrupted" and "SIGINT" in res["error"]
+    assert res["iterations_done"] < total and load_checkpoint(run_dir).iteration == at
+
+    r = realize_cli(f"resume={run_dir}", "logging.progress=false", cwd=tmp_path, timeout=240)
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = json.loads((run_dir / RESULT_FILE).read_text())
+    assert res["status"] == "done" and res["interrupted"] is False and res["iterations_done"] == total
+    assert res["segments"] == 2 and res["resumed_from_iteration"] == at
     _compare(uninterrupted, run_dir)
 
 
