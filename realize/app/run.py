@@ -304,6 +304,9 @@ class _Assembly:
         from realize.app.replay import ReplayError
 
         v = self.spec.validation
+        if self.spec.logging.progress:  # a minute or two on a CPU: say what runs now
+            print(f"validation: the {v.candidates} best plans, each in {v.replicas} perturbed worlds and the "
+                  f"unperturbed one ({v.candidates * (v.replicas + 1)} copies at most) ...", flush=True)
         try:
             rep = validate_candidates(self.run_dir, v.candidates, v.replicas, min_success=v.min_success,
                                       iterations=v.iterations, seed=self.spec.seed)
