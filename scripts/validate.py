@@ -35,6 +35,8 @@ from realize.app.candidate_validation import validate_candidates  # noqa: E402
 from realize.app.validation import validate  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
+RUNS_OWN = "the run's"  # --candidates without K: the run's validation.candidates
+
 
 def _range(ap: argparse.ArgumentParser, values: list[str] | None, flag: str) -> tuple[float, float] | None:
     if values is None:
@@ -65,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robot-noise", type=float, default=None, help="robot start xy noise (m), the task's if unset")
     ap.add_argument("--no-track", action="store_true",
                     help="aim at objects' config poses, not where they lie (controller.track_objects=false)")
-    ap.add_argument("--candidates", type=int, nargs="?", const=0, default=None, metavar="K",
+    ap.add_argument("--candidates", type=int, nargs="?", const=RUNS_OWN, default=None, metavar="K",
                     help="validate the K cheapest distinct feasible plans of the last iterations (no K: the run's "
                          "validation.candidates), not only the best, name the one to return and rewrite the run's "
                          "validation block (realize/app/candidate_validation.py)")
@@ -109,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _candidates(args: argparse.Namespace, track: bool | None, overrides: dict) -> int:
-    rep = validate_candidates(args.run_dir, args.candidates or None, args.replicas, min_success=args.min_success,
+    k = None if args.candidates == RUNS_OWN else args.candidates
+    rep = validate_candidates(args.run_dir, k, args.replicas, min_success=args.min_success,
                               seed=args.seed, backend=args.backend, track_objects=track, write=not args.dry_run,
                               **overrides)
     if args.json:

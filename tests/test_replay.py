@@ -78,6 +78,11 @@ def test_bad_run_dirs(tmp_path: Path) -> None:
         assert load_script(script).main([str(tmp_path)]) == 2
 
 
+def test_validate_candidates_zero_is_refused_not_read_as_the_runs(run_dir: Path, capsys: pytest.CaptureFixture) -> None:
+    assert load_script("validate").main([str(run_dir), "--candidates", "0", "--dry-run"]) == 2
+    assert "candidates = 0 must be an integer >= 1" in capsys.readouterr().err
+
+
 def test_replay_reaches_the_goal(run_dir: Path, direct_cost: float) -> None:
     rep = replay(run_dir)
     assert rep.feasible, rep.failure
