@@ -8,8 +8,8 @@ For each preset and seed: `python -m realize experiment=PRESET seed=S OVERRIDES`
 OUT/PRESET_sS (its validation stage picks the plan to return from its 5 best under 64 perturbed
 worlds, drawn with the run's seed S), then `scripts/validate.py` on the same run: the search's
 nominal best (`--nominal`) in those worlds ("before"), and both plans in 64 other worlds (drawn
-with seed S + 1, "held out": worlds no choice was made in). Prints one markdown row per run; `--reuse` keeps
-finished runs. A seed-paper run takes 3-4 min on 2 cores, a ramp run 3-5 min.
+with seed S + 1, "held out": worlds no choice was made in). Prints one markdown row per run;
+`--reuse` keeps finished runs. A seed-paper run takes 3-4 min on 2 cores, a ramp run 3-5 min.
 """
 
 from __future__ import annotations

@@ -1,14 +1,13 @@
-"""Validation replicas: a run's best plan re-simulated K times at once under the task's perturbations.
+"""Validation replicas: the plan a run returns re-simulated K times at once under the task's perturbations.
 
 What it does: ``validate`` builds one batched scene of K copies of the run's world (the run's
 task, geometry, physics, controllers), copy ``k`` in the ``k``-th world drawn from the task's
 perturbation model (``TaskSpec.perturbation``; any field can be overridden) by
 ``realize.tasks.worlds.draw_worlds`` (by default the run's seed and replica count: the worlds
-its candidates met, ``run_validation``):
-each object's xy and yaw, the robot start's xy, each
-object's friction and mass (CPU backend), realizes the plan the run returns in all K copies (``nominal``: ``best_z``), and reports
-the share that reaches the goal, the failure reasons and the cost of the successful ones.
-``simulate_worlds`` (one world per copy, the copies in the run's shards on its workers) is
+its candidates met, ``run_validation``): each object's xy and yaw, the robot start's xy, each
+object's friction and mass (CPU backend), realizes the plan the run returns in all K copies
+(``nominal``: ``best_z``), and reports the share that reaches the goal, the failure reasons
+and the cost of the successful ones. ``simulate_worlds`` (one world per copy, the copies in the run's shards on its workers) is
 shared with the candidates' validation.
 ``write_validation`` stores the report in ``result.json`` under ``plan_validation`` (read, add
 the key, write back atomically; the run's own candidates block, ``validation``, stays).
@@ -30,7 +29,6 @@ from typing import Any
 
 import numpy as np
 import torch
-
 import yaml
 
 from realize.app.replay import ReplayError, build_replay_spec, returned_z, saved_plan
@@ -124,8 +122,7 @@ def run_validation(run: BestPlan) -> tuple[ValidationSettings, int]:
     v = ValidationSettings.from_mapping(run.config.get("validation"))
     if v.replicas == 0:
         v = ValidationSettings.from_mapping(yaml.safe_load((CONFIG_DIR / "validation" / "default.yaml").read_text()))
-    seed = run.config.get("seed", 0)
-    return v, int(seed) if isinstance(seed, int) and not isinstance(seed, bool) else 0
+    return v, int(run.config.get("seed", 0))
 
 
 def validation_worlds(model: Perturbation, objects: Any, replicas: int, seed: int) -> Worlds:

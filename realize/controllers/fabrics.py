@@ -56,8 +56,8 @@ No dynamic fabrics (moving obstacles, reference-path tracking), no
 self-collision or capsule leaves, no orientation goals and no secondary
 goals. The obstacle leaf coordinate is pluggable (``obstacle_distance``):
 spheres here, boxes through ``realize.controllers.obstacles.BoxDistance``
-(the whole-body fabric's tables and walls), without touching the fabric. Like the reference, the leaves have no
-distance cut-off, and a goal reached exactly gives zero attractor force (the
+(the whole-body fabric's tables and walls), without touching the fabric.
+Like the reference, the leaves have no distance cut-off, and a goal reached exactly gives zero attractor force (the
 reference gives NaN there).
 """
 
