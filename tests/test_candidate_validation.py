@@ -37,17 +37,23 @@ def test_wilson_interval_is_scipys(k: int, n: int) -> None:
     assert lo == pytest.approx(ci.low, abs=1e-12) and hi == pytest.approx(ci.high, abs=1e-12)
 
 
+def _history(its: list[tuple[list, list[float], list[bool]]]) -> History:
+    """A search history of the iterations ``its``: (Z, cost, feasible) each."""
+    h = History([f"p{j}" for j in range(len(its[0][0][0]))])
+    for Z, cost, ok in its:
+        h.append({"Z": np.array(Z, float), "cost": np.array(cost), "feasible": np.array(ok)}, n_envs=len(Z),
+                 success_share=float(np.mean(ok)), best_cost=min(c for c, f in zip(cost, ok) if f),
+                 mean=np.zeros(len(Z[0])), std=np.ones(len(Z[0])))
+    return h
+
+
 def test_candidates_are_the_cheapest_distinct_feasible_samples_of_the_last_iterations() -> None:
-    h = History(["a", "b"])
     its = [  # (Z, cost, feasible) per iteration
         ([[0, 0], [1, 1], [2, 2]], [100.0, 50.0, 60.0], [True, True, False]),   # too early but for the best
         ([[3, 3], [4, 4], [3, 3]], [90.0, 80.0, 90.0], [True, True, True]),     # [3, 3] twice
         ([[5, 5], [6, 6], [7, 7]], [85.0, 70.0, 10.0], [True, True, False]),    # 10: infeasible
     ]
-    for Z, cost, ok in its:
-        h.append({"Z": np.array(Z, float), "cost": np.array(cost), "feasible": np.array(ok)}, n_envs=3,
-                 success_share=float(np.mean(ok)), best_cost=min(c for c, f in zip(cost, ok) if f),
-                 mean=np.zeros(2), std=np.ones(2))
+    h = _history(its)
     got = pick_candidates(h, 4, iterations=2)
     assert [(z.tolist(), c, i) for z, c, i, _ in got] == [([1, 1], 50.0, 0), ([6, 6], 70.0, 2), ([4, 4], 80.0, 1),
                                                        ([5, 5], 85.0, 2)]
@@ -55,26 +61,17 @@ def test_candidates_are_the_cheapest_distinct_feasible_samples_of_the_last_itera
 
 
 def test_the_runs_best_is_a_candidate_when_an_earlier_iteration_found_it() -> None:
-    h = History(["a"])
     its = [  # (Z, cost, feasible) per iteration; the run's best (40) comes first, its runner-up (45) never counts
         ([[0], [1], [2]], [40.0, 45.0, 30.0], [True, True, False]),
         ([[3], [4], [5]], [60.0, 50.0, 55.0], [True, True, True]),
         ([[6], [0], [7]], [70.0, 40.0, 65.0], [True, True, True]),     # z = [0] again: one candidate
     ]
-    for Z, cost, ok in its:
-        h.append({"Z": np.array(Z, float), "cost": np.array(cost), "feasible": np.array(ok)}, n_envs=3,
-                 success_share=float(np.mean(ok)), best_cost=min(c for c, f in zip(cost, ok) if f),
-                 mean=np.zeros(1), std=np.ones(1))
+    h = _history(its)
     got = pick_candidates(h, 3, iterations=1)
     assert [(z.tolist(), c, i) for z, c, i, _ in got] == [([0], 40.0, 2), ([7], 65.0, 2), ([6], 70.0, 2)]
     got = pick_candidates(h, 3, iterations=2)
     assert [(z.tolist(), c, i) for z, c, i, _ in got] == [([0], 40.0, 2), ([4], 50.0, 1), ([5], 55.0, 1)]
-    h2 = History(["a"])
-    for Z, cost, ok in its[:2]:
-        h2.append({"Z": np.array(Z, float), "cost": np.array(cost), "feasible": np.array(ok)}, n_envs=3,
-                  success_share=float(np.mean(ok)), best_cost=min(c for c, f in zip(cost, ok) if f),
-                  mean=np.zeros(1), std=np.ones(1))
-    got = pick_candidates(h2, 2, iterations=1)
+    got = pick_candidates(_history(its[:2]), 2, iterations=1)
     assert [(z.tolist(), c, i) for z, c, i, _ in got] == [([0], 40.0, 0), ([4], 50.0, 1)]
 
 
