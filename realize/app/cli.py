@@ -23,6 +23,7 @@ from hydra.errors import CompactHydraException
 from omegaconf import DictConfig
 
 from realize.app.cli_keys import check_override_keys
+from realize.app.compose import CONFIG_GROUPS, check_group_choices, compose_or_error, parse_overrides
 from realize.config import ConfigError
 from realize.app.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
@@ -32,9 +33,6 @@ from realize.app.workers.errors import WorkerFailed
 
 __all__ = ["main", "preflight", "SweepJobConfigError", "CONFIG_GROUPS"]
 
-CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation",
-                 "experiment", "ablation")
-
 
 class SweepJobConfigError(CompactHydraException):
     """A sweep job's ``ConfigError``: Hydra marks the job failed and prints just the message."""
@@ -42,11 +40,6 @@ class SweepJobConfigError(CompactHydraException):
     def __init__(self, error: ConfigError) -> None:
         super().__init__(f"error: {error}")
         self.error = error
-
-
-def _group_options(group: str) -> list[str]:
-    d = CONFIG_DIR / group
-    return sorted(p.stem for p in d.glob("*.yaml")) if d.is_dir() else []
 
 
 def preflight(args: list[str]) -> list[str]:
@@ -58,8 +51,6 @@ def preflight(args: list[str]) -> list[str]:
     the resumed directory. For a single run without Hydra flags it also composes the config
     once, so composition errors become one line too.
     """
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
     flags = [a for a in args if a.startswith("-")]
     plain = [a for a in args if not a.startswith("-")]
     if any(f not in ("-m", "--multirun") for f in flags):
@@ -68,14 +59,7 @@ def preflight(args: list[str]) -> list[str]:
                   "config.task then holds the file's content)", file=sys.stderr, flush=True)
         return args  # --cfg, --config-dir, --help, ...: Hydra's own business (and its own checks)
     multirun = bool(flags)
-    parser = OverridesParser.create()
-    parsed = []
-    for a in plain:
-        try:
-            parsed.extend(parser.parse_overrides([a]))
-        except Exception as e:
-            msg = " ".join(str(e).split()).split(" See https://")[0]
-            raise ConfigError(f"cannot parse the override {a!r}: {msg}") from None
+    parsed = parse_overrides(plain)
     resume_dir: str | None = None
     has_run_dir = False
     # config dirs added through hydra.searchpath may hold more group options than configs/ does
@@ -87,15 +71,6 @@ def preflight(args: list[str]) -> list[str]:
         if o.is_delete():
             continue
         values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
-        if check_groups and key in CONFIG_GROUPS and o.package is None:
-            options = _group_options(key)
-            for v in values:
-                if v not in options and v != "null":
-                    what = "preset" if key == "experiment" else "option"
-                    raise ConfigError(
-                        f"{key}={v}: unknown {key} {what} {v!r}; available: {', '.join(options)} "
-                        f"(files in configs/{key}/)"
-                    )
         if key == "resume":
             for v in values:
                 if v in ("null", "None"):
@@ -107,7 +82,8 @@ def preflight(args: list[str]) -> list[str]:
             for v in values:
                 if v not in ("null", "None") and not (Path(v) / RESULT_FILE).is_file():
                     raise ConfigError(f"replan_from: {v} is not a realize run directory (no {RESULT_FILE})")
-    if check_groups:  # secne=wall, ce.n_envz=3: one line with the closest known names
+    if check_groups:  # experiment=foo; secne=wall, ce.n_envz=3: one line with the closest known names
+        check_group_choices(parsed)
         check_override_keys(parsed, CONFIG_GROUPS)
     if resume_dir is not None and not multirun and not has_run_dir:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -118,19 +94,8 @@ def preflight(args: list[str]) -> list[str]:
 
 
 def _trial_compose(overrides: list[str]) -> None:
-    """Compose once with Hydra's compose API; composition errors become one ``ConfigError``."""
-    from hydra import compose, initialize_config_dir
-
-    try:
-        with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="realize"):
-            compose(config_name="config", overrides=overrides)
-    except Exception as e:
-        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-        if e.__cause__ is not None and str(e.__cause__).strip():
-            lines.append(str(e.__cause__).strip().splitlines()[0])
-        lines = [ln for ln in lines if "HYDRA_FULL_ERROR" not in ln]
-        cut = next((i for i, ln in enumerate(lines) if ln.startswith("Config search path")), len(lines))
-        raise ConfigError("; ".join(lines[:cut]) or type(e).__name__) from None
+    """Compose once; composition errors become one ``ConfigError``."""
+    compose_or_error(overrides)
 
 
 def _hydra_task(cfg: DictConfig) -> Any:

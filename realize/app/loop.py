@@ -34,16 +34,22 @@ class LoopEnd:
     """How the loop ended: ``status`` (done | interrupted), ``exit_code`` (0, 130, 143) and
     ``iterations`` (the run's complete iterations, a resumed run's earlier ones included)."""
 
-    def __init__(self, status: str, exit_code: int, iterations: int) -> None:
+    def __init__(self, status: str, exit_code: int, iterations: int, stopped: bool = False) -> None:
         self.status, self.exit_code, self.iterations = status, exit_code, iterations
+        self.stopped = stopped  # ended by ``until`` before the searcher was done
 
 
 def search_loop(searcher: Searcher, sinks: SinkSet, open_pool: OpenPool, *, error_file: Path | None = None,
-                after_iteration: Callable[[int], None] | None = None) -> LoopEnd:
+                after_iteration: Callable[[int], None] | None = None, keep_pool: bool = False,
+                until: Callable[[Iteration], bool] | None = None) -> LoopEnd:
     """Run ``searcher`` to its end (see the module docstring). ``after_iteration(i)`` is called
     once iteration ``i`` (counted over the whole run) has passed every sink; a failure other
-    than an interrupt is re-raised after the sinks closed with status ``failed``."""
+    than an interrupt is re-raised after the sinks closed with status ``failed``. ``until(it)``
+    true after an iteration ends the search there (a replan that has its plan: ``LoopEnd.stopped``).
+    With ``keep_pool`` the workers stay open for the caller (``realize.app.planner``, which
+    closes them), else the loop closes them."""
     done = [searcher.iterations_done]
+    stopped = [False]
     pools: list[Any] = []
 
     def close_pool() -> None:
@@ -58,7 +64,8 @@ def search_loop(searcher: Searcher, sinks: SinkSet, open_pool: OpenPool, *, erro
         with RunSignals():
             sinks.open()
             pool = open_pool()
-            pools.append(pool)
+            if not keep_pool:
+                pools.append(pool)
             record = sinks.wants_trajectories
             while (batch := searcher.ask()) is not None:
                 t0 = time.perf_counter()
@@ -71,4 +78,7 @@ def search_loop(searcher: Searcher, sinks: SinkSet, open_pool: OpenPool, *, erro
                 done[0] += 1
                 if after_iteration is not None:
                     after_iteration(it.index)
-    return LoopEnd(guard.status, guard.exit_code, done[0])
+                if until is not None and not searcher.done and until(it):
+                    stopped[0] = True
+                    break
+    return LoopEnd(guard.status, guard.exit_code, done[0], stopped[0])

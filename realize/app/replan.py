@@ -36,7 +36,8 @@ from realize.world.state import SceneState, load_state
 from realize.tasks.spec import TaskSpec
 from realize.tasks.suffix import check_suffix_start, task_suffix
 
-__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "read_replan", "check_no_replan", "REFUSED_OVERRIDES"]
+__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "read_replan",
+           "check_no_replan", "REFUSED_OVERRIDES"]
 
 # overrides a replan refuses: they would change the plan, not the world or the search
 REFUSED_OVERRIDES = ("task", "task_file", "task.plan", "task.goal", "task.planner", "task.name", "experiment",
@@ -122,6 +123,31 @@ def replan_config(current: Mapping[str, Any], overrides: Sequence[str]) -> dict[
     assert isinstance(out, dict)
     out["replan_from"] = run_dir
     out["replan"] = current.get("replan")
+    out["resume"] = None
+    return out
+
+
+def replan_overrides_config(base: Mapping[str, Any], run_dir: str, changes: Sequence[str], *, action: int,
+                            state: str, warm: bool = True, check_plan: bool = True) -> dict[str, Any]:
+    """The config of a replan of ``run_dir`` (its saved config ``base``) from action ``action``
+    of its plan, starting from the state file ``state``, with ``changes`` (override strings
+    whose values are read as the command line reads them) on top: the Python API's side of
+    ``replan_config`` (``realize.app.planner.Planner.replan``). What would change the plan is
+    refused (``check_plan=False``: the caller sets a new plan itself)."""
+    from realize.app.compose import parse_overrides
+    from realize.app.planner import apply_overrides
+
+    for o in parse_overrides(changes):
+        key = o.key_or_group
+        if key.startswith("hydra") or key in ("replan_from", "replan") or key.startswith("replan."):
+            raise ConfigError(f"replan: change {o.input_line!r}: the replan itself is set by the call's arguments")
+        if check_plan and (_refused(key) or o.package is not None):
+            raise ConfigError(f"replan: change {o.input_line!r} would change the plan of {run_dir}; a replan keeps its "
+                              f"task (refused: {', '.join(REFUSED_OVERRIDES)}); change the world (scene.*, "
+                              "task.params.*) or the search (ce.*, seed) instead")
+    out = apply_overrides(base, changes, where="replan: changes")
+    out["replan_from"] = str(run_dir)
+    out["replan"] = {"action": action, "state": str(state), "warm": bool(warm)}
     out["resume"] = None
     return out
 

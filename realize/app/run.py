@@ -53,7 +53,7 @@ from realize.run_dir.names import CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, RES
 from realize.run_dir.result_doc import ResultDoc
 from realize.run_dir.summaries import IterationSummary
 from realize.search.protocol import SearchReport, Searcher
-from realize.sinks.base import Sink, SinkSet
+from realize.sinks.base import Iteration, Sink, SinkSet
 from realize.sinks.files import CheckpointSink, ResultSink, RunClock
 from realize.sinks.progress import ProgressSink
 from realize.sinks.rerun import RerunSink, recording_name
@@ -61,9 +61,12 @@ from realize.sinks.trajectories import TrajectorySink
 from realize.recording.validation_log import VALIDATION_RRD, log_validation
 from realize.search.warm_start import WarmStart, load_warm_start
 
-__all__ = ["run", "RunOutcome", "RESUME_ALLOWED_PREFIXES"]
+__all__ = ["run", "prepare_run", "RunOutcome", "PoolSource", "RESUME_ALLOWED_PREFIXES"]
 
 log = logging.getLogger("realize")
+
+# (spec, tasks, worker log dir) -> the run's rollout workers (a planner's, which it keeps open)
+PoolSource = Callable[[RunSpec, Sequence[Any], Path], RolloutPool]
 
 # overrides a resumed run accepts (everything else comes from the run's saved config)
 RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "workers.", "hydra.", "validation")
@@ -125,13 +128,27 @@ def run(
     cli_overrides: Sequence[str] = (),
     after_iteration: Callable[[int], None] | None = None,
 ) -> RunOutcome:
-    """One realize run into ``out_dir`` (or into the resumed run's directory).
+    """One realize run into ``out_dir`` (or into the resumed run's directory), through
+    ``realize.app.planner.Planner`` (one path for the command line and the Python API).
 
     ``cfg`` is the composed config (Hydra's, without the ``hydra`` node, or plain data);
     ``cli_overrides`` the command-line overrides (checked when resuming); ``after_iteration(i)``
     is called after iteration ``i`` (counted over the whole run) is on disk (tests use it to
     interrupt a run). Raises ``ConfigError`` (nothing simulated) for bad input.
     """
+    from realize.app.planner import Planner
+
+    with Planner(cfg, cli_overrides=cli_overrides) as planner:
+        return planner.plan(out_dir, after_iteration=after_iteration).outcome
+
+
+def prepare_run(cfg: DictConfig | Mapping[str, Any], out_dir: Path | str, cli_overrides: Sequence[str] = (), *,
+                merged: bool = False) -> _Assembly:
+    """The validated run of ``cfg`` in ``out_dir`` (``resume``: the resumed run's directory and
+    checkpoint; ``replan_from``: the earlier run's config with the command line's changes on
+    top, unless ``merged``: ``cfg`` is that config already, as ``Planner.replan`` makes it),
+    ready to ``execute``. A ``ConfigError`` leaves a ``failed`` result.json in ``out_dir`` and
+    is raised."""
     clock = RunClock()
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     current: dict[str, Any] | None = None
@@ -145,13 +162,12 @@ def run(
                 raise ConfigError(str(e)) from None
             run_dir = Path(str(current["resume"]))
             current = _resume_config(current, ckpt, cli_overrides)
-        elif current.get("replan_from") is not None:  # the earlier run's config, the world's changes on top
+        elif current.get("replan_from") is not None and not merged:  # the earlier run's config, changes on top
             current = replan_config(current, cli_overrides)
-        assembled = _Assembly(build_run_spec(current), run_dir, ckpt, clock)
+        return _Assembly(build_run_spec(current), run_dir, ckpt, clock)
     except ConfigError as e:
         RunDir(out_dir).write_failure(failure_doc(str(e), config=current))
         raise
-    return assembled.execute(after_iteration)
 
 
 class _Assembly:
@@ -233,6 +249,8 @@ class _Assembly:
                           error=error, info=self.info, halving=report.halving)
         if spec.replan is not None:  # where this run replanned from
             doc.extra["replan"] = spec.replan.to_json(warm_start=self.info.warm_start)
+        if getattr(self, "stopped_early", False):  # a replan that had its plan before its last iteration
+            doc.extra["stopped_early"] = True
         if spec.ce.replicas > 1:  # a robust search: best_cost is the risk cost over the worlds
             doc.extra["robust"] = {"replicas": spec.ce.replicas, "risk": spec.ce.risk, "cvar_alpha": spec.ce.cvar_alpha,
                                    "best_share": report.state.best_share}
@@ -254,9 +272,10 @@ class _Assembly:
                                   spec.logging.progress))
         return sinks
 
-    def _open_pool(self) -> RolloutPool:
+    def _open_pool(self, source: PoolSource | None = None) -> RolloutPool:
         spec, t0 = self.spec, time.perf_counter()
-        pool = open_pool(spec, self.tasks, log_dir=self.run_dir / WORKER_LOG_DIR)
+        log_dir = self.run_dir / WORKER_LOG_DIR
+        pool = open_pool(spec, self.tasks, log_dir=log_dir) if source is None else source(spec, self.tasks, log_dir)
         self.info.backend, self.info.n_envs, self.info.setup_time_s = pool.backend, pool.n_envs, time.perf_counter() - t0
         self.info.workers = pool.n_workers
         if pool.n_workers > 1:
@@ -273,8 +292,13 @@ class _Assembly:
                      self.info.setup_time_s)
         return pool
 
-    def execute(self, after_iteration: Callable[[int], None] | None) -> RunOutcome:
+    def execute(self, after_iteration: Callable[[int], None] | None = None, *, pools: PoolSource | None = None,
+                until: Callable[[Iteration], bool] | None = None) -> RunOutcome:
+        """Search (and validate) to the end. ``pools(spec, tasks, log_dir)`` gives the workers
+        (a planner's, kept open: it closes them) instead of opening and closing them here;
+        ``until(iteration)`` true ends the search after that iteration (``stopped_early``)."""
         spec, run_dir = self.spec, self.run_dir
+        self.stopped_early, self.search_s, self.validation_s = False, 0.0, 0.0
         if self.searcher.done:  # a resumed run that had already finished
             log.info("%s is already complete; nothing to run", run_dir)
             self.result.write("done")
@@ -285,13 +309,19 @@ class _Assembly:
             if spec.halving and len(self.tasks) < spec.planner.top_k:
                 log.info("the planner returned %d distinct plan(s) for top_k = %d", len(self.tasks),
                          spec.planner.top_k)
-            end = search_loop(self.searcher, SinkSet(self.sinks), self._open_pool, error_file=run_dir / ERROR_FILE,
-                              after_iteration=after_iteration)
+            t_search = time.perf_counter()
+            end = search_loop(self.searcher, SinkSet(self.sinks), lambda: self._open_pool(pools),
+                              error_file=run_dir / ERROR_FILE, after_iteration=after_iteration,
+                              keep_pool=pools is not None, until=until)
             status, exit_code, n_done = end.status, end.exit_code, end.iterations
+            self.stopped_early = end.stopped
+            self.search_s = time.perf_counter() - t_search
         report = self.result.report
         feasible = bool(report.state.best_feasible)
         if status == "done" and feasible and spec.validation is not None and spec.validation.replicas > 0:
+            t_validation = time.perf_counter()
             self._validate()
+            self.validation_s = time.perf_counter() - t_validation
         outcome = RunOutcome(run_dir, status, feasible, report.state.best_cost if feasible else math.inf, n_done,
                              self.clock.wall(), exit_code)
         self._print(outcome, report)

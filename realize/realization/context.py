@@ -22,6 +22,7 @@ from realize.controllers.occupancy import GridSpec
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
 from realize.realization.config import RolloutConfig
 from realize.scene import BatchedScene
+from realize.world.geometry import SceneGeometry
 
 
 class StepContext:
@@ -66,8 +67,9 @@ class StepContext:
     fab_invalid: Tensor  # (N,) the fabric flagged the copy's step invalid
 
     def __init__(self, scene: BatchedScene, cfg: RolloutConfig, fabric: WholeBodyFabric, grid: GridSpec,
-                 occupancy: Tensor, occupancy_tight: Tensor | None = None):
+                 occupancy: Tensor, occupancy_tight: Tensor | None = None, geometry: SceneGeometry | None = None):
         self.scene, self.cfg, self.fabric = scene, cfg, fabric
+        self.geometry = scene.geometry if geometry is None else geometry  # the map the controllers plan in
         self.grid, self.occupancy, self.occupancy_tight = grid, occupancy, occupancy_tight
         self.n_envs, self.device = scene.n_envs, scene.device
         self.dt = scene.control_dt

@@ -39,6 +39,7 @@ from realize.realization.failures import Failure
 from realize.tasks.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
 from realize.scene import BatchedScene
+from realize.world.geometry import SceneGeometry
 from realize.world.state import SceneState
 from realize.tasks.frames import position_columns
 from realize.tasks.regions import Region
@@ -65,7 +66,7 @@ class Rollout:
         self.n_envs, self.device, self.m = n, dev, Z.shape[0]
         scene.reset(seed=realizer.seed, state=realizer.start)
         self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy,
-                               realizer.occupancy_tight)
+                               realizer.occupancy_tight, realizer.geometry)
         self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
         self.n_actions = task.n_actions
         self.action = torch.zeros(n, dtype=torch.long, device=dev)  # the action each plan is in
@@ -237,7 +238,7 @@ class Rollout:
 
     def _goal_now(self) -> tuple[Tensor, Tensor]:
         ctx = self.ctx
-        return goal_reached(self.task.goal, self.scene.geometry, self.realizer.layout.regions, ctx.objects[:, :, :3],
+        return goal_reached(self.task.goal, self.realizer.geometry, self.realizer.layout.regions, ctx.objects[:, :, :3],
                             ctx.object_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed)
 
     def read_due_goals(self) -> None:
@@ -307,7 +308,8 @@ class PlanRealizer:
     """Realizes a task's plan for batches of parameter samples in one batched scene."""
 
     def __init__(self, task: TaskSpec, scene: BatchedScene, cfg: RolloutConfig | None = None, seed: int = 0,
-                 fabric_dtype: torch.dtype = torch.float32, start: SceneState | None = None):
+                 fabric_dtype: torch.dtype = torch.float32, start: SceneState | None = None,
+                 geometry: SceneGeometry | None = None):
         self.task, self.scene = task, scene
         self.start = start  # every rollout starts from this state (None: the task's initial state)
         # called as hook(a, rows) when plans ``rows`` (copy indices) are about to begin action a
@@ -317,7 +319,9 @@ class PlanRealizer:
         self.seed = seed
         self.layout = task.layout
         self.device = scene.device
-        g = scene.geometry
+        # the map the controllers plan in: the scene's own, or what a robot believes of its world
+        # (an executor's, where the world changed and the robot has not seen it yet)
+        g = self.geometry = scene.geometry if geometry is None else geometry
         self.grid = grid_from_bounds((g.bounds_low[0], g.bounds_low[1], g.bounds_high[0], g.bounds_high[1]),
                                      self.cfg.astar.resolution)
         obs = g.obstacles

@@ -6,6 +6,9 @@ What it does:
     and final cost; its eq. (2) cost then counts the remaining actions only;
   * ``suffix_columns(task, k)``: which columns of the full task's sample matrix the suffix's
     columns are (to pick a plan's remaining parameters out of a full one, e.g. a run's best);
+  * ``tail_index(whole, part)``: where a task mapping's plan is the tail of another's (same
+    parameters, goal and final cost), so a new action sequence can be searched as a replan of
+    those actions;
   * ``check_suffix_start(task, state)``: what the action templates assume about the actions
     before them in the same rollout, checked against the state the suffix starts from: the
     hand's contents through the remaining plan (``realize.tasks.spec.check_hand``) starting
@@ -20,11 +23,14 @@ or read run directories (``realize.app.replan``).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from realize.config import ConfigError
 from realize.world.state import SceneState
 from realize.tasks.spec import TaskSpec, check_hand, task_for_plan
 
-__all__ = ["task_suffix", "suffix_columns", "check_suffix_start"]
+__all__ = ["task_suffix", "suffix_columns", "check_suffix_start", "tail_index"]
 
 
 def task_suffix(task: TaskSpec, k: int, key: str = "replan.action") -> TaskSpec:
@@ -52,3 +58,21 @@ def check_suffix_start(task: TaskSpec, state: SceneState, where: str = "replan")
     except ConfigError as e:
         raise ConfigError(f"{where}: {e} (the state, {state.source or 'given'}, holds "
                           f"{state.held or 'nothing'})") from None
+
+
+def _action_text(a: object) -> str:
+    return "".join(str(a).split())
+
+
+def tail_index(whole: Mapping[str, Any], part: Mapping[str, Any]) -> int | None:
+    """``k`` where task mapping ``part``'s plan is ``whole``'s plan from action ``k`` on and both
+    have the same params, goal and final cost; None otherwise (plain task mappings, as configs
+    hold them)."""
+    a = [_action_text(x) for x in whole.get("plan") or []]
+    b = [_action_text(x) for x in part.get("plan") or []]
+    if not b or len(b) > len(a) or a[len(a) - len(b):] != b:
+        return None
+    for key in ("params", "goal", "final_cost"):
+        if whole.get(key) != part.get(key):
+            return None
+    return len(a) - len(b)

@@ -45,6 +45,8 @@ class RolloutPool(Protocol):
 
     def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult: ...
 
+    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None: ...
+
     def close(self) -> None: ...
 
 
@@ -63,6 +65,10 @@ class InProcessPool:
         check_batch(Z, self.n_envs)
         parts = [Z[s] for s in deal_rows(Z.shape[0], len(self.worker.shards), self.worker.unit)]
         return self.worker.rollout(candidate, parts, record)
+
+    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
+        """Realize ``tasks`` from now on, on the scenes already built (``ShardWorker.retask``)."""
+        self.worker.retask(spec, tasks)
 
     def close(self) -> None:
         self.worker.close()

@@ -118,6 +118,14 @@ def worker_main(conn: Connection, payload: bytes, k: int, log_path: str | None, 
             break
         if msg[0] == "close":
             break
+        if msg[0] == "retask":  # a replan in the same world: new realizers, the scenes kept
+            try:
+                worker.retask(msg[1], msg[2])
+            except Exception:
+                _send(conn, ("error", traceback.format_exc()))
+                continue
+            _send(conn, ("retasked",))
+            continue
         _, candidate, parts, record = msg
         log.info("rollout of %d rows (candidate %s)", sum(p.shape[0] for p in parts), candidate)
         t0 = time.perf_counter()
@@ -246,6 +254,19 @@ class ProcessPool:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
+        """Every worker realizes ``tasks`` from now on, on the scenes it has (``ShardWorker.retask``);
+        a worker started later (a restart) is built for them too."""
+        self._spec, self._tasks = spec, list(tasks)
+        for s in self.slots:
+            _send(s.conn, ("retask", spec, self._tasks))
+        for s in self.slots:
+            msg = self._receive(s, self._timeout)
+            if msg is None:
+                raise self._failure(s, "died while taking a new task")
+            if msg[0] == "error":
+                raise WorkerFailed(f"{s.name()} could not take a new task:\n{msg[1]}")
 
     def pids(self) -> list[int]:
         """The worker processes' pids (for tests and tools)."""

@@ -75,5 +75,8 @@ class ReplicaPool:
         res = self.inner.rollout(candidate, Z.repeat_interleave(self.replicas, dim=0), record)
         return fold_result(res, self.replicas, self.risk, self.alpha)
 
+    def retask(self, spec: Any, tasks: Any) -> None:
+        self.inner.retask(spec, tasks)
+
     def close(self) -> None:
         self.inner.close()

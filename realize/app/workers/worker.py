@@ -52,6 +52,7 @@ class ShardWorker:
         from realize.app.workers.replicas import shard_worlds
 
         t0 = time.perf_counter()
+        self.physx_threads = physx_threads
         self.shards = list(shards)
         self.first, self.stop = self.shards[0].first, self.shards[-1].stop
         wspec = worker_spec(spec, physx_threads)
@@ -69,6 +70,17 @@ class ShardWorker:
             raise
         self.backend = self.scenes[0].backend
         self.setup_time_s = time.perf_counter() - t0
+
+    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
+        """New realizers for ``tasks`` (and ``spec``'s start state, controller settings and seed)
+        on the scenes already built: a replan of the same world keeps its scenes. The caller
+        checks that ``spec``'s scene is the one these scenes were built for
+        (``realize.app.planner``)."""
+        from realize.realization.rollout import PlanRealizer
+
+        wspec = worker_spec(spec, self.physx_threads)
+        self.realizers = [[PlanRealizer.from_spec(wspec, t, scene) for t in tasks] for scene in self.scenes]
+        self.unit = spec.ce.replicas
 
     def describe(self) -> str:
         return f"rows {self.first}-{self.stop - 1} ({len(self.shards)} shard(s))"

@@ -81,13 +81,13 @@ class MoveTo(Template):
         if not cfg.carry_footprint:
             return None
         if self._boxes is None:
-            self._boxes = boxes_tensor(ctx.scene.geometry, floor=False)
+            self._boxes = boxes_tensor(ctx.geometry, floor=False)
         if self._boxes.shape[0] == 0:
             return None
         kin = ctx.fabric.kin
         centres, radii = kin.collision_spheres(ctx.q[rows].to(ctx.fabric.dtype))
         offsets = centres[..., :2].float() - ctx.base[rows, None, :2]
-        reach = cfg.padding + ctx.scene.geometry.robot_radius
+        reach = cfg.padding + ctx.geometry.robot_radius
         return carry_blocked(ctx.grid, self._boxes, offsets, centres[..., 2].float(), radii.float(), reach,
                              cfg.carry_margin)
 

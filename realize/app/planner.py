@@ -1,0 +1,489 @@
+"""The planner you import: built once from a config, then ``plan()``, ``replan(...)``, ``close()``.
+
+What it does: ``Planner`` holds one run config (composed from overrides, as the ``realize``
+command composes its arguments, or given) and the rollout workers it has opened. ``plan()``
+runs the search of that config into a run directory (the command line runs through it: one
+path; ``resume`` and ``replan_from`` configs too) and returns a typed ``PlanResult``.
+``replan(state, from_action, changes)`` realizes the rest of a plan from a
+``realize.world.state.SceneState``: a search over the parameters of actions ``from_action, ...``
+only (indices of the whole plan), every rollout starting from ``state``, warm-started from the
+plan it repairs (the last result, or ``source``), on a small budget (``ReplanBudget``: few
+copies, few iterations, no validation, stopped as soon as a plan reaches the goal).
+``changes`` are overrides of the world as it is now (``scene.tables.1.center=[0.1,-1.5]``,
+``scene.walls=[...]``) or of the search (``ce.*``); what would change the plan itself is
+refused (``realize.app.replan``). ``resequence(task, state, ...)`` realizes another plan
+(a new action sequence from the PDDL planner, ``realize.app.resequence``) from a state.
+
+What stays up between calls: the rollout workers and their scenes, keyed by what they were
+built for (scene, robot, simulator, workers, copies). A call whose scene is the same takes
+them over with new realizers (``retask``: a new plan, a new start state, cost nothing to
+build); one whose world changed its static layout (a table moved, a new obstacle) needs new
+scenes: the planner says so in the log and in ``PlanResult.scene`` and builds only those,
+keeping at most ``max_pools`` sets open. ``close()`` ends every worker (a context manager).
+What it doesn't: search, simulate or write files itself (``realize.app.run`` does, per call),
+or carry a plan out (``realize.app.execute``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig
+
+from realize.app.run import RunOutcome, plain_config, prepare_run
+from realize.app.workers.pool import RolloutPool, open_pool
+from realize.config import ConfigError
+from realize.run_dir.directory import RunDir
+from realize.world.state import SceneState, save_state
+
+__all__ = ["Planner", "PlanResult", "ReplanBudget", "PlanTimings"]
+
+log = logging.getLogger("realize")
+
+START_STATE_FILE = "start_state.json"  # the state a replan's rollouts start from, in its run directory
+
+
+@dataclass(frozen=True)
+class ReplanBudget:
+    """The search of one replan: ``n_envs`` copies (and samples) per iteration, ``n_elite``
+    elites, at most ``iterations``; with ``stop_when_feasible`` it ends after the first
+    iteration (from ``min_iterations`` on) whose best plan reaches the goal. ``validation``
+    replicas of the task's perturbations after it (0: none; a replan starts from an observed
+    state, so what is left uncertain is small). ``workers``: rollout workers (None: as the run);
+    ``shard_rows``: copies per PhysX scene (None: as the run).
+    ``progress``/``rerun``: the progress bar and the rerun recording of each replan."""
+
+    n_envs: int = 32
+    n_elite: int = 4
+    iterations: int = 3
+    stop_when_feasible: bool = True
+    min_iterations: int = 1
+    validation: int = 0
+    workers: int | None = None
+    shard_rows: int | None = 16  # copies per PhysX scene: 32 copies in 2 scenes keep both cores of a laptop busy
+    progress: bool = False
+    rerun: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("n_envs", "n_elite", "iterations", "min_iterations"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"replan budget: {name} = {v!r} is invalid: must be an integer >= 1")
+        if self.n_elite > self.n_envs:
+            raise ConfigError(f"replan budget: n_elite = {self.n_elite} is more than n_envs = {self.n_envs}")
+        if isinstance(self.validation, bool) or not isinstance(self.validation, int) or self.validation < 0:
+            raise ConfigError(f"replan budget: validation = {self.validation!r} is invalid: an integer >= 0")
+
+    @classmethod
+    def from_mapping(cls, d: Mapping[str, Any] | None, where: str = "replan budget") -> ReplanBudget:
+        d = dict(d or {})
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        return cls(**d)
+
+    def overrides(self) -> dict[str, Any]:
+        """The run-config keys this budget sets (dotted key -> value)."""
+        out: dict[str, Any] = {"ce.n_envs": self.n_envs, "ce.n_elite": self.n_elite, "ce.iterations": self.iterations,
+                               "ce.schedule": "constant", "ce.n_envs_end": None, "ce.replicas": 1,
+                               "validation.replicas": self.validation, "logging.progress": self.progress,
+                               "logging.rerun": self.rerun, "logging.record": self.rerun}
+        if self.workers is not None:
+            out["workers.n"] = self.workers
+        if self.shard_rows is not None:
+            out["sim.shard_rows"] = self.shard_rows
+        return out
+
+
+@dataclass(frozen=True)
+class PlanTimings:
+    """Where a call's wall time went (s): workers and scenes (built or taken over), the search,
+    the validation after it, and everything (config, files) in ``total_s``."""
+
+    setup_s: float
+    search_s: float
+    validation_s: float
+    total_s: float
+
+    def to_dict(self) -> dict[str, float]:
+        return {"setup_s": self.setup_s, "search_s": self.search_s, "validation_s": self.validation_s,
+                "total_s": self.total_s}
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """What ``plan``/``replan`` return. ``plan`` is the realized plan's text (a replan's: the
+    remaining actions), ``actions`` its actions, ``params`` the returned plan's parameters by
+    name (``z`` over ``columns``, the validation's returned candidate where there is one),
+    ``cost`` its cost (inf if infeasible), ``validation`` the result.json block (None: none),
+    ``run_dir`` where everything is. ``from_action``: the first action of the whole plan it
+    realizes (0 for ``plan``); ``scene``: ``"built"`` or ``"kept"`` (the workers of an
+    earlier call). ``outcome``: the run's ``RunOutcome`` (status, exit code)."""
+
+    plan: str
+    actions: tuple[str, ...]
+    params: dict[str, list[float]]
+    z: tuple[float, ...]
+    columns: tuple[str, ...]
+    cost: float
+    feasible: bool
+    status: str
+    iterations_done: int
+    validation: dict[str, Any] | None
+    run_dir: Path
+    timings: PlanTimings
+    outcome: RunOutcome
+    from_action: int = 0
+    scene: str = "built"
+    stopped_early: bool = False
+    whole_plan: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"plan": self.plan, "actions": list(self.actions), "params": self.params, "z": list(self.z),
+                "columns": list(self.columns), "cost": self.cost, "feasible": self.feasible, "status": self.status,
+                "iterations_done": self.iterations_done, "run_dir": str(self.run_dir),
+                "timings": self.timings.to_dict(), "from_action": self.from_action, "scene": self.scene,
+                "stopped_early": self.stopped_early, "whole_plan": self.whole_plan}
+
+
+def _pool_key(spec: Any) -> str:
+    """What a set of workers was built for: two specs with the same key can share them."""
+    c = spec.config
+    return json.dumps({"scene": c.get("scene"), "robot": c.get("robot"), "sim": c.get("sim"),
+                       "workers": c.get("workers"), "backend": spec.placement.backend,
+                       "device": str(spec.placement.device), "n_envs": spec.ce.n_envs, "replicas": spec.ce.replicas,
+                       "worlds_seed": spec.seed if spec.ce.replicas > 1 else None}, sort_keys=True, default=str)
+
+
+def _set(d: dict[str, Any], dotted: str, value: Any) -> None:
+    parts = dotted.split(".")
+    node = d
+    for p in parts[:-1]:
+        nxt = node.get(p)
+        if not isinstance(nxt, dict):
+            nxt = {}
+            node[p] = nxt
+        node = nxt
+    node[parts[-1]] = value
+
+
+def apply_overrides(config: Mapping[str, Any], overrides: Sequence[str], where: str = "changes") -> dict[str, Any]:
+    """``config`` (plain data) with Hydra-syntax ``key=value`` overrides applied (values parsed
+    as the command line parses them: ``scene.tables.1.center=[0.1,-1.5]``); one ``ConfigError``
+    line for an override that does not parse or names no key of ``config``."""
+    from omegaconf import OmegaConf
+
+    from realize.app.compose import parse_overrides
+
+    base = OmegaConf.create(json.loads(json.dumps(dict(config), default=str)))
+    for o in parse_overrides(overrides):
+        key = o.key_or_group
+        if o.is_delete() or o.is_sweep_override():
+            raise ConfigError(f"{where}: {o.input_line!r}: give one value for a key (no deletions or sweeps)")
+        try:
+            present = OmegaConf.select(base, key, throw_on_missing=False, default="__missing__") != "__missing__"
+        except Exception:
+            present = False
+        if not present and not (o.is_add() or o.is_force_add()):
+            raise ConfigError(f"{where}: {o.input_line!r}: the config has no key {key!r}")
+        OmegaConf.update(base, key, o.value(), merge=False, force_add=True)
+    out = OmegaConf.to_container(base, resolve=True)
+    assert isinstance(out, dict)
+    return out
+
+
+class Planner:
+    """Plans and replans one task with workers kept up between calls (module docstring).
+
+        with Planner(["experiment=seed_paper", "ce.iterations=3"]) as planner:
+            result = planner.plan("runs/seed0")
+            print(result.plan, result.cost, result.params["Table1"])
+
+    ``config``: a composed config (plain data or a DictConfig) or a list of overrides (composed
+    with ``realize.app.compose.compose_config``). ``cli_overrides``: the command line's (a
+    resumed or replanned config checks them). ``max_pools``: sets of workers kept open.
+    """
+
+    def __init__(self, config: Sequence[str] | Mapping[str, Any] | DictConfig = (), *,
+                 cli_overrides: Sequence[str] = (), max_pools: int = 2) -> None:
+        if isinstance(config, (DictConfig, Mapping)):
+            self.config = plain_config(config)
+        else:
+            from realize.app.compose import compose_config
+
+            if isinstance(config, str):
+                raise ConfigError(f"Planner({config!r}): give a list of overrides, e.g. Planner([{config!r}])")
+            self.config = compose_config(list(config))
+        self.cli_overrides = list(cli_overrides)
+        self.max_pools = max(1, int(max_pools))
+        self._pools: dict[str, RolloutPool] = {}
+        self._built: set[str] = set()  # keys whose workers the current call built
+        self.last: PlanResult | None = None
+        self.closed = False
+
+    @classmethod
+    def from_run(cls, run_dir: str | Path, **kw: Any) -> Planner:
+        """A planner with an earlier run's saved config, ``last`` that run's result (what
+        ``replan`` repairs first)."""
+        try:
+            rd = RunDir.existing(run_dir)
+            cfg = rd.config()
+        except (FileNotFoundError, OSError, ValueError) as e:
+            raise ConfigError(f"Planner.from_run({str(run_dir)!r}): {e}") from None
+        if not isinstance(cfg, Mapping) or not cfg:
+            raise ConfigError(f"Planner.from_run({str(run_dir)!r}): its result.json holds no config")
+        cfg = dict(cfg)
+        cfg["resume"] = None
+        planner = cls(cfg, **kw)
+        planner.last = planner._result(Path(run_dir), None, 0.0, 0.0, 0.0, None)
+        return planner
+
+    # ------------------------------------------------------------------ workers
+    def _pool(self, spec: Any, tasks: Sequence[Any], log_dir: Path) -> RolloutPool:
+        key = _pool_key(spec)
+        pool = self._pools.get(key)
+        if pool is not None:
+            pool.retask(spec, tasks)
+            return pool
+        if self._pools:
+            log.info("planner: this call's scene differs from the %d open set(s) of workers (%s); building new ones",
+                     len(self._pools), _what_differs(key, list(self._pools)))
+        while len(self._pools) >= self.max_pools:  # the oldest set goes
+            old = next(iter(self._pools))
+            self._pools.pop(old).close()
+        pool = open_pool(spec, tasks, log_dir=log_dir)
+        self._pools[key] = pool
+        self._built.add(key)
+        return pool
+
+    def _drop(self, spec: Any) -> None:
+        """Close the workers of ``spec`` (a run that did not end cleanly may leave them mid-batch)."""
+        pool = self._pools.pop(_pool_key(spec), None)
+        if pool is not None:
+            pool.close()
+
+    @property
+    def open_pools(self) -> int:
+        """How many sets of workers are open now."""
+        return len(self._pools)
+
+    # ------------------------------------------------------------------ calls
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RuntimeError("this Planner is closed")
+
+    def _run(self, cfg: Mapping[str, Any], run_dir: Path, *, cli_overrides: Sequence[str] = (),
+             after_iteration: Callable[[int], None] | None = None, stop_when_feasible: bool = False,
+             min_iterations: int = 1, from_action: int = 0, merged: bool = False) -> PlanResult:
+        t0 = time.perf_counter()
+        assembly = prepare_run(cfg, run_dir, cli_overrides, merged=merged)
+        spec = assembly.spec
+        self._built.clear()
+        until = None
+        if stop_when_feasible:
+            def until(it: Any) -> bool:
+                return bool(it.report.state.best_feasible) and it.index + 1 >= min_iterations
+        t_setup: list[float] = []
+        source = self._timed(t_setup)
+        try:
+            outcome = assembly.execute(after_iteration, pools=source, until=until)
+        except BaseException:
+            self._drop(spec)
+            raise
+        if outcome.status != "done":
+            self._drop(spec)
+        total = time.perf_counter() - t0
+        v = getattr(assembly, "validation_s", 0.0)
+        setup = sum(t_setup)
+        search = max(0.0, getattr(assembly, "search_s", total) - setup)
+        scene = "built" if self._built else "kept"
+        res = self._result(assembly.run_dir, outcome, setup, search, v, spec, total=total, scene=scene,
+                           from_action=from_action, stopped=bool(getattr(assembly, "stopped_early", False)))
+        self.last = res
+        return res
+
+    def _timed(self, into: list[float]) -> Callable[[Any, Sequence[Any], Path], RolloutPool]:
+        def source(spec: Any, tasks: Sequence[Any], log_dir: Path) -> RolloutPool:
+            t = time.perf_counter()
+            pool = self._pool(spec, tasks, log_dir)
+            into.append(time.perf_counter() - t)
+            return pool
+        return source
+
+    def plan(self, run_dir: str | Path | None = None, *,
+             after_iteration: Callable[[int], None] | None = None) -> PlanResult:
+        """Search the config's plan into ``run_dir`` (default ``outputs/planner/<date-time>``;
+        a ``resume`` config: the resumed run's directory) and validate it as the config says."""
+        self._check_open()
+        if run_dir is None:
+            run_dir = Path("outputs") / "planner" / time.strftime("%Y%m%d-%H%M%S")
+        return self._run(self.config, Path(run_dir), cli_overrides=self.cli_overrides,
+                         after_iteration=after_iteration)
+
+    def replan(self, state: SceneState, from_action: int, changes: Sequence[str] = (), *,
+               source: PlanResult | str | Path | None = None, run_dir: str | Path | None = None,
+               budget: ReplanBudget | None = None, warm: bool = True, seed: int | None = None) -> PlanResult:
+        """Realize actions ``from_action, ...`` of the plan of ``source`` (default: the last
+        result) from ``state``, in the world ``changes`` describe (module docstring). The run
+        goes to ``run_dir`` (default ``<source run>/replans/replan-<k>``), ``state`` to its
+        ``start_state.json``. ``ConfigError`` (nothing simulated) for a bad action index, a
+        state the remaining actions cannot start from, or a change that would change the plan."""
+        from realize.app.replan import replan_overrides_config
+
+        self._check_open()
+        src = self._source(source)
+        budget = budget or ReplanBudget()
+        out = Path(run_dir) if run_dir is not None else _next_dir(src / "replans", "replan")
+        out.mkdir(parents=True, exist_ok=True)
+        state_file = save_state(state, out / START_STATE_FILE)
+        base = _saved_config(src)
+        cfg = replan_overrides_config(base, str(src), list(changes), action=from_action, state=str(state_file),
+                                      warm=warm)
+        for k, v in budget.overrides().items():
+            _set(cfg, k, v)
+        if seed is not None:
+            cfg["seed"] = int(seed)
+        return self._run(cfg, out, stop_when_feasible=budget.stop_when_feasible,
+                         min_iterations=budget.min_iterations, from_action=from_action, merged=True)
+
+    def resequence(self, task: Mapping[str, Any], state: SceneState, changes: Sequence[str] = (), *,
+                   source: PlanResult | str | Path | None = None, run_dir: str | Path | None = None,
+                   budget: ReplanBudget | None = None, seed: int | None = None) -> PlanResult:
+        """Realize another plan, ``task`` (a task mapping: params, plan, goal; e.g. the PDDL
+        planner's new sequence, ``realize.app.resequence``), from ``state`` in the world of
+        ``source`` (default: the last result) with ``changes``. Where the new plan is the tail of
+        the source's plan the search is warm-started from it (a replan of those actions);
+        otherwise it searches the new plan from scratch on ``budget``."""
+        from realize.tasks.suffix import tail_index
+
+        self._check_open()
+        src = self._source(source)
+        base = _saved_config(src)
+        k = tail_index(base.get("task") or {}, task)
+        if k is not None:
+            return self.replan(state, k, changes, source=src, run_dir=run_dir, budget=budget, seed=seed)
+        budget = budget or ReplanBudget()
+        out = Path(run_dir) if run_dir is not None else _next_dir(src / "replans", "resequence")
+        out.mkdir(parents=True, exist_ok=True)
+        state_file = save_state(state, out / START_STATE_FILE)
+        from realize.app.replan import replan_overrides_config
+
+        # a new task whose action 0 starts from the state: a "replan" of all of it, searched cold
+        base["task"] = dict(task)
+        base["task_file"], base["task_origin"] = None, None
+        cfg = replan_overrides_config(base, str(src), list(changes), action=0, state=str(state_file), warm=False,
+                                      check_plan=False)
+        for kk, v in budget.overrides().items():
+            _set(cfg, kk, v)
+        if seed is not None:
+            cfg["seed"] = int(seed)
+        return self._run(cfg, out, stop_when_feasible=budget.stop_when_feasible, min_iterations=budget.min_iterations,
+                         merged=True)
+
+    def _source(self, source: PlanResult | str | Path | None) -> Path:
+        if source is None:
+            if self.last is None:
+                raise ConfigError("replan: nothing to repair yet: call plan() first, or give source=<run dir>")
+            return self.last.run_dir
+        return source.run_dir if isinstance(source, PlanResult) else Path(source)
+
+    # ------------------------------------------------------------------ results
+    def _result(self, run_dir: Path, outcome: RunOutcome | None, setup: float, search: float, validation: float,
+                spec: Any, *, total: float = 0.0, scene: str = "built", from_action: int = 0,
+                stopped: bool = False) -> PlanResult:
+        import math
+
+        from realize.app.replay import ReplayError, returned_z, saved_plan
+
+        d = RunDir(run_dir).result_json() or {}
+        status = str(d.get("status", "failed"))
+        columns = tuple(str(c) for c in d.get("columns") or [])
+        z: tuple[float, ...] = ()
+        cost = math.inf
+        feasible = bool(d.get("feasible"))
+        if feasible:
+            try:
+                choice = returned_z(saved_plan(run_dir))
+                z, cost = tuple(float(x) for x in choice.z), float(choice.cost)
+            except ReplayError:
+                z = tuple(float(x) for x in d.get("best_z") or [])
+                cost = float(d.get("best_cost") or math.inf)
+        params: dict[str, list[float]] = {}
+        for name, col in zip(columns, z):
+            params.setdefault(name.split("[")[0].split(".")[0], []).append(col)
+        plan = str(d.get("plan") or "")
+        replan = d.get("replan") if isinstance(d.get("replan"), dict) else {}
+        if outcome is None:
+            outcome = RunOutcome(run_dir, status, feasible, cost, int(d.get("iterations_done") or 0),
+                                 float(d.get("wall_time_s") or 0.0))
+        return PlanResult(
+            plan=plan, actions=tuple(a.strip() for a in _split_plan(plan)), params=params, z=z, columns=columns,
+            cost=cost, feasible=feasible, status=status, iterations_done=int(d.get("iterations_done") or 0),
+            validation=d.get("validation") if isinstance(d.get("validation"), dict) else None, run_dir=run_dir,
+            timings=PlanTimings(setup, search, validation, total), outcome=outcome,
+            from_action=int(replan.get("action", from_action) or 0) if replan else from_action, scene=scene,
+            stopped_early=stopped or bool(d.get("stopped_early")), whole_plan=str(replan.get("plan", plan)))
+
+    # ------------------------------------------------------------------ lifecycle
+    def close(self) -> None:
+        """End every worker this planner opened."""
+        for pool in self._pools.values():
+            try:
+                pool.close()
+            except Exception:  # pragma: no cover
+                pass
+        self._pools = {}
+        self.closed = True
+
+    def __enter__(self) -> Planner:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def _split_plan(plan: str) -> list[str]:
+    """``"move_to(A), grasp(cube, G)"`` -> its actions (commas inside parentheses kept)."""
+    out, depth, cur = [], 0, ""
+    for ch in plan:
+        depth += ch == "("
+        depth -= ch == ")"
+        if ch == "," and depth == 0:
+            out.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    if cur.strip():
+        out.append(cur)
+    return out
+
+
+def _saved_config(run_dir: Path) -> dict[str, Any]:
+    try:
+        cfg = RunDir.existing(run_dir).config()
+    except (FileNotFoundError, OSError, ValueError) as e:
+        raise ConfigError(f"replan: {str(run_dir)!r}: {e}") from None
+    if not isinstance(cfg, Mapping) or not cfg:
+        raise ConfigError(f"replan: {str(run_dir)!r}: its result.json holds no config")
+    return json.loads(json.dumps(dict(cfg)))
+
+
+def _next_dir(parent: Path, stem: str) -> Path:
+    k = 0
+    while (parent / f"{stem}-{k}").exists():
+        k += 1
+    return parent / f"{stem}-{k}"
+
+
+def _what_differs(key: str, others: list[str]) -> str:
+    mine = json.loads(key)
+    theirs = json.loads(others[-1])
+    diff = [k for k in mine if mine[k] != theirs.get(k)]
+    return "differs in " + ", ".join(diff) if diff else "same"

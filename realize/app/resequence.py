@@ -1,0 +1,141 @@
+"""A new action sequence from where the world stands: the symbolic state read off an observed
+scene, and the PDDL planner run from it.
+
+What it does: where the remaining plan can no longer reach the goal (the object fell out of the
+hand, so ``place`` has nothing to place), ``resequence_task(task_cfg, geometry, state, out_dir)``
+derives the symbolic state of the observed world, writes the task's PDDL problem with that
+initial state (``resequence.pddl`` in ``out_dir``), solves it with the task's domain (Fast
+Downward, ``realize.tasks.pddl``) and returns the task mapping with the new plan (the same
+params, goal and final cost), ready for ``realize.app.planner.Planner.resequence``.
+
+The symbolic state (``symbolic_facts``), by the conventions of ``configs/pddl/`` (its domains
+name these predicates; a domain without them cannot be re-planned from a state, which is said
+in one line):
+  * ``(robot-at S)``: S of a ``(base-near R S)`` fact whose base region R (the task's param)
+    contains the base, with ``BASE_SLACK_M`` of slack; else the problem's own start site;
+  * ``(holding O)`` for the held object, else ``(hand-empty)``;
+  * ``(item-at O loc_T)`` for an object that rests on table T (its centre above T's top
+    footprint, within ``REST_SLACK_M`` of the top): the site is ``loc_<table name>``; an object
+    on no table (on the floor) gets no ``item-at`` and no plan can reach it;
+every other fact of the problem's ``:init`` (the static ones) is kept as written.
+What it doesn't: simulate, or search the new plan's parameters (the planner does).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from realize.config import ConfigError
+from realize.world.geometry import SceneGeometry
+from realize.world.state import SceneState
+
+__all__ = ["symbolic_facts", "resequence_task", "DYNAMIC_PREDICATES", "RESEQUENCE_PROBLEM"]
+
+DYNAMIC_PREDICATES = ("robot-at", "hand-empty", "holding", "item-at")
+RESEQUENCE_PROBLEM = "resequence.pddl"
+BASE_SLACK_M = 0.25  # a base this far outside a base region still counts as parked there
+REST_SLACK_M = 0.05  # an object's bottom within this of a table's top rests on it
+
+
+def _strip_comments(text: str) -> str:
+    return "\n".join(line.split(";", 1)[0] for line in text.splitlines())
+
+
+def _block(text: str, head: str) -> tuple[int, int]:
+    """Start and end (exclusive) of the s-expression that begins with ``(head``."""
+    m = re.search(r"\(\s*" + re.escape(head) + r"\b", text, re.IGNORECASE)
+    if m is None:
+        raise ConfigError(f"the PDDL problem has no ({head} ...) section")
+    depth, i = 0, m.start()
+    while i < len(text):
+        depth += text[i] == "("
+        depth -= text[i] == ")"
+        i += 1
+        if depth == 0:
+            return m.start(), i
+    raise ConfigError(f"the PDDL problem's ({head} ...) section is not closed")
+
+
+def _facts(init: str) -> list[tuple[str, ...]]:
+    body = init[init.index("(") + 1: init.rindex(")")]
+    body = re.sub(r"^\s*:init", "", body, flags=re.IGNORECASE)
+    return [tuple(f.split()) for f in re.findall(r"\(([^()]*)\)", body)]
+
+
+def symbolic_facts(state: SceneState, geometry: SceneGeometry, task: Any, static: list[tuple[str, ...]],
+                   start_site: str) -> list[tuple[str, ...]]:
+    """The dynamic facts of ``state`` (module docstring) given the problem's ``static`` facts."""
+    facts: list[tuple[str, ...]] = []
+    base = torch.tensor([state.base[0], state.base[1]], dtype=torch.float64)
+    at = None
+    names = {n.casefold(): n for n in task.layout.names}
+    for f in static:
+        if f[0].casefold() != "base-near" or len(f) != 3 or f[1].casefold() not in names:
+            continue
+        region = task.layout.regions[names[f[1].casefold()]]
+        z = torch.zeros(1, region.dim, dtype=torch.float64)
+        z[0, :2] = base  # a task's regions are in the world frame (their frames resolved when it was built)
+        if bool(region.contains(z, tol=BASE_SLACK_M)[0]):
+            at = f[2]
+            break
+    facts.append(("robot-at", at or start_site))
+    facts.append(("holding", state.held) if state.held else ("hand-empty",))
+    for name, pose in state.objects.items():
+        if name == state.held:
+            continue
+        o = geometry.object(name)
+        x, y, z = pose.position
+        for t in geometry.tables:
+            if t.contains_xy(x, y) and abs((z - o.half_height) - t.top_z) <= REST_SLACK_M:
+                facts.append(("item-at", name, f"loc_{t.name}"))
+                break
+    return facts
+
+
+def resequence_task(task_cfg: Mapping[str, Any], geometry: SceneGeometry, state: SceneState,
+                    out_dir: str | Path) -> dict[str, Any]:
+    """The task mapping ``task_cfg`` with the plan the PDDL planner finds from ``state``
+    (module docstring). ``ConfigError`` (one line) where the task has no PDDL files, the domain
+    lacks the predicates, or no plan reaches the goal from there."""
+    from realize.app.task_plans import _resolve_path, build_task
+    from realize.realization.actions import TEMPLATES
+    from realize.tasks.pddl import PlanningError, plan_from_pddl
+
+    planner = task_cfg.get("planner") or {}
+    if not planner.get("domain") or not planner.get("problem"):
+        raise ConfigError("re-sequence: the task names no PDDL domain and problem (task.planner.domain/problem), "
+                          "so no new action sequence can be planned")
+    domain = _resolve_path(planner["domain"], "task.planner.domain")
+    problem = _resolve_path(planner["problem"], "task.planner.problem")
+    text = _strip_comments(problem.read_text())
+    lo, hi = _block(text, ":init")
+    static = [f for f in _facts(text[lo:hi]) if f and f[0].casefold() not in DYNAMIC_PREDICATES]
+    start = next((f[1] for f in _facts(text[lo:hi]) if f and f[0].casefold() == "robot-at" and len(f) == 2), None)
+    if start is None:
+        raise ConfigError(f"re-sequence: {problem} has no (robot-at SITE) fact; its domain does not follow the "
+                          f"conventions {DYNAMIC_PREDICATES} of realize/app/resequence.py")
+    plain = dict(task_cfg)
+    plain["planner"] = dict(planner, enabled=False, top_k=1)
+    task = build_task(plain, geometry, "re-sequence")
+    facts = symbolic_facts(state, geometry, task, static, start)
+    init = "(:init\n" + "".join(f"    ({' '.join(f)})\n" for f in static + facts) + "  )"
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / RESEQUENCE_PROBLEM
+    path.write_text(f"; {problem.name} with the initial state observed at the re-sequence\n"
+                    + text[:lo] + init + text[hi:])
+    try:
+        plans = plan_from_pddl(domain, path, list(TEMPLATES), task.layout.names, objects=geometry.object_names,
+                               top_k=1, timeout_s=float(planner.get("timeout_s", 30.0)))
+    except PlanningError as e:
+        raise ConfigError(f"re-sequence: {' '.join(str(e).split())[:400]}") from None
+    if not plans:
+        raise ConfigError(f"re-sequence: the PDDL planner found no plan from the observed state ({path})")
+    new = dict(task_cfg)
+    new["plan"] = [str(a) for a in plans[0]]
+    return new
