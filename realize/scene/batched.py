@@ -247,6 +247,12 @@ class BatchedScene(ObjectProperties):
         """(N,) bool: the gripper target is closed (the last ``set_gripper``, or the reset's)."""
         return self._grip_target == self._grip_closed
 
+    def commanded_targets(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Copies of the targets the next ``step`` writes: base velocity (N, 3) in the local frame
+        (vx, vy in m/s, yaw rate in rad/s), upper-joint position targets (N, n_upper) in
+        ``robot.upper.joints`` order (rad, m), and the gripper command (N,) bool (closed)."""
+        return self._base_cmd.clone(), self._arm_target.clone(), self._grip_target == self._grip_closed
+
     def finger_width(self) -> torch.Tensor:
         """(N,) sum of the finger joint positions (m): ``robot.gripper.width_open`` fully open."""
         return self._read("qpos", self._impl.qpos)[:, self._finger_idx].sum(dim=1)
