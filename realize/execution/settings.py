@@ -1,0 +1,79 @@
+"""The settings of an execution (an ``execute`` preset, ``configs/execute/*.yaml``), read and checked.
+
+What it does: ``ExecuteSettings`` holds how many worlds to execute in (``worlds``), their
+``seed``, ``max_replans`` per world, the ``time_limit_s`` of control time per world,
+``monitor_every`` (control steps between the executor's checks), the ``tolerance`` of each
+check (``Tolerance``: object, table and base distances in m) and the raw ``disturbances`` list
+(checked against the scene and plan by ``realize.execution.disturbances.read_disturbances``
+once they are known). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
+key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file).
+What it doesn't: check disturbances against a scene (that needs the run's geometry and plan), or
+execute anything.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import yaml
+
+from realize.config import ConfigError, Settings, setting
+from realize.paths import CONFIG_DIR
+
+__all__ = ["Tolerance", "ExecuteSettings", "PRESET_DIR", "presets", "load_preset"]
+
+PRESET_DIR = CONFIG_DIR / "execute"
+
+
+@dataclass
+class Tolerance(Settings):
+    """How far the observed world may be from the plan's belief before the monitor reports it (m).
+
+    ``object_m``: an object the remaining actions act on (the plan tracks objects, so a few cm
+    need no replan: the seed plan reaches the goal with the cube anywhere within +-25 cm);
+    ``table_m``: a table's centre; ``base_m``: the base from its target at a move_to's end
+    (the move_to's own success tolerance is ``controller.move_tolerance``, 0.1 m)."""
+
+    config_key: ClassVar[str] = "execute.tolerance"
+
+    object_m: float = setting(0.3, gt=0)
+    table_m: float = setting(0.05, gt=0)
+    base_m: float = setting(0.15, gt=0)
+
+
+@dataclass
+class ExecuteSettings(Settings):
+    """One execution study (module docstring)."""
+
+    config_key: ClassVar[str] = "execute"
+
+    worlds: int = setting(16, ge=1)
+    seed: int = setting(0, ge=0)
+    max_replans: int = setting(3, ge=0)
+    time_limit_s: float = setting(180.0, gt=0)
+    monitor_every: int = setting(5, ge=1)  # control steps between checks (and at every action's end)
+    tolerance: Tolerance = field(default_factory=Tolerance)
+    disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
+
+
+def presets() -> list[str]:
+    """The preset names of ``configs/execute/``."""
+    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+
+
+def load_preset(name: str | Path) -> ExecuteSettings:
+    """``configs/execute/<name>.yaml`` (or the YAML file ``name``) as ``ExecuteSettings``."""
+    path = Path(name)
+    if path.suffix not in (".yaml", ".yml"):
+        path = PRESET_DIR / f"{name}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"execute preset {str(name)!r} is unknown; presets: {presets()}")
+    elif not path.is_file():
+        raise ConfigError(f"execute preset file {str(path)!r} does not exist")
+    try:
+        d = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path.name}: not YAML ({str(e).splitlines()[0]})") from None
+    return ExecuteSettings.from_mapping(d, f"execute[{path.stem}]")
