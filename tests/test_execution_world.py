@@ -1,0 +1,302 @@
+"""The world side of execution (realize/execution/): disturbances read and drawn, the one-copy
+execution world and what its disturbances do in physics, belief updates the run config accepts,
+the monitor's checks and the trajectory file. One-copy scenes and short simulations only."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from helpers import compose_config
+from realize.app.run_config import build_run_spec
+from realize.config import ConfigError
+from realize.execution.disturbances import (AddBox, KnockOut, MoveObject, MoveTable, PushBase, Schedule, Scheduled,
+                                            Trigger, draw, read_disturbances)
+from realize.execution.monitor import KINDS, Deviation, check, expectation, held_by_plan
+from realize.execution.settings import ExecuteSettings, Tolerance, load_preset, presets
+from realize.execution.trajectory import TRAJECTORY_FORMAT, TrajectoryLog, read_trajectory
+from realize.execution.world import (BoxSeen, ExecutionWorld, Observation, TablePose, apply_geometry_updates,
+                                     geometry_changes, geometry_updates)
+from realize.world.geometry import build_geometry
+from realize.world.state import ObjectPose, SceneState, load_state
+
+FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"  # the cube in the hand above table 1
+CUBE_HALF = 0.0225
+TABLE_TOP = 0.72
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return build_run_spec(compose_config())
+
+
+def _plan(spec) -> list[str]:
+    return [str(a) for a in spec.task.plan]
+
+
+def _read(spec, entries):
+    return read_disturbances(entries, spec.geometry, _plan(spec))
+
+
+def _drop(world: ExecutionWorld, x: float, y: float, steps: int = 30) -> float:
+    """Drop the cube from 1 m at (x, y); the z where it comes to rest."""
+    world.scene.place_object("cube", torch.tensor([[x, y, 1.0]]))
+    for _ in range(steps):
+        world.scene.step()
+    return float(world.scene.object_pose("cube")[0, 2])
+
+
+# ------------------------------------------------------------------------------ reading, drawing
+@pytest.mark.parametrize("entry, needles", [
+    ({"trigger": {"action": 0}, "move_object": {"object": "ball", "dx": 0.1}}, ["move_object.object", "'ball'", "cube"]),
+    ({"trigger": {"action": 0}, "move_table": {"table": "table3", "dx": 0.1}}, ["table3", "table1", "table2"]),
+    ({"trigger": {"action": 5}, "knock_out": {"object": "cube"}}, ["trigger.action = 5", "5 actions"]),
+    ({"trigger": {"action": -1}, "knock_out": {"object": "cube"}}, ["trigger.action = -1", "5 actions"]),
+    ({"trigger": {"action": 0}, "teleport": {"object": "cube"}}, ["unknown effect 'teleport'", "move_object"]),
+    ({"trigger": {"action": 0}, "push_base": {"dx": 0.1, "spin": 1}}, ["unknown key(s) ['spin']"]),
+    ({"trigger": {"action": 0, "delay": 1}, "push_base": {"dx": 0.1}}, ["unknown key(s) ['delay']"]),
+    ({"trigger": {"when": "held", "object": "bowl"}, "knock_out": {"object": "cube"}}, ["trigger.object", "bowl"]),
+    ({"trigger": {"when": "dropped", "object": "cube"}, "knock_out": {"object": "cube"}}, ["when = 'dropped'"]),
+    ({"trigger": {"action": 0}, "move_table": {"table": "table2", "distance": [-0.1, 0.2]}}, ["distance[0]", ">= 0"]),
+    ({"trigger": {"action": 0}, "move_table": {"table": "table2", "distance": [0.3, 0.2]}}, ["empty range"]),
+    ({"trigger": {"action": 0}, "add_box": {"center": [0, 0], "size": [0.5, -0.5, 0.5]}}, ["size[1]", ">= 0"]),
+    ({"trigger": {"action": 0}, "add_box": {"between": ["table1", "table9"], "size": [0.5, 0.5, 0.5]}}, ["table9"]),
+    ({"trigger": {"action": 0, "delay_s": -1.0}, "push_base": {"dx": 0.1}}, ["delay_s = -1.0", ">= 0"]),
+    ({"move_object": {"object": "cube", "dx": 0.1}}, ["no trigger"]),
+])
+def test_bad_disturbances_are_refused_in_one_line_before_any_simulation(spec, no_sim, entry, needles) -> None:
+    with pytest.raises(ConfigError) as ei:
+        _read(spec, [{"trigger": {"action": 0}, "push_base": {"dx": 0.0, "dy": 0.1}}, entry])
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.startswith("disturbances[1]"), msg
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+def test_presets_read_against_the_seed_task(spec, no_sim) -> None:
+    assert {"none", "cube_moved", "table_moved", "knocked_out", "obstacle"} <= set(presets())
+    kinds = {}
+    for name in presets():
+        s = load_preset(name)
+        assert isinstance(s, ExecuteSettings) and s.worlds >= 1 and s.monitor_every >= 1
+        kinds[name] = [d.kind for d in _read(spec, s.disturbances)]
+    assert kinds["none"] == [] and kinds["cube_moved"] == ["move_object"] and kinds["table_moved"] == ["move_table"]
+    assert kinds["knocked_out"] == ["knock_out"] and kinds["obstacle"] == ["add_box"]
+    with pytest.raises(ConfigError, match="unknown key"):
+        ExecuteSettings.from_mapping({"worlds": 2, "replans": 1})
+    with pytest.raises(ConfigError, match="execute preset 'nope' is unknown"):
+        load_preset("nope")
+
+
+def test_drawing_is_deterministic_per_seed(spec) -> None:
+    ds = _read(spec, load_preset("table_moved").disturbances + load_preset("obstacle").disturbances
+               + [{"trigger": {"action": 1}, "push_base": {"dx": 0.1, "dy": -0.2}}])
+    a, b = draw(ds, np.random.default_rng(7)), draw(ds, np.random.default_rng(7))
+    c = draw(ds, np.random.default_rng(8))
+    assert a == b and a != c
+    moved = a[0].effect
+    assert isinstance(moved, MoveTable) and 0.2 <= math.hypot(moved.dx, moved.dy) <= 0.4
+    box = a[1].effect
+    assert isinstance(box, AddBox) and 0.4 <= box.at <= 0.6 and box.between == ("base", "table2")
+    assert a[2].effect == PushBase(0.1, -0.2)
+
+
+def test_schedule_fires_each_once_at_its_delay() -> None:
+    s = Schedule([Scheduled(0, Trigger(delay_s=1.0, action=2), KnockOut("cube")),
+                  Scheduled(1, Trigger(delay_s=0.5, when="held", object="cube"), PushBase(0.1, 0.0))], 0.05)
+    assert s.due(10) == []  # nothing began, nothing held
+    s.action_began(2, 100)
+    assert s.due(119) == [] and [x.index for x in s.due(120)] == [0] and s.due(121) == []
+    assert s.due(130, held="cube") == [] and [x.index for x in s.due(140, held="cube")] == [1]
+    assert s.pending == []
+
+
+# ------------------------------------------------------------------------------ the world
+def test_world_start_is_drawn_per_seed(spec) -> None:
+    with ExecutionWorld(spec, 3) as w:
+        a = w.start_state()
+        w.reset()
+        again = w.start_state()
+    with ExecutionWorld(spec, 3) as w:
+        same = w.start_state()
+    with ExecutionWorld(spec, 4) as w:
+        other = w.start_state()
+    with ExecutionWorld(spec, 3, perturb=False) as w:
+        nominal = w.start_state()
+    assert a.base == again.base == same.base and a.objects["cube"] == same.objects["cube"]
+    assert a.base != other.base and a.objects["cube"].position != other.objects["cube"].position
+    assert nominal.base[:2] == pytest.approx(spec.geometry.robot_start[:2], abs=1e-6)
+    assert nominal.objects["cube"].position == pytest.approx(spec.geometry.object("cube").position, abs=1e-4)
+    assert math.hypot(a.base[0] + 2.0, a.base[1]) > 1e-4  # perturbed: within the task's robot_xy (5 cm)
+    assert abs(a.base[0] + 2.0) <= 0.05 and abs(a.base[1]) <= 0.05
+
+
+def test_moved_table_is_moved_in_physics_and_stays_through_restores(spec) -> None:
+    with ExecutionWorld(spec, 0, perturb=False) as w:
+        cube0 = w.start_state().objects["cube"].position
+        line = w.apply(MoveTable("table1", 0.5, 0.0))
+        assert "table1" in line and "with cube" in line  # the cube on it moved along
+        assert w.observe().state.objects["cube"].position[0] == pytest.approx(cube0[0] + 0.5, abs=1e-5)
+        assert _drop(w, 0.5, 1.2) == pytest.approx(TABLE_TOP + CUBE_HALF, abs=2e-3)  # lands on its new top
+        assert _drop(w, -0.15, 1.2) == pytest.approx(CUBE_HALF, abs=2e-3)  # nothing where it was
+        state = w.observe().state
+        w.scene.reset(state=state)  # a restore moves bodies and the robot, not the tables
+        assert w.tables()["table1"] == TablePose(0.5, 1.2, 0.0)
+        assert _drop(w, 0.6, 1.3) == pytest.approx(TABLE_TOP + CUBE_HALF, abs=2e-3)
+        w.scene.reset()
+        assert _drop(w, 0.6, 1.3) == pytest.approx(TABLE_TOP + CUBE_HALF, abs=2e-3)
+        w.reset()  # the world's own reset puts it back
+        assert _drop(w, -0.15, 1.2) == pytest.approx(TABLE_TOP + CUBE_HALF, abs=2e-3)
+
+
+def test_added_box_blocks_bodies_and_the_robot(spec) -> None:
+    box = AddBox("obstacle", (0.5, 0.5, 0.5), center=(-1.0, 0.0))
+    with ExecutionWorld(spec, 0, perturb=False, disturbances=[Scheduled(0, Trigger(action=0), box)]) as w:
+        assert _drop(w, -1.0, 0.0) == pytest.approx(CUBE_HALF, abs=2e-3)  # parked: not there yet
+        w.reset()
+        assert "appeared at (-1.000, 0.000)" in w.apply(box)
+        assert w.observe().boxes == (BoxSeen("obstacle", (-1.0, 0.0), (0.5, 0.5, 0.5)),)
+        assert _drop(w, -1.0, 0.0) == pytest.approx(0.5 + CUBE_HALF, abs=2e-3)  # stops at its top
+        w.scene.reset(state=w.observe().state)
+        for _ in range(60):  # drive +x at 0.5 m/s for 3 s from x = -2: 1.5 m without the box
+            w.scene.set_base_velocity(torch.tensor([[0.5, 0.0, 0.0]]))
+            w.scene.step()
+        x = float(w.scene.base_pose()[0, 0])
+        assert x < -1.25 - 0.2  # stopped at the box's face (-1.25) minus the robot's reach
+
+
+def test_knock_out_leaves_the_object_on_the_table_below_not_held(spec) -> None:
+    with ExecutionWorld(spec, 0, perturb=False) as w:
+        w.scene.reset(state=load_state(FIXTURE))
+        assert w.held() == "cube"
+        before = w.observe().state.objects["cube"].position
+        line = w.apply(KnockOut("cube"))
+        assert "out of the hand onto table1" in line and not bool(w.scene.gripper_command()[0])
+        for _ in range(20):
+            w.scene.step()
+        p = w.observe().state.objects["cube"].position
+        assert p[2] == pytest.approx(TABLE_TOP + CUBE_HALF, abs=3e-3)
+        assert math.hypot(p[0] - before[0], p[1] - before[1]) < 0.03
+        assert w.held() is None and w.observe().held is None
+
+
+def test_move_object_and_push_base(spec) -> None:
+    with ExecutionWorld(spec, 0, perturb=False) as w:
+        c = w.start_state().objects["cube"].position
+        w.apply(MoveObject("cube", 0.1, -0.15))
+        for _ in range(10):
+            w.scene.step()
+        p = w.observe().state.objects["cube"].position
+        assert p == pytest.approx((c[0] + 0.1, c[1] - 0.15, c[2]), abs=2e-3)
+        b = w.observe().state.base
+        assert "base pushed" in w.apply(PushBase(0.2, 0.1))
+        assert w.observe().state.base[:2] == pytest.approx((b[0] + 0.2, b[1] + 0.1), abs=1e-4)
+
+
+def test_observed_changes_become_a_belief_the_run_config_accepts(spec) -> None:
+    from omegaconf import OmegaConf
+
+    box = AddBox("obstacle", (0.5, 0.5, 0.5), between=("base", "table2"), at=0.5)
+    with ExecutionWorld(spec, 1, disturbances=[Scheduled(0, Trigger(action=2), box)]) as w:
+        assert geometry_changes(w.observe(), spec.geometry_cfg) == []  # nothing changed yet
+        w.apply(MoveTable("table2", 0.1, -0.3))
+        w.apply(box)
+        obs = w.observe()
+        base = obs.state.base
+        now = w.geometry_now()
+    assert obs.tables["table2"] == TablePose(0.1, -1.5, 0.0)
+    (seen,) = obs.boxes
+    assert seen.center == pytest.approx(((base[0] + 0.1) / 2, (base[1] - 1.5) / 2), abs=1e-6)  # table 2 where it is now
+    changes = geometry_changes(obs, spec.geometry_cfg)
+    assert changes[0] == "scene.tables.1.center=[0.1,-1.5]" and changes[1].startswith("scene.walls=[{name:obstacle,")
+    s2 = build_run_spec(compose_config(*changes))  # as Hydra overrides
+    assert s2.geometry.table("table2").center[:2] == pytest.approx((0.1, -1.5))
+    wall = next(b for b in s2.geometry.extras if b.name == "obstacle")
+    assert wall.center == pytest.approx((*seen.center, 0.25), abs=1e-6) and wall.half_size == (0.25, 0.25, 0.25)
+    cfg = compose_config(plain=False)  # and as values put into a composed config
+    for key, value in geometry_updates(obs, spec.geometry_cfg).items():
+        OmegaConf.update(cfg, key, value, merge=False)
+    s3 = build_run_spec(OmegaConf.to_container(cfg, resolve=True))
+    rebuilt = build_geometry(apply_geometry_updates(spec.geometry_cfg, geometry_updates(obs, spec.geometry_cfg)))
+    assert s3.geometry == s2.geometry == now == rebuilt and s3.geometry.table("table2").center[:2] == pytest.approx((0.1, -1.5))
+    # the regions framed by table 2 follow it in the new spec
+    assert s2.task.layout.regions["Table2"] != spec.task.layout.regions["Table2"]
+
+
+# ------------------------------------------------------------------------------ monitor
+def _obs(spec, *, held=None, cube=(0.0, 1.2, 0.7425), tables=None, boxes=(), base=(-2.0, 0.0, 0.0)) -> Observation:
+    state = SceneState(base=base, gripper_closed=held is not None, objects={"cube": ObjectPose(cube)}, held=held)
+    t = tables or {b.name: TablePose(b.center[0], b.center[1]) for b in spec.geometry.tables}
+    return Observation(0, 0.0, state, t, tuple(boxes))
+
+
+def test_monitor_flags_each_deviation_and_nothing_in_the_nominal_world(spec) -> None:
+    task, g, tol = spec.task, spec.geometry, Tolerance()
+    assert held_by_plan(task, 1) is None and held_by_plan(task, 1, done=True) == "cube"
+    assert held_by_plan(task, 2) == "cube" and held_by_plan(task, 3) is None and held_by_plan(task, 4) is None
+    at0, carry = expectation(task, g, 0), expectation(task, g, 2)
+    assert set(at0.objects) == {"cube"} and carry.objects == {} and carry.held == "cube"
+    # unperturbed: nothing, during any action
+    for k in range(task.n_actions):
+        held = held_by_plan(task, k)
+        assert check(_obs(spec, held=held, cube=(0.0, 1.2, 0.9) if held else (0.0, 1.2, 0.7425)),
+                     expectation(task, g, k), tol) == []
+    def kinds(obs, exp):
+        out = check(obs, exp, tol)
+        assert all(isinstance(d, Deviation) and d.kind in KINDS and d.detail for d in out)
+        return [d.kind for d in out]
+
+    assert kinds(_obs(spec, held=None), carry) == ["grasp_lost"]
+    assert kinds(_obs(spec, cube=(0.0, 1.2, 0.7425)), expectation(task, g, 1, done=True)) == ["grasp_lost"]
+    assert kinds(_obs(spec, cube=(0.25, 1.35, 0.7425)), at0) == []  # 29 cm: the plan tracks it
+    assert kinds(_obs(spec, cube=(0.35, 1.2, 0.7425)), at0) == ["object_moved"]
+    moved = {"table1": TablePose(0.0, 1.2), "table2": TablePose(0.06, -1.2)}
+    assert kinds(_obs(spec, held="cube", tables=moved), carry) == ["table_moved"]
+    inside = BoxSeen("obstacle", (-0.5, 0.0), (0.5, 0.5, 0.5))
+    outside = BoxSeen("far", (10.0, 0.0), (0.5, 0.5, 0.5))
+    assert kinds(_obs(spec, held="cube", boxes=[inside, outside]), carry) == ["path_blocked"]
+    s_walls = build_run_spec(compose_config("scene.walls=[{name:obstacle,center:[-0.5,0.0],size:[0.5,0.5,0.5]}]"))
+    assert kinds(_obs(spec, held="cube", boxes=[inside]), expectation(task, s_walls.geometry, 2)) == []  # known
+    arrived = expectation(task, g, 0, done=True, base_target=(-0.85, 1.2))
+    assert kinds(_obs(spec, base=(-0.80, 1.15, 0.0)), arrived) == []
+    assert kinds(_obs(spec, base=(-0.60, 1.2, 0.0)), arrived) == ["base_off"]
+
+
+# ------------------------------------------------------------------------------ trajectory file
+def test_trajectory_file_round_trips(tmp_path: Path) -> None:
+    log = TrajectoryLog(control_freq=20)
+    joints = ("torso_lift_joint", "shoulder_pan_joint")
+    rows = [(0, 0, "move_to(Table1)"), (1, 0, "move_to(Table1)"), (2, 1, "grasp(cube, Cube_g)"),
+            (3, 1, "grasp(cube, Cube_g)"), (4, 1, "grasp(cube, Cube_g)"), (5, 0, "move_to(Table1)")]  # a replan
+    for step, a, text in rows:
+        log.append(step, a, text, {n: 0.1 * step + i for i, n in enumerate(joints)}, (0.5, -0.1 * step, 0.2),
+                   gripper_closed=step >= 4)
+    path = log.save(tmp_path / "traj")
+    t = read_trajectory(path)
+    assert path.suffix == ".npz" and t.format == TRAJECTORY_FORMAT and t.control_freq == 20.0 and len(t) == 6
+    assert t.joint_names == joints and t.step.tolist() == [0, 1, 2, 3, 4, 5]
+    assert t.t_s.tolist() == pytest.approx([0.0, 0.05, 0.1, 0.15, 0.2, 0.25])
+    assert t.joint_targets[:, 1].tolist() == pytest.approx([1 + 0.1 * s for s in range(6)])
+    assert t.base_velocity[3].tolist() == pytest.approx([0.5, -0.3, 0.2])
+    assert t.gripper.tolist() == [False] * 4 + [True] * 2
+    assert t.action_text == ("move_to(Table1)", "grasp(cube, Cube_g)", "move_to(Table1)")
+    assert t.action_boundaries.tolist() == [[0, 1], [2, 4], [5, 5]]
+    assert t.action.tolist() == [0, 0, 1, 1, 1, 2] and t.plan_index.tolist() == [0, 0, 1, 1, 1, 0]
+    with pytest.raises(ConfigError, match="steps must increase"):
+        log.append(5, 0, "x", dict.fromkeys(joints, 0.0), (0, 0, 0), False)
+
+
+def test_trajectory_from_a_scene(spec, tmp_path: Path) -> None:
+    with ExecutionWorld(spec, 0, perturb=False) as w:
+        log = TrajectoryLog(spec.sim.control_freq)
+        for _ in range(3):
+            w.scene.set_base_velocity(torch.tensor([[0.3, 0.0, 0.1]]))
+            w.scene.step()
+            log.from_scene(w.scene, 0, str(spec.task.plan[0]))
+        t = read_trajectory(log.save(tmp_path / "t.npz"))
+    assert t.joint_names == tuple(spec.robot.upper.joints) and t.step.tolist() == [1, 2, 3]
+    assert t.base_velocity[0].tolist() == pytest.approx([0.3, 0.0, 0.1]) and not t.gripper.any()
