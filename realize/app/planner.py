@@ -15,11 +15,13 @@ refused (``realize.app.replan``). ``resequence(task, state, ...)`` realizes anot
 (a new action sequence from the PDDL planner, ``realize.app.resequence``) from a state.
 
 What stays up between calls: the rollout workers and their scenes, keyed by what they were
-built for (scene, robot, simulator, workers, copies). A call whose scene is the same takes
-them over with new realizers (``retask``: a new plan, a new start state, cost nothing to
-build); one whose world changed its static layout (a table moved, a new obstacle) needs new
-scenes: the planner says so in the log and in ``PlanResult.scene`` and builds only those,
-keeping at most ``max_pools`` sets open. ``close()`` ends every worker (a context manager).
+built for (processes: copies, shards, workers, backend; scenes: scene, robot, simulator). A
+call whose scene is the same takes them over with new realizers (``retask``: a new plan, a new
+start state, nothing to build); one whose world changed its static layout (a table moved, a
+new obstacle) needs new scenes: the planner says so in the log and in ``PlanResult.scene`` and
+builds only those, in the running worker processes (Ray actors: new actors). At most
+``max_pools`` sets stay open. ``warm_up(budget)`` opens the replans' workers ahead of the
+first replan. ``close()`` ends every worker (a context manager).
 What it doesn't: search, simulate or write files itself (``realize.app.run`` does, per call),
 or carry a plan out (``realize.app.execute``).
 """
@@ -124,8 +126,8 @@ class PlanResult:
     name (``z`` over ``columns``, the validation's returned candidate where there is one),
     ``cost`` its cost (inf if infeasible), ``validation`` the result.json block (None: none),
     ``run_dir`` where everything is. ``from_action``: the first action of the whole plan it
-    realizes (0 for ``plan``); ``scene``: ``"built"`` or ``"kept"`` (the workers of an
-    earlier call). ``outcome``: the run's ``RunOutcome`` (status, exit code)."""
+    realizes (0 for ``plan``); ``scene``: ``"built"`` (new workers), ``"rebuilt"`` (new scenes
+    in the running workers: the world's layout changed) or ``"kept"`` (an earlier call's). ``outcome``: the run's ``RunOutcome`` (status, exit code)."""
 
     plan: str
     actions: tuple[str, ...]
@@ -153,13 +155,17 @@ class PlanResult:
                 "stopped_early": self.stopped_early, "whole_plan": self.whole_plan}
 
 
-def _pool_key(spec: Any) -> str:
-    """What a set of workers was built for: two specs with the same key can share them."""
+def _pool_keys(spec: Any) -> tuple[str, str]:
+    """What a set of workers was built for: its processes (copies, shards, workers, backend) and
+    its scenes (scene, robot, simulator). Same both: shared as they are; same processes only:
+    their scenes are built again."""
     c = spec.config
-    return json.dumps({"scene": c.get("scene"), "robot": c.get("robot"), "sim": c.get("sim"),
-                       "workers": c.get("workers"), "backend": spec.placement.backend,
-                       "device": str(spec.placement.device), "n_envs": spec.ce.n_envs, "replicas": spec.ce.replicas,
-                       "worlds_seed": spec.seed if spec.ce.replicas > 1 else None}, sort_keys=True, default=str)
+    procs = json.dumps({"workers": c.get("workers"), "backend": spec.placement.backend,
+                        "device": str(spec.placement.device), "n_envs": spec.ce.n_envs, "replicas": spec.ce.replicas,
+                        "shard_rows": spec.sim.shard_rows}, sort_keys=True, default=str)
+    scenes = json.dumps({"scene": c.get("scene"), "robot": c.get("robot"), "sim": c.get("sim"),
+                         "worlds_seed": spec.seed if spec.ce.replicas > 1 else None}, sort_keys=True, default=str)
+    return procs, scenes
 
 
 def _set(d: dict[str, Any], dotted: str, value: Any) -> None:
@@ -223,7 +229,7 @@ class Planner:
             self.config = compose_config(list(config))
         self.cli_overrides = list(cli_overrides)
         self.max_pools = max(1, int(max_pools))
-        self._pools: dict[str, RolloutPool] = {}
+        self._pools: dict[str, tuple[RolloutPool, str]] = {}  # processes key -> (workers, scenes key)
         self._built: set[str] = set()  # keys whose workers the current call built
         self.last: PlanResult | None = None
         self.closed = False
@@ -247,27 +253,51 @@ class Planner:
 
     # ------------------------------------------------------------------ workers
     def _pool(self, spec: Any, tasks: Sequence[Any], log_dir: Path) -> RolloutPool:
-        key = _pool_key(spec)
-        pool = self._pools.get(key)
-        if pool is not None:
-            pool.retask(spec, tasks)
-            return pool
-        if self._pools:
-            log.info("planner: this call's scene differs from the %d open set(s) of workers (%s); building new ones",
-                     len(self._pools), _what_differs(key, list(self._pools)))
+        procs, scenes = _pool_keys(spec)
+        found = self._pools.get(procs)
+        if found is not None:
+            pool, built_for = found
+            if built_for == scenes:
+                pool.retask(spec, tasks)
+                return pool
+            what = _what_differs(scenes, built_for)
+            if hasattr(pool, "rebuild") and not hasattr(pool, "_ray"):
+                log.info("planner: the world changed (%s): building its scenes again in the running workers", what)
+                pool.rebuild(spec, tasks)
+                self._pools[procs] = (pool, scenes)
+                self._built.add("scenes")
+                return pool
+            log.info("planner: the world changed (%s): new workers", what)
+            self._pools.pop(procs)[0].close()
         while len(self._pools) >= self.max_pools:  # the oldest set goes
             old = next(iter(self._pools))
-            self._pools.pop(old).close()
+            self._pools.pop(old)[0].close()
         pool = open_pool(spec, tasks, log_dir=log_dir)
-        self._pools[key] = pool
-        self._built.add(key)
+        self._pools[procs] = (pool, scenes)
+        self._built.add("workers")
         return pool
 
     def _drop(self, spec: Any) -> None:
         """Close the workers of ``spec`` (a run that did not end cleanly may leave them mid-batch)."""
-        pool = self._pools.pop(_pool_key(spec), None)
-        if pool is not None:
-            pool.close()
+        found = self._pools.pop(_pool_keys(spec)[0], None)
+        if found is not None:
+            found[0].close()
+
+    def warm_up(self, budget: ReplanBudget | None = None, source: PlanResult | str | Path | None = None) -> float:
+        """Open the workers replans on ``budget`` will use (for the plan of ``source``, default
+        the last result) before the first replan, so that it does not wait for them: a robot's
+        planner is up before the robot moves. Returns the seconds it took."""
+        from realize.app.run_config import build_run_spec
+
+        t0 = time.perf_counter()
+        cfg = _saved_config(self._source(source))
+        for k, v in (budget or ReplanBudget()).overrides().items():
+            _set(cfg, k, v)
+        cfg["replan_from"], cfg["resume"] = None, None
+        cfg["replan"] = {"action": None, "state": None, "warm": True}
+        spec = build_run_spec(cfg)
+        self._pool(spec, [spec.task], self._source(source) / "replans" / "workers")
+        return time.perf_counter() - t0
 
     @property
     def open_pools(self) -> int:
@@ -303,7 +333,7 @@ class Planner:
         v = getattr(assembly, "validation_s", 0.0)
         setup = sum(t_setup)
         search = max(0.0, getattr(assembly, "search_s", total) - setup)
-        scene = "built" if self._built else "kept"
+        scene = "kept" if not self._built else ("built" if "workers" in self._built else "rebuilt")
         res = self._result(assembly.run_dir, outcome, setup, search, v, spec, total=total, scene=scene,
                            from_action=from_action, stopped=bool(getattr(assembly, "stopped_early", False)))
         self.last = res
@@ -434,7 +464,7 @@ class Planner:
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
         """End every worker this planner opened."""
-        for pool in self._pools.values():
+        for pool, _ in self._pools.values():
             try:
                 pool.close()
             except Exception:  # pragma: no cover
@@ -482,8 +512,14 @@ def _next_dir(parent: Path, stem: str) -> Path:
     return parent / f"{stem}-{k}"
 
 
-def _what_differs(key: str, others: list[str]) -> str:
-    mine = json.loads(key)
-    theirs = json.loads(others[-1])
-    diff = [k for k in mine if mine[k] != theirs.get(k)]
-    return "differs in " + ", ".join(diff) if diff else "same"
+def _what_differs(key: str, other: str) -> str:
+    """Which config keys two scene keys differ in (``scene.tables, scene.walls``)."""
+    mine, theirs = json.loads(key), json.loads(other)
+    diff = []
+    for k in mine:
+        a, b = mine[k], theirs.get(k)
+        if isinstance(a, dict) and isinstance(b, dict):
+            diff += [f"{k}.{kk}" for kk in sorted(set(a) | set(b)) if a.get(kk) != b.get(kk)]
+        elif a != b:
+            diff.append(k)
+    return ", ".join(diff) or "nothing"

@@ -47,6 +47,8 @@ class RolloutPool(Protocol):
 
     def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None: ...
 
+    def rebuild(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None: ...
+
     def close(self) -> None: ...
 
 
@@ -69,6 +71,11 @@ class InProcessPool:
     def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
         """Realize ``tasks`` from now on, on the scenes already built (``ShardWorker.retask``)."""
         self.worker.retask(spec, tasks)
+
+    def rebuild(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
+        """New scenes for ``spec`` on the same shards (``ShardWorker.rebuild``)."""
+        self.worker.rebuild(spec, tasks)
+        self.setup_time_s = self.worker.setup_time_s
 
     def close(self) -> None:
         self.worker.close()

@@ -118,12 +118,14 @@ def worker_main(conn: Connection, payload: bytes, k: int, log_path: str | None, 
             break
         if msg[0] == "close":
             break
-        if msg[0] == "retask":  # a replan in the same world: new realizers, the scenes kept
+        if msg[0] in ("retask", "rebuild"):  # a replan: new realizers (retask) or new scenes (rebuild)
             try:
-                worker.retask(msg[1], msg[2])
+                t0 = time.perf_counter()
+                (worker.retask if msg[0] == "retask" else worker.rebuild)(msg[1], msg[2])
             except Exception:
                 _send(conn, ("error", traceback.format_exc()))
                 continue
+            log.info("%s done in %.1f s", msg[0], time.perf_counter() - t0)
             _send(conn, ("retasked",))
             continue
         _, candidate, parts, record = msg
@@ -255,18 +257,25 @@ class ProcessPool:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
-        """Every worker realizes ``tasks`` from now on, on the scenes it has (``ShardWorker.retask``);
-        a worker started later (a restart) is built for them too."""
+    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec], what: str = "retask") -> None:
+        """Every worker realizes ``tasks`` from now on, on the scenes it has (``ShardWorker.retask``;
+        ``what="rebuild"``: on new scenes of ``spec``, ``ShardWorker.rebuild``); a worker started
+        later (a restart) is built for them too."""
         self._spec, self._tasks = spec, list(tasks)
         for s in self.slots:
-            _send(s.conn, ("retask", spec, self._tasks))
+            _send(s.conn, (what, spec, self._tasks))
         for s in self.slots:
             msg = self._receive(s, self._timeout)
             if msg is None:
                 raise self._failure(s, "died while taking a new task")
             if msg[0] == "error":
                 raise WorkerFailed(f"{s.name()} could not take a new task:\n{msg[1]}")
+
+    def rebuild(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
+        """New scenes for ``spec`` in the running workers (their processes kept)."""
+        t0 = time.perf_counter()
+        self.retask(spec, tasks, "rebuild")
+        self.setup_time_s = time.perf_counter() - t0
 
     def pids(self) -> list[int]:
         """The worker processes' pids (for tests and tools)."""

@@ -78,5 +78,8 @@ class ReplicaPool:
     def retask(self, spec: Any, tasks: Any) -> None:
         self.inner.retask(spec, tasks)
 
+    def rebuild(self, spec: Any, tasks: Any) -> None:
+        self.inner.rebuild(spec, tasks)
+
     def close(self) -> None:
         self.inner.close()

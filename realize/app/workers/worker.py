@@ -82,6 +82,13 @@ class ShardWorker:
         self.realizers = [[PlanRealizer.from_spec(wspec, t, scene) for t in tasks] for scene in self.scenes]
         self.unit = spec.ce.replicas
 
+    def rebuild(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
+        """Close the scenes and build them again for ``spec`` (a world whose static layout
+        changed: a table moved, a new obstacle), the same shards; the process stays."""
+        shards, threads = self.shards, self.physx_threads
+        self.close()
+        self.__init__(spec, tasks, shards, threads)  # type: ignore[misc]
+
     def describe(self) -> str:
         return f"rows {self.first}-{self.stop - 1} ({len(self.shards)} shard(s))"
 
