@@ -10,3 +10,24 @@ from realize.reproducible import pin_cpu_math
 pin_cpu_math()  # before any torch op: the same torch/MKL kernel paths on every x86-64 CPU with AVX2
 
 __version__ = "0.1.0"
+
+# The Python API, imported on first use so that `import realize` stays fast (no simulator, no Hydra):
+#   from realize import Planner           (realize.app.planner)
+_LAZY = {
+    "Planner": "realize.app.planner",
+    "PlanResult": "realize.app.planner",
+    "ReplanBudget": "realize.app.planner",
+    "compose_config": "realize.app.compose",
+    "SceneState": "realize.world.state",
+    "execute": "realize.app.execute",
+}
+
+__all__ = ["__version__", *_LAZY]
+
+
+def __getattr__(name: str):  # PEP 562
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'realize' has no attribute {name!r}")

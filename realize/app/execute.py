@@ -173,10 +173,22 @@ class _Segment:
 
 class _Executor:
     def __init__(self, run: Any, spec: Any, settings: ExecuteSettings, scheduled: list[Scheduled], world_seed: int,
-                 k: int, closed: bool, out: Path, planner: Any, recorder: Any = None) -> None:
+                 k: int, closed: bool, out: Path, planner: Any, recorder: Any = None,
+                 video: str | Path | None = None) -> None:
         self.run, self.spec, self.settings, self.closed = run, spec, settings, closed
         self.out, self.planner, self.k = out, planner, k
-        self.world = ExecutionWorld(spec, world_seed, disturbances=scheduled)
+        env, self.video = None, None
+        if video is not None:  # the existing video code: a render camera over the whole world, a step hook
+            from realize.app.replay import video_camera
+            from realize.app.video import VideoRecorder
+            from realize.scene import Camera, EnvOptions
+
+            eye, target = video_camera(spec.geometry)
+            env = EnvOptions(camera=Camera(width=640, height=480, eye=tuple(eye), target=tuple(target)))
+            self.video = VideoRecorder(video, fps=20.0, every=2)
+        self.world = ExecutionWorld(spec, world_seed, disturbances=scheduled, env=env)
+        if self.video is not None:
+            self.video.attach(self.world.scene)
         self.schedule = Schedule(scheduled, self.world.scene.control_dt)
         self.log = WorldLog(world=k, seed=world_seed, mode="closed" if closed else "open", plan=spec.task.describe())
         self.base_step = 0  # world timeline steps before the current segment
@@ -377,6 +389,8 @@ class _Executor:
     budget: Any = None
 
     def close(self) -> None:
+        if self.video is not None:
+            self.video.close(hold_s=1.0)
         self.world.close()
 
 
@@ -395,9 +409,10 @@ def _plain(effect: Any) -> dict[str, Any]:
 
 def execute_world(run_dir: str | Path, settings: ExecuteSettings, k: int, *, closed_loop: bool = True,
                   planner: Any = None, out: Path | None = None, budget: Any = None, recorder: Any = None,
-                  trajectory: str | Path | None = None) -> WorldLog:
+                  trajectory: str | Path | None = None, video: str | Path | None = None) -> WorldLog:
     """World ``k`` of the study ``settings`` of the run at ``run_dir`` (see ``execute``); the
-    executed trajectory is saved to ``trajectory`` (an ``.npz``) where given."""
+    executed trajectory is saved to ``trajectory`` (an ``.npz``) and an MP4 to ``video``
+    where given."""
     from realize.app.replay import build_replay_spec, returned_z, saved_plan
 
     run = saved_plan(run_dir)
@@ -407,7 +422,7 @@ def execute_world(run_dir: str | Path, settings: ExecuteSettings, k: int, *, clo
     seed = settings.seed * SEED_STRIDE + k
     scheduled = draw(disturbances, np.random.default_rng([settings.seed, k]))
     out = Path(out) if out is not None else Path(run_dir) / EXECUTION_DIR / "default"
-    ex = _Executor(run, spec, settings, scheduled, seed, k, closed_loop, out, planner, recorder)
+    ex = _Executor(run, spec, settings, scheduled, seed, k, closed_loop, out, planner, recorder, video)
     ex.budget = budget
     try:
         wl = ex.run_world(choice.z)
@@ -424,7 +439,7 @@ def _label(settings_name: str | None, closed: bool | None = None) -> str:
 
 def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None = None, worlds: int | None = None,
             open_loop: bool = True, closed_loop: bool = True, out: str | Path | None = None, budget: Any = None,
-            rerun: bool = True, progress: bool = True) -> ExecutionSummary:
+            rerun: bool = True, progress: bool = True, video: bool = False) -> ExecutionSummary:
     """The study of module docstring: ``worlds`` (default ``settings.worlds``) worlds, each open
     loop and/or closed loop, into ``out`` (default ``<run>/execution/<name>``). Every world's
     files are written as it ends (a killed study keeps what it has); ``summary.json`` after
@@ -466,13 +481,14 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
                     rec = ExecutionRecorder(where / f"{stem}.rrd", spec, stem)
                 try:
                     wl = execute_world(run_dir, settings, k, closed_loop=mode == "closed", planner=planner, out=where,
-                                       budget=budget, recorder=rec, trajectory=where / f"{stem}.npz")
+                                       budget=budget, recorder=rec, trajectory=where / f"{stem}.npz",
+                                       video=where / f"{stem}.mp4" if video else None)
                 finally:
                     if rec is not None:
                         rec.close()
                 logs[mode].append(wl)
                 (where / f"{stem}.json").write_text(json.dumps(wl.to_dict(), indent=2, default=str) + "\n")
-                files += [f"{stem}.json", f"{stem}.npz"]
+                files += [f"{stem}.json", f"{stem}.npz"] + ([f"{stem}.mp4"] if video else [])
                 if rec is not None:
                     files.append(f"{stem}.rrd")
                 summary = _summary(run_dir, label, settings, n, logs, files, time.perf_counter() - t0)

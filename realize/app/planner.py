@@ -123,8 +123,8 @@ class PlanTimings:
 class PlanResult:
     """What ``plan``/``replan`` return. ``plan`` is the realized plan's text (a replan's: the
     remaining actions), ``actions`` its actions, ``params`` the returned plan's parameters by
-    name (``z`` over ``columns``, the validation's returned candidate where there is one),
-    ``cost`` its cost (inf if infeasible), ``validation`` the result.json block (None: none),
+    name (``z`` over ``columns``, the validation's returned candidate where there is one; with
+    no feasible plan the search's best-ranked sample), ``cost`` its cost (inf if infeasible), ``validation`` the result.json block (None: none),
     ``run_dir`` where everything is. ``from_action``: the first action of the whole plan it
     realizes (0 for ``plan``); ``scene``: ``"built"`` (new workers), ``"rebuilt"`` (new scenes
     in the running workers: the world's layout changed) or ``"kept"`` (an earlier call's). ``outcome``: the run's ``RunOutcome`` (status, exit code)."""
@@ -445,6 +445,8 @@ class Planner:
             except ReplayError:
                 z = tuple(float(x) for x in d.get("best_z") or [])
                 cost = float(d.get("best_cost") or math.inf)
+        else:  # no plan reached the goal: the search's best-ranked one (cost inf)
+            z = tuple(float(x) for x in d.get("best_z") or [] if x is not None)
         params: dict[str, list[float]] = {}
         for name, col in zip(columns, z):
             params.setdefault(name.split("[")[0].split(".")[0], []).append(col)

@@ -1,0 +1,91 @@
+"""Carry a run's returned plan out in changing worlds, open loop beside closed loop (watch and replan).
+
+Usage: python scripts/execute.py RUN_DIR [--disturbance FAMILY|FILE.yaml] [--worlds W] [--seed S]
+            [--max-replans N] [--open-only | --closed-only] [--n-envs N] [--iterations T]
+            [--video] [--no-rerun] [--out DIR] [--json]
+
+FAMILY is a preset of configs/execute/ (none, cube_moved, table_moved, knocked_out, obstacle) or a
+YAML file of the same keys; --worlds, --seed and --max-replans override it. Each world is its own
+one-copy scene drawn from the task's perturbation model with seed S * 1000 + k, plus the family's
+disturbances; the replans search --n-envs copies for at most --iterations iterations and stop at
+the first plan that reaches the goal (realize.app.planner.ReplanBudget). Results go to
+RUN_DIR/execution/FAMILY/ (summary.json, world-K-{open,closed}.json/.npz/.rrd; format of the .npz in
+docs/execution_format.md). The last lines print the study's table row.
+
+    python scripts/execute.py runs/seed0 --worlds 16 --disturbance table_moved --seed 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run_dir")
+    p.add_argument("--disturbance", default="none", help="preset of configs/execute/ or a YAML file (default none)")
+    p.add_argument("--worlds", type=int, default=None, help="worlds (default: the preset's)")
+    p.add_argument("--seed", type=int, default=None, help="study seed (default: the preset's)")
+    p.add_argument("--max-replans", type=int, default=None)
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--open-only", action="store_true", help="no replanning")
+    mode.add_argument("--closed-only", action="store_true", help="no open-loop baseline")
+    p.add_argument("--n-envs", type=int, default=None, help="copies per replan iteration (default 32)")
+    p.add_argument("--iterations", type=int, default=None, help="most CE iterations per replan (default 3)")
+    p.add_argument("--video", action="store_true", help="an MP4 per world")
+    p.add_argument("--no-rerun", action="store_true", help="no .rrd per world")
+    p.add_argument("--out", default=None, help="output directory (default RUN_DIR/execution/FAMILY)")
+    p.add_argument("--json", action="store_true", help="print summary.json")
+    a = p.parse_args(argv)
+
+    from realize.app.execute import execute
+    from realize.app.planner import ReplanBudget
+    from realize.config import ConfigError
+    from realize.execution.settings import load_preset
+
+    logging.basicConfig(level=logging.WARNING, format="%(message)s")
+    try:
+        if not (Path(a.run_dir) / "result.json").is_file():
+            raise ConfigError(f"{a.run_dir}: not a realize run directory (no result.json)")
+        settings = load_preset(a.disturbance)
+        for key in ("worlds", "seed", "max_replans"):
+            v = getattr(a, key)
+            if v is not None:
+                settings = type(settings).from_mapping({**_plain(settings), key: v}, "execute")
+        kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations)) if v is not None}
+        budget = ReplanBudget(**kw)
+        if budget.n_elite > budget.n_envs:
+            budget = ReplanBudget(**kw, n_elite=max(1, budget.n_envs // 4))
+        name = Path(a.disturbance).stem
+        s = execute(a.run_dir, settings, name=name, open_loop=not a.closed_only, closed_loop=not a.open_only,
+                    out=a.out, budget=budget, rerun=not a.no_rerun, video=a.video)
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    d = s.to_dict()
+    if a.json:
+        print(json.dumps(d, indent=2))
+    med, p95 = d["replan_s_median"], d["replan_s_p95"]
+    fmt = (lambda v: "-" if v is None else f"{v:.1f} s")
+    print(f"{name}: {s.worlds} worlds; open loop {s.open_successes if s.open_successes is not None else '-'}"
+          f"/{s.worlds}; closed loop {s.closed_successes if s.closed_successes is not None else '-'}/{s.worlds}; "
+          f"replans per world {s.replans}; replan wall time median {fmt(med)}, p95 {fmt(p95)}; "
+          f"replans in worlds open loop got right: {sum(s.replans_with_open_success)}")
+    print(f"files: {Path(a.out) if a.out else Path(a.run_dir) / 'execution' / name}/summary.json")
+    return 0
+
+
+def _plain(settings) -> dict:
+    import dataclasses
+
+    d = dataclasses.asdict(settings)
+    return d
+
+
+if __name__ == "__main__":
+    sys.exit(main())
