@@ -14,7 +14,8 @@ import torch
 from helpers import compose_config
 from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
-from realize.execution.disturbances import (AddBox, KnockOut, MoveObject, MoveTable, PushBase, Schedule, Scheduled,
+from realize.execution.schedule import Schedule
+from realize.execution.disturbances import (AddBox, KnockOut, MoveObject, MoveTable, PushBase, Scheduled,
                                             Trigger, draw, read_disturbances)
 from realize.execution.monitor import KINDS, Deviation, check, expectation, held_by_plan
 from realize.execution.settings import ExecuteSettings, Tolerance, load_preset, presets

@@ -12,7 +12,7 @@ candidate its search cost, nominal cost (re-simulated), success share, 95 % Wils
 to return is the cheapest candidate whose interval's lower bound is at least ``min_success``,
 else the most robust one (highest success share, then cheapest). ``write`` stores it in
 ``result.json`` under ``validation``. ``realize.app.run_config.ValidationSettings`` (the Hydra
-``validation`` group) runs it after a run's search (``realize.app.run``; ``validation.replicas=0``
+``validation`` group) runs it after a run's search (``realize.app.assembly``; ``validation.replicas=0``
 turns it off).
 What it doesn't: run inside the search, or change ``best_z`` (the nominal best stays the
 search's; ``validation.returned`` names the plan to execute: replay runs it).

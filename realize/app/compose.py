@@ -6,20 +6,22 @@ checks group choices (``experiment=foo`` -> the presets there are), keys (``secn
 "did you mean 'scene'", ``realize.app.cli_keys``), composes ``configs/config.yaml`` and returns
 the resolved plain config (no ``hydra`` node). Every problem is a ``ConfigError`` with one line.
 ``check_group_choices`` and ``compose_or_error`` are the pieces the command line shares
-(``realize.app.cli``). ``CONFIG_GROUPS`` are the groups a plain ``group=option`` may choose.
+(``realize.app.cli``); ``apply_overrides(config, overrides)`` puts overrides on a plain config
+(a replan's world changes), ``set_key`` one dotted key. ``CONFIG_GROUPS`` are the groups a plain ``group=option`` may choose.
 What it doesn't: validate values (``realize.app.run_config.build_run_spec`` does) or run.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from realize.app.cli_keys import check_override_keys
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 
-__all__ = ["CONFIG_GROUPS", "compose_config", "compose_or_error", "check_group_choices", "group_options",
+__all__ = ["CONFIG_GROUPS", "compose_config", "apply_overrides", "set_key", "compose_or_error", "check_group_choices", "group_options",
            "parse_overrides"]
 
 CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation",
@@ -99,3 +101,38 @@ def compose_config(overrides: Sequence[str] = ()) -> dict[str, Any]:
     assert isinstance(d, dict)
     d.pop("hydra", None)
     return d
+
+
+def set_key(d: dict[str, Any], dotted: str, value: Any) -> None:
+    parts = dotted.split(".")
+    node = d
+    for p in parts[:-1]:
+        nxt = node.get(p)
+        if not isinstance(nxt, dict):
+            nxt = {}
+            node[p] = nxt
+        node = nxt
+    node[parts[-1]] = value
+
+
+def apply_overrides(config: Mapping[str, Any], overrides: Sequence[str], where: str = "changes") -> dict[str, Any]:
+    """``config`` (plain data) with Hydra-syntax ``key=value`` overrides applied (values parsed
+    as the command line parses them: ``scene.tables.1.center=[0.1,-1.5]``); one ``ConfigError``
+    line for an override that does not parse or names no key of ``config``."""
+    from omegaconf import OmegaConf
+
+    base = OmegaConf.create(json.loads(json.dumps(dict(config), default=str)))
+    for o in parse_overrides(overrides):
+        key = o.key_or_group
+        if o.is_delete() or o.is_sweep_override():
+            raise ConfigError(f"{where}: {o.input_line!r}: give one value for a key (no deletions or sweeps)")
+        try:
+            present = OmegaConf.select(base, key, throw_on_missing=False, default="__missing__") != "__missing__"
+        except Exception:
+            present = False
+        if not present and not (o.is_add() or o.is_force_add()):
+            raise ConfigError(f"{where}: {o.input_line!r}: the config has no key {key!r}")
+        OmegaConf.update(base, key, o.value(), merge=False, force_add=True)
+    out = OmegaConf.to_container(base, resolve=True)
+    assert isinstance(out, dict)
+    return out

@@ -9,7 +9,7 @@ successive halving over candidate plans; it does not know which) to its end:
 inside a ``realize.app.guard.RunGuard`` (signals -> interrupted status, failures -> error.txt, the
 sinks' final ``close`` shielded from a second Ctrl-C, then the workers closed). It returns the
 guard (``status``, ``exit_code``) and the count of iterations every sink has seen.
-What it doesn't: choose the searcher, the sinks or the files (``realize.app.run``), or sample,
+What it doesn't: choose the searcher, the sinks or the files (``realize.app.assembly``), or sample,
 rank and simulate itself.
 """
 

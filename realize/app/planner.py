@@ -19,10 +19,10 @@ built for (processes: copies, shards, workers, backend; scenes: scene, robot, si
 call whose scene is the same takes them over with new realizers (``retask``: a new plan, a new
 start state, nothing to build); one whose world changed its static layout (a table moved, a
 new obstacle) needs new scenes: the planner says so in the log and in ``PlanResult.scene`` and
-builds only those, in the running worker processes (Ray actors: new actors). At most
+builds only those, in the running worker processes (Ray actors are not kept: new ones per call). At most
 ``max_pools`` sets stay open. ``warm_up(budget)`` opens the replans' workers ahead of the
 first replan. ``close()`` ends every worker (a context manager).
-What it doesn't: search, simulate or write files itself (``realize.app.run`` does, per call),
+What it doesn't: search, simulate or write files itself (``realize.app.assembly`` does, per call),
 or carry a plan out (``realize.app.execute``).
 """
 
@@ -32,13 +32,14 @@ import json
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig
 
-from realize.app.run import RunOutcome, plain_config, prepare_run
+from realize.app.compose import set_key
+from realize.app.plan_result import PlanResult, PlanTimings, ReplanBudget
+from realize.app.assembly import RunOutcome, plain_config, prepare_run
 from realize.app.workers.pool import RolloutPool, open_pool
 from realize.config import ConfigError
 from realize.run_dir.directory import RunDir
@@ -49,110 +50,6 @@ __all__ = ["Planner", "PlanResult", "ReplanBudget", "PlanTimings"]
 log = logging.getLogger("realize")
 
 START_STATE_FILE = "start_state.json"  # the state a replan's rollouts start from, in its run directory
-
-
-@dataclass(frozen=True)
-class ReplanBudget:
-    """The search of one replan: ``n_envs`` copies (and samples) per iteration, ``n_elite``
-    elites, at most ``iterations``; with ``stop_when_feasible`` it ends after the first
-    iteration (from ``min_iterations`` on) whose best plan reaches the goal. ``validation``
-    replicas of the task's perturbations after it (0: none; a replan starts from an observed
-    state, so what is left uncertain is small). ``workers``: rollout workers (None: as the run);
-    ``shard_rows``: copies per PhysX scene (None: as the run).
-    ``progress``/``rerun``: the progress bar and the rerun recording of each replan."""
-
-    n_envs: int = 32
-    n_elite: int = 4
-    iterations: int = 3
-    stop_when_feasible: bool = True
-    min_iterations: int = 1
-    validation: int = 0
-    workers: int | None = None
-    shard_rows: int | None = 16  # copies per PhysX scene: 32 copies in 2 scenes keep both cores of a laptop busy
-    progress: bool = False
-    rerun: bool = False
-
-    def __post_init__(self) -> None:
-        for name in ("n_envs", "n_elite", "iterations", "min_iterations"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"replan budget: {name} = {v!r} is invalid: must be an integer >= 1")
-        if self.n_elite > self.n_envs:
-            raise ConfigError(f"replan budget: n_elite = {self.n_elite} is more than n_envs = {self.n_envs}")
-        if isinstance(self.validation, bool) or not isinstance(self.validation, int) or self.validation < 0:
-            raise ConfigError(f"replan budget: validation = {self.validation!r} is invalid: an integer >= 0")
-
-    @classmethod
-    def from_mapping(cls, d: Mapping[str, Any] | None, where: str = "replan budget") -> ReplanBudget:
-        d = dict(d or {})
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def overrides(self) -> dict[str, Any]:
-        """The run-config keys this budget sets (dotted key -> value)."""
-        out: dict[str, Any] = {"ce.n_envs": self.n_envs, "ce.n_elite": self.n_elite, "ce.iterations": self.iterations,
-                               "ce.schedule": "constant", "ce.n_envs_end": None, "ce.replicas": 1,
-                               "validation.replicas": self.validation, "logging.progress": self.progress,
-                               "logging.rerun": self.rerun, "logging.record": self.rerun}
-        if self.workers is not None:
-            out["workers.n"] = self.workers
-        if self.shard_rows is not None:
-            out["sim.shard_rows"] = self.shard_rows
-        return out
-
-
-@dataclass(frozen=True)
-class PlanTimings:
-    """Where a call's wall time went (s): workers and scenes (built or taken over), the search,
-    the validation after it, and everything (config, files) in ``total_s``."""
-
-    setup_s: float
-    search_s: float
-    validation_s: float
-    total_s: float
-
-    def to_dict(self) -> dict[str, float]:
-        return {"setup_s": self.setup_s, "search_s": self.search_s, "validation_s": self.validation_s,
-                "total_s": self.total_s}
-
-
-@dataclass(frozen=True)
-class PlanResult:
-    """What ``plan``/``replan`` return. ``plan`` is the realized plan's text (a replan's: the
-    remaining actions), ``actions`` its actions, ``params`` the returned plan's parameters by
-    name (``z`` over ``columns``, the validation's returned candidate where there is one; with
-    no feasible plan the search's best-ranked sample), ``cost`` its cost (inf if infeasible), ``validation`` the result.json block (None: none),
-    ``run_dir`` where everything is. ``from_action``: the first action of the whole plan it
-    realizes (0 for ``plan``); ``scene``: ``"built"`` (new workers), ``"rebuilt"`` (new scenes
-    in the running workers: the world's layout changed) or ``"kept"`` (an earlier call's). ``outcome``: the run's ``RunOutcome`` (status, exit code)."""
-
-    plan: str
-    actions: tuple[str, ...]
-    params: dict[str, list[float]]
-    z: tuple[float, ...]
-    columns: tuple[str, ...]
-    cost: float
-    feasible: bool
-    status: str
-    iterations_done: int
-    validation: dict[str, Any] | None
-    run_dir: Path
-    timings: PlanTimings
-    outcome: RunOutcome
-    from_action: int = 0
-    scene: str = "built"
-    stopped_early: bool = False
-    whole_plan: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"plan": self.plan, "actions": list(self.actions), "params": self.params, "z": list(self.z),
-                "columns": list(self.columns), "cost": self.cost, "feasible": self.feasible, "status": self.status,
-                "iterations_done": self.iterations_done, "run_dir": str(self.run_dir),
-                "timings": self.timings.to_dict(), "from_action": self.from_action, "scene": self.scene,
-                "stopped_early": self.stopped_early, "whole_plan": self.whole_plan}
 
 
 def _pool_keys(spec: Any) -> tuple[str, str]:
@@ -166,43 +63,6 @@ def _pool_keys(spec: Any) -> tuple[str, str]:
     scenes = json.dumps({"scene": c.get("scene"), "robot": c.get("robot"), "sim": c.get("sim"),
                          "worlds_seed": spec.seed if spec.ce.replicas > 1 else None}, sort_keys=True, default=str)
     return procs, scenes
-
-
-def _set(d: dict[str, Any], dotted: str, value: Any) -> None:
-    parts = dotted.split(".")
-    node = d
-    for p in parts[:-1]:
-        nxt = node.get(p)
-        if not isinstance(nxt, dict):
-            nxt = {}
-            node[p] = nxt
-        node = nxt
-    node[parts[-1]] = value
-
-
-def apply_overrides(config: Mapping[str, Any], overrides: Sequence[str], where: str = "changes") -> dict[str, Any]:
-    """``config`` (plain data) with Hydra-syntax ``key=value`` overrides applied (values parsed
-    as the command line parses them: ``scene.tables.1.center=[0.1,-1.5]``); one ``ConfigError``
-    line for an override that does not parse or names no key of ``config``."""
-    from omegaconf import OmegaConf
-
-    from realize.app.compose import parse_overrides
-
-    base = OmegaConf.create(json.loads(json.dumps(dict(config), default=str)))
-    for o in parse_overrides(overrides):
-        key = o.key_or_group
-        if o.is_delete() or o.is_sweep_override():
-            raise ConfigError(f"{where}: {o.input_line!r}: give one value for a key (no deletions or sweeps)")
-        try:
-            present = OmegaConf.select(base, key, throw_on_missing=False, default="__missing__") != "__missing__"
-        except Exception:
-            present = False
-        if not present and not (o.is_add() or o.is_force_add()):
-            raise ConfigError(f"{where}: {o.input_line!r}: the config has no key {key!r}")
-        OmegaConf.update(base, key, o.value(), merge=False, force_add=True)
-    out = OmegaConf.to_container(base, resolve=True)
-    assert isinstance(out, dict)
-    return out
 
 
 class Planner:
@@ -255,13 +115,16 @@ class Planner:
     def _pool(self, spec: Any, tasks: Sequence[Any], log_dir: Path) -> RolloutPool:
         procs, scenes = _pool_keys(spec)
         found = self._pools.get(procs)
+        if found is not None and not hasattr(getattr(found[0], "inner", found[0]), "retask"):
+            self._pools.pop(procs)[0].close()  # Ray actors: new ones for every call
+            found = None
         if found is not None:
             pool, built_for = found
             if built_for == scenes:
                 pool.retask(spec, tasks)
                 return pool
             what = _what_differs(scenes, built_for)
-            if hasattr(pool, "rebuild") and not hasattr(pool, "_ray"):
+            if hasattr(pool, "rebuild"):
                 log.info("planner: the world changed (%s): building its scenes again in the running workers", what)
                 pool.rebuild(spec, tasks)
                 self._pools[procs] = (pool, scenes)
@@ -292,7 +155,7 @@ class Planner:
         t0 = time.perf_counter()
         cfg = _saved_config(self._source(source))
         for k, v in (budget or ReplanBudget()).overrides().items():
-            _set(cfg, k, v)
+            set_key(cfg, k, v)
         cfg["replan_from"], cfg["resume"] = None, None
         cfg["replan"] = {"action": None, "state": None, "warm": True}
         spec = build_run_spec(cfg)
@@ -316,10 +179,10 @@ class Planner:
         assembly = prepare_run(cfg, run_dir, cli_overrides, merged=merged)
         spec = assembly.spec
         self._built.clear()
-        until = None
-        if stop_when_feasible:
-            def until(it: Any) -> bool:
-                return bool(it.report.state.best_feasible) and it.index + 1 >= min_iterations
+        def feasible_now(it: Any) -> bool:  # a replan ends at its first plan that reaches the goal
+            return bool(it.report.state.best_feasible) and it.index + 1 >= min_iterations
+
+        until = feasible_now if stop_when_feasible else None
         t_setup: list[float] = []
         source = self._timed(t_setup)
         try:
@@ -377,7 +240,7 @@ class Planner:
         cfg = replan_overrides_config(base, str(src), list(changes), action=from_action, state=str(state_file),
                                       warm=warm)
         for k, v in budget.overrides().items():
-            _set(cfg, k, v)
+            set_key(cfg, k, v)
         if seed is not None:
             cfg["seed"] = int(seed)
         return self._run(cfg, out, stop_when_feasible=budget.stop_when_feasible,
@@ -411,7 +274,7 @@ class Planner:
         cfg = replan_overrides_config(base, str(src), list(changes), action=0, state=str(state_file), warm=False,
                                       check_plan=False)
         for kk, v in budget.overrides().items():
-            _set(cfg, kk, v)
+            set_key(cfg, kk, v)
         if seed is not None:
             cfg["seed"] = int(seed)
         return self._run(cfg, out, stop_when_feasible=budget.stop_when_feasible, min_iterations=budget.min_iterations,

@@ -20,7 +20,7 @@ What it does:
     (``replan.warm: true``, the default; ``realize.search.warm_start``: the marginal over their
     columns, moved with the objects their regions follow, widened); ``replan.warm=false``
     samples iteration 0 uniformly, as a cold run does.
-What it doesn't: simulate, or write result.json (``realize.app.run`` adds ``ReplanSpec.to_json``
+What it doesn't: simulate, or write result.json (``realize.app.assembly`` adds ``ReplanSpec.to_json``
 under the key ``replan``).
 """
 
@@ -134,8 +134,7 @@ def replan_overrides_config(base: Mapping[str, Any], run_dir: str, changes: Sequ
     whose values are read as the command line reads them) on top: the Python API's side of
     ``replan_config`` (``realize.app.planner.Planner.replan``). What would change the plan is
     refused (``check_plan=False``: the caller sets a new plan itself)."""
-    from realize.app.compose import parse_overrides
-    from realize.app.planner import apply_overrides
+    from realize.app.compose import apply_overrides, parse_overrides
 
     for o in parse_overrides(changes):
         key = o.key_or_group

@@ -24,8 +24,7 @@ What it does:
     robot's base stands when the box appears) or an [x, y] point.
   * ``draw(disturbances, rng)`` draws every range once, in list order, from a numpy Generator
     (a fixed entry draws nothing): the concrete ``Scheduled`` list of one world.
-  * ``Schedule``: which scheduled disturbances are due at a control step, given when the
-    original plan's actions began and what the hand holds; each fires once.
+  * ``realize.execution.schedule.Schedule`` says which are due at a control step.
 What it doesn't: touch a simulator (``realize.execution.world.ExecutionWorld.apply`` carries an
 effect out), or decide how to react (``realize.execution.monitor``, the executor).
 """
@@ -43,7 +42,7 @@ from realize.config import ConfigError
 from realize.world.geometry import SceneGeometry
 
 __all__ = ["Trigger", "Displacement", "BoxCenter", "Disturbance", "MoveObject", "KnockOut", "MoveTable", "AddBox",
-           "PushBase", "Effect", "Scheduled", "Schedule", "EFFECTS", "BASE", "read_disturbances", "draw"]
+           "PushBase", "Effect", "Scheduled", "EFFECTS", "BASE", "read_disturbances", "draw"]
 
 HELD = "held"  # the one condition a trigger may wait for
 BASE = "base"  # a ``between`` end point: the robot's base when the box appears
@@ -362,46 +361,3 @@ def draw(disturbances: Sequence[Disturbance], rng: np.random.Generator) -> list[
                 effect = PushBase(dx, dy)
         out.append(Scheduled(d.index, d.trigger, effect))
     return out
-
-
-# ------------------------------------------------------------------------------ timing
-class Schedule:
-    """Which of one world's disturbances are due. The executor reports when each action of the
-    ORIGINAL plan begins (``action_began``, 0-based index, control step) and asks ``due(step,
-    held)`` every control step with the object in hand (or None); a disturbance fires once, at
-    the first step ``>=`` its start step + ``round(delay_s / control_dt)``. An action trigger
-    whose action never begins (a re-sequenced plan) never fires; ``pending`` lists those left."""
-
-    def __init__(self, scheduled: Sequence[Scheduled], control_dt: float):
-        if not control_dt > 0:
-            raise ConfigError(f"control_dt = {control_dt!r} is invalid: must be > 0")
-        self.scheduled = list(scheduled)
-        self.control_dt = float(control_dt)
-        self._began: dict[int, int] = {}
-        self._held: dict[str, int] = {}
-        self._fired: set[int] = set()
-
-    def action_began(self, k: int, step: int) -> None:
-        self._began.setdefault(int(k), int(step))
-
-    def _start(self, t: Trigger) -> int | None:
-        if t.action is not None:
-            return self._began.get(t.action)
-        return self._held.get(str(t.object))
-
-    def due(self, step: int, held: str | None = None) -> list[Scheduled]:
-        if held is not None:
-            self._held.setdefault(held, int(step))
-        out = []
-        for i, s in enumerate(self.scheduled):
-            if i in self._fired:
-                continue
-            start = self._start(s.trigger)
-            if start is not None and step >= start + round(s.trigger.delay_s / self.control_dt):
-                self._fired.add(i)
-                out.append(s)
-        return out
-
-    @property
-    def pending(self) -> list[Scheduled]:
-        return [s for i, s in enumerate(self.scheduled) if i not in self._fired]

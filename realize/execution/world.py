@@ -42,8 +42,9 @@ from realize.world.geometry import Box, GeometryCfg, SceneGeometry, build_geomet
 from realize.world.state import SceneState
 
 if TYPE_CHECKING:
-    from realize.app.run_config import RunSpec
-    from realize.scene import BatchedScene, EnvOptions
+    from realize.scene import EnvOptions
+
+RunSpec = Any  # a run's spec (realize.app.run_config.RunSpec; the app layer sits above this one)
 
 __all__ = ["EXECUTION_STREAM", "TablePose", "BoxSeen", "Observation", "ExecutionWorld", "geometry_updates",
            "geometry_changes", "apply_geometry_updates"]

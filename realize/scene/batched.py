@@ -248,9 +248,7 @@ class BatchedScene(ObjectProperties):
         return self._grip_target == self._grip_closed
 
     def commanded_targets(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Copies of the targets the next ``step`` writes: base velocity (N, 3) in the local frame
-        (vx, vy in m/s, yaw rate in rad/s), upper-joint position targets (N, n_upper) in
-        ``robot.upper.joints`` order (rad, m), and the gripper command (N,) bool (closed)."""
+        """Copies of the next step's targets: base velocity (N, 3), upper joints (N, n_upper), gripper closed (N,)."""
         return self._base_cmd.clone(), self._arm_target.clone(), self._grip_target == self._grip_closed
 
     def finger_width(self) -> torch.Tensor:

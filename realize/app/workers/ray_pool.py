@@ -184,11 +184,6 @@ class ShardActor:
                     node_ip=ray.util.get_node_ip_address(), logs=[p for p in logs if p.startswith("/")],
                     setup_time_s=self.worker.setup_time_s)
 
-    def retask(self, spec: Any, tasks: list[Any]) -> None:
-        """New realizers on the scenes built (``ShardWorker.retask``)."""
-        assert self.worker is not None
-        self.worker.retask(spec, tasks)
-
     def rollout(self, candidate: int | None, parts: list[Tensor], record: bool) -> RolloutResult:
         """Realize ``parts[k]`` in shard ``k`` (``ShardWorker.rollout``)."""
         assert self.worker is not None
@@ -255,7 +250,6 @@ class RayPool:
                             int(sum(nodes)), self.cpus)
             self._actor_class = ray.remote(ShardActor).options(num_cpus=self.cpus, max_restarts=0,
                                                                  max_task_retries=0)
-            self._threads = threads
             self._payloads = {k: ray.put(pickle.dumps((spec, list(tasks), g, threads)))
                               for k, g in enumerate(self.groups)}
             self.slots = [self._start(k) for k in range(self.n_workers)]
@@ -379,16 +373,6 @@ class RayPool:
         res = join_results([results[k] for k in sorted(results)])
         res.wall_time_s = time.perf_counter() - t0
         return res
-
-    def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
-        """Every actor realizes ``tasks`` from now on, on its scenes (a restarted one is built for them)."""
-        ray = self._ray
-        try:
-            ray.get([s.actor.retask.remote(spec, list(tasks)) for s in self.slots])
-        except ray.exceptions.RayTaskError as e:
-            raise WorkerFailed(f"a Ray actor could not take a new task:\n{e}") from None
-        self._payloads = {k: ray.put(pickle.dumps((spec, list(tasks), g, self._threads)))
-                          for k, g in enumerate(self.groups)}
 
     def pids(self) -> list[int]:
         """The actors' process ids (for tests and tools)."""

@@ -1,0 +1,102 @@
+"""What an execution writes: one world's log (actions, deviations, disturbances, replans) and a
+study's summary, as dataclasses (``world-K-<mode>.json``, ``summary.json``).
+
+What it does: ``ReplanRecord``, ``ActionRecord``, ``WorldLog``, ``ExecutionSummary`` (its
+``to_dict`` adds the replans' median and p95 wall time).
+What it doesn't: execute anything (``realize.app.executor``, ``realize.app.execute``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ReplanRecord", "ActionRecord", "WorldLog", "ExecutionSummary"]
+
+
+@dataclass
+class ReplanRecord:
+    """One repair: ``kind`` re-parameterize | re-sequence, at control step ``step`` (of the
+    world's timeline), from action ``from_action`` (of the plan it repaired), why, its wall
+    time, what it found and where it ran."""
+
+    kind: str
+    step: int
+    from_action: int
+    reason: list[str]
+    wall_s: float
+    feasible: bool
+    cost: float | None
+    plan: str
+    run_dir: str
+    scene: str  # built | kept: the planner's workers
+    changes: list[str]
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class ActionRecord:
+    """An action as planned (its parameters) and as executed (steps, outcome)."""
+
+    index: int  # in the plan that was running
+    text: str
+    params: dict[str, list[float]]
+    begin_step: int
+    end_step: int | None = None
+    outcome: str = "running"  # done | failed: ... | interrupted: <deviation> | cut
+
+
+@dataclass
+class WorldLog:
+    """One world's execution (written as ``world-<k>-<mode>.json``)."""
+
+    world: int
+    seed: int
+    mode: str  # closed | open
+    success: bool = False
+    failure: str = ""
+    steps: int = 0
+    control_time_s: float = 0.0
+    pause_s: float = 0.0  # the robot held still while the planner thought
+    wall_s: float = 0.0
+    plan: str = ""  # the plan it started with
+    final_plan: str = ""  # the plan it ended with
+    disturbances: list[dict[str, Any]] = field(default_factory=list)
+    deviations: list[dict[str, Any]] = field(default_factory=list)
+    actions: list[ActionRecord] = field(default_factory=list)
+    replans: list[ReplanRecord] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class ExecutionSummary:
+    """A study's ``summary.json``."""
+
+    run_dir: str
+    label: str
+    worlds: int
+    seed: int
+    closed_loop_success: float | None
+    open_loop_success: float | None
+    closed_successes: int | None
+    open_successes: int | None
+    replans: list[int]  # per closed-loop world
+    replan_s: list[float]  # every replan's wall time
+    replan_kinds: list[str]
+    replans_with_open_success: list[int]  # replans in worlds that open loop got right (a control's check)
+    pause_s: list[float]
+    wall_time_s: float
+    settings: dict[str, Any]
+    files: list[str]
+    planner_start_s: float = 0.0  # opening the replans' workers, before the first world
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        s = sorted(self.replan_s)
+        d["replan_s_median"] = float(np.median(s)) if s else None
+        d["replan_s_p95"] = float(np.percentile(s, 95)) if s else None
+        return d
