@@ -195,16 +195,16 @@ class BatchedScene(ObjectProperties):
         self._impl.set_state(row.repeat(n, 1), torch.tensor(poses, dtype=torch.float32).repeat(n, 1, 1))
 
     def capture_state(self, copy: int = 0, source: str = "") -> SceneState:
-        """Copy ``copy``'s state now (velocities dropped): what ``reset(state=...)`` restores."""
+        """Copy ``copy``'s state now (no velocities; held only if the gripper is closed): ``reset(state=)`` restores it."""
         qpos = self._read("qpos", self._impl.qpos)[copy].tolist()
         base = self.base_pose()[copy].tolist()
         poses = self.object_poses()[copy].tolist()
         held = int(self.held_object()[copy])
         return SceneState(base=tuple(base), joints={n: qpos[self.joint_names.index(n)] for n in self.state_joints},
-                          gripper_closed=bool(self._grip_target[copy] == self._grip_closed),
+                          gripper_closed=(closed := bool(self._grip_target[copy] == self._grip_closed)),
                           objects={n: ObjectPose(tuple(p[:3]), tuple(p[3:]), where=f"objects.{n}")
                                    for n, p in zip(self.object_names, poses)},
-                          held=self.object_names[held] if held >= 0 else None, source=source)
+                          held=self.object_names[held] if held >= 0 and closed else None, source=source)
 
     # ------------------------------------------------------------------ reads
     # Each quantity is read from the simulator once per state: the first read after a change
