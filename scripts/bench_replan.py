@@ -53,13 +53,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-cold", action="store_true", help="skip the cold run (report replans only)")
     p.add_argument("--cold-args", nargs="*", default=[], help="overrides of the cold run")
     p.add_argument("--max", type=int, default=None, help="at most this many repairs")
+    p.add_argument("--per-study", type=int, default=None, help="at most this many repairs of each study")
     p.add_argument("--out", default=None, help="JSON file of every timing")
     a = p.parse_args(argv)
 
     from realize.app.planner import Planner
     from realize.world.state import load_state
 
-    repairs = [r for s in a.study for r in _repairs(Path(s))][: a.max]
+    repairs = [r for s in a.study for r in _repairs(Path(s))[: a.per_study]][: a.max]
     if not repairs:
         print("no recorded replans in the studies given", file=sys.stderr)
         return 2

@@ -38,6 +38,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from realize.app.compose import set_key
+from realize.app.replan import saved_config
 from realize.app.plan_result import PlanResult, PlanTimings, ReplanBudget
 from realize.app.assembly import RunOutcome, plain_config, prepare_run
 from realize.app.workers.pool import RolloutPool, open_pool
@@ -98,13 +99,7 @@ class Planner:
     def from_run(cls, run_dir: str | Path, **kw: Any) -> Planner:
         """A planner with an earlier run's saved config, ``last`` that run's result (what
         ``replan`` repairs first)."""
-        try:
-            rd = RunDir.existing(run_dir)
-            cfg = rd.config()
-        except (FileNotFoundError, OSError, ValueError) as e:
-            raise ConfigError(f"Planner.from_run({str(run_dir)!r}): {e}") from None
-        if not isinstance(cfg, Mapping) or not cfg:
-            raise ConfigError(f"Planner.from_run({str(run_dir)!r}): its result.json holds no config")
+        cfg = saved_config(run_dir, "Planner.from_run")
         cfg = dict(cfg)
         cfg["resume"] = None
         planner = cls(cfg, **kw)
@@ -153,7 +148,7 @@ class Planner:
         from realize.app.run_config import build_run_spec
 
         t0 = time.perf_counter()
-        cfg = _saved_config(self._source(source))
+        cfg = saved_config(self._source(source))
         for k, v in (budget or ReplanBudget()).overrides().items():
             set_key(cfg, k, v)
         cfg["replan_from"], cfg["resume"] = None, None
@@ -236,7 +231,7 @@ class Planner:
         out = Path(run_dir) if run_dir is not None else _next_dir(src / "replans", "replan")
         out.mkdir(parents=True, exist_ok=True)
         state_file = save_state(state, out / START_STATE_FILE)
-        base = _saved_config(src)
+        base = saved_config(src)
         cfg = replan_overrides_config(base, str(src), list(changes), action=from_action, state=str(state_file),
                                       warm=warm)
         for k, v in budget.overrides().items():
@@ -258,7 +253,7 @@ class Planner:
 
         self._check_open()
         src = self._source(source)
-        base = _saved_config(src)
+        base = saved_config(src)
         k = tail_index(base.get("task") or {}, task)
         if k is not None:
             return self.replan(state, k, changes, source=src, run_dir=run_dir, budget=budget, seed=seed)
@@ -358,16 +353,6 @@ def _split_plan(plan: str) -> list[str]:
     if cur.strip():
         out.append(cur)
     return out
-
-
-def _saved_config(run_dir: Path) -> dict[str, Any]:
-    try:
-        cfg = RunDir.existing(run_dir).config()
-    except (FileNotFoundError, OSError, ValueError) as e:
-        raise ConfigError(f"replan: {str(run_dir)!r}: {e}") from None
-    if not isinstance(cfg, Mapping) or not cfg:
-        raise ConfigError(f"replan: {str(run_dir)!r}: its result.json holds no config")
-    return json.loads(json.dumps(dict(cfg)))
 
 
 def _next_dir(parent: Path, stem: str) -> Path:

@@ -36,7 +36,7 @@ from realize.world.state import SceneState, load_state
 from realize.tasks.spec import TaskSpec
 from realize.tasks.suffix import check_suffix_start, task_suffix
 
-__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "read_replan",
+__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "read_replan", "saved_config",
            "check_no_replan", "REFUSED_OVERRIDES"]
 
 # overrides a replan refuses: they would change the plan, not the world or the search
@@ -76,16 +76,20 @@ class ReplanSpec:
                 "columns": list(self.columns), "warm_start": warm_start}
 
 
-def _saved_config(run_dir: str) -> dict[str, Any]:
+def saved_config(run_dir: str | Path, key: str = "replan_from") -> dict[str, Any]:
+    """The resolved config a run directory saved (a deep copy); one ``ConfigError`` line naming
+    ``key`` where it has none."""
     from realize.run_dir.directory import RunDir
 
     try:
         cfg = RunDir.existing(run_dir).config()
     except (FileNotFoundError, OSError, ValueError) as e:
-        raise ConfigError(f"replan_from = {run_dir!r}: {e}") from None
+        raise ConfigError(f"{key} = {str(run_dir)!r}: {e}") from None
     if not isinstance(cfg, Mapping) or not cfg:
-        raise ConfigError(f"replan_from = {run_dir!r}: neither its result.json nor its checkpoint holds a config")
-    return dict(cfg)
+        raise ConfigError(f"{key} = {str(run_dir)!r}: neither its result.json nor its checkpoint holds a config")
+    import json
+
+    return json.loads(json.dumps(dict(cfg)))
 
 
 def _refused(key: str) -> bool:
@@ -100,7 +104,7 @@ def replan_config(current: Mapping[str, Any], overrides: Sequence[str]) -> dict[
     from omegaconf import OmegaConf
 
     run_dir = str(current["replan_from"])
-    base = OmegaConf.create(_saved_config(run_dir))
+    base = OmegaConf.create(saved_config(run_dir))
     cur = OmegaConf.create(dict(current))
     parser = OverridesParser.create()
     for text in overrides:

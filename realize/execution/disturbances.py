@@ -38,7 +38,7 @@ from typing import Any, ClassVar, Union
 
 import numpy as np
 
-from realize.config import ConfigError
+from realize.config import ConfigError, as_mapping, check_unknown
 from realize.world.geometry import SceneGeometry
 
 __all__ = ["Trigger", "Displacement", "BoxCenter", "Disturbance", "MoveObject", "KnockOut", "MoveTable", "AddBox",
@@ -182,18 +182,6 @@ _KEYS = {
 }
 
 
-def _mapping(v: Any, where: str) -> dict[str, Any]:
-    if not isinstance(v, Mapping):
-        raise ConfigError(f"{where} = {v!r} is invalid: must be a mapping")
-    return dict(v)
-
-
-def _unknown(d: Mapping[str, Any], allowed: Sequence[str], where: str) -> None:
-    bad = sorted(str(k) for k in d if k not in allowed)
-    if bad:
-        raise ConfigError(f"{where}: unknown key(s) {bad}; allowed: {sorted(allowed)}")
-
-
 def _number(v: Any, where: str, *, ge: float | None = None) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
         raise ConfigError(f"{where} = {v!r} is invalid: must be a finite number")
@@ -225,8 +213,8 @@ def _name(v: Any, known: Sequence[str], what: str, where: str) -> str:
 
 
 def _trigger(v: Any, objects: Sequence[str], n_actions: int, plan: str, where: str) -> Trigger:
-    d = _mapping(v, where)
-    _unknown(d, ("action", "when", "object", "delay_s"), where)
+    d = as_mapping(v, where)
+    check_unknown(d, ("action", "when", "object", "delay_s"), where)
     delay = _number(d.get("delay_s", 0.0), f"{where}.delay_s", ge=0.0)
     if ("action" in d) == ("when" in d):
         raise ConfigError(f"{where} = {d!r} is invalid: give either action (an index of the plan) or when: {HELD}")
@@ -301,7 +289,7 @@ def read_disturbances(entries: Sequence[Any] | None, geometry: SceneGeometry, pl
     fixtures = set(tables) | {b.name for b in geometry.extras} | {c.name for c in geometry.containers} | set(objects)
     for i, e in enumerate(entries):
         w = f"{where}[{i}]"
-        d = _mapping(e, w)
+        d = as_mapping(e, w)
         kinds = [k for k in d if k != "trigger"]
         unknown = [k for k in kinds if k not in EFFECTS]
         if unknown:
@@ -314,8 +302,8 @@ def read_disturbances(entries: Sequence[Any] | None, geometry: SceneGeometry, pl
         trigger = _trigger(d["trigger"], objects, len(plan_actions), plan, f"{w}.trigger")
         kind = kinds[0]
         ew = f"{w}.{kind}"
-        p = _mapping(d[kind] if d[kind] is not None else {}, ew)
-        _unknown(p, _KEYS[kind], ew)
+        p = as_mapping(d[kind] if d[kind] is not None else {}, ew)
+        check_unknown(p, _KEYS[kind], ew)
         if kind in ("move_object", "knock_out"):
             out.append(Disturbance(i, trigger, kind, _name(p.get("object"), objects, "object", f"{ew}.object"),
                                    move=_displacement(p, ew) if kind == "move_object" else None))
