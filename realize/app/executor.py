@@ -233,12 +233,14 @@ class Executor:
         t0 = time.perf_counter()
         state = obs.state
         changes = geometry_changes(obs, self.spec.geometry_cfg)
-        remaining = task_suffix(seg.task, a)
         kind = "re-parameterize"
-        try:
-            check_suffix_start(remaining, state)
-        except ConfigError:
+        if a >= seg.task.n_actions:  # every action done but the goal does not hold: a new sequence from here
             kind = "re-sequence"
+        else:
+            try:
+                check_suffix_start(task_suffix(seg.task, a), state)
+            except ConfigError:
+                kind = "re-sequence"
         rdir = self.out / "replans" / f"world-{self.k}-replan-{len(self.log.replans)}"
         try:
             if kind == "re-parameterize":
