@@ -243,19 +243,24 @@ class Executor:
                 kind = "re-sequence"
         rdir = self.out / "replans" / f"world-{self.k}-replan-{len(self.log.replans)}"
         try:
-            if kind == "re-parameterize":
-                src_cfg = saved_plan(source).config
-                base_k = 0 if src_cfg.get("replan") is None or src_cfg.get("replan_from") is None else \
-                    int(src_cfg["replan"]["action"] or 0)
-                res = self.planner.replan(state, base_k + a, changes, source=source, run_dir=rdir,
-                                          budget=self.budget, seed=self.spec.seed)
-            else:
+            task_cfg = None
+            if kind == "re-sequence":
                 from realize.execution.world import apply_geometry_updates, geometry_updates
                 from realize.world.geometry import build_geometry
 
                 now_geo = build_geometry(apply_geometry_updates(self.spec.geometry_cfg,
                                                                 geometry_updates(obs, self.spec.geometry_cfg)))
                 task_cfg = resequence_task(saved_plan(source).config["task"], now_geo, state, rdir)
+                if not task_cfg["plan"] and a >= seg.task.n_actions:
+                    # symbolically done, geometrically not (the base just outside the exit): the last action again
+                    kind, a, task_cfg = "re-parameterize", seg.task.n_actions - 1, None
+            if task_cfg is None:
+                src_cfg = saved_plan(source).config
+                base_k = 0 if src_cfg.get("replan") is None or src_cfg.get("replan_from") is None else \
+                    int(src_cfg["replan"]["action"] or 0)
+                res = self.planner.replan(state, base_k + a, changes, source=source, run_dir=rdir,
+                                          budget=self.budget, seed=self.spec.seed)
+            else:
                 res = self.planner.resequence(task_cfg, state, changes, source=source, run_dir=rdir,
                                               budget=self.budget, seed=self.spec.seed)
         except ConfigError as e:
