@@ -69,7 +69,7 @@ class StepContext:
     def __init__(self, scene: BatchedScene, cfg: RolloutConfig, fabric: WholeBodyFabric, grid: GridSpec,
                  occupancy: Tensor, occupancy_tight: Tensor | None = None, geometry: SceneGeometry | None = None):
         self.scene, self.cfg, self.fabric = scene, cfg, fabric
-        self.geometry = scene.geometry if geometry is None else geometry  # the map the controllers plan in
+        self._geometry = geometry  # the map the controllers plan in (None: the scene's own)
         self.grid, self.occupancy, self.occupancy_tight = grid, occupancy, occupancy_tight
         self.n_envs, self.device = scene.n_envs, scene.device
         self.dt = scene.control_dt
@@ -90,6 +90,11 @@ class StepContext:
         self.fab_invalid = torch.zeros(n, dtype=torch.bool, device=dev)
         self._holds: Tensor | None = None
 
+
+    @property
+    def geometry(self) -> SceneGeometry:
+        """The map the controllers plan in: the realizer's belief, or the scene's geometry."""
+        return self.scene.geometry if self._geometry is None else self._geometry
     def steps(self, seconds: float) -> int:
         """Control steps in ``seconds`` (at least 1)."""
         return max(1, int(round(seconds / self.dt)))
