@@ -18,6 +18,7 @@ docs/execution_format.md). The last lines print the study's table row.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
@@ -56,11 +57,11 @@ def main(argv: list[str] | None = None) -> int:
         for key in ("worlds", "seed", "max_replans"):
             v = getattr(a, key)
             if v is not None:
-                settings = type(settings).from_mapping({**_plain(settings), key: v}, "execute")
+                settings = type(settings).from_mapping({**dataclasses.asdict(settings), key: v}, "execute")
         kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations)) if v is not None}
+        if a.n_envs is not None:  # a quarter of the copies are elites (the default budget's 4 of 32)
+            kw["n_elite"] = max(1, a.n_envs // 8 if a.n_envs >= 32 else a.n_envs // 4)
         budget = ReplanBudget(**kw)
-        if budget.n_elite > budget.n_envs:
-            budget = ReplanBudget(**kw, n_elite=max(1, budget.n_envs // 4))
         name = Path(a.disturbance).stem
         s = execute(a.run_dir, settings, name=name, open_loop=not a.closed_only, closed_loop=not a.open_only,
                     out=a.out, budget=budget, rerun=not a.no_rerun, video=a.video)
@@ -78,13 +79,6 @@ def main(argv: list[str] | None = None) -> int:
           f"replans in worlds open loop got right: {sum(s.replans_with_open_success)}")
     print(f"files: {Path(a.out) if a.out else Path(a.run_dir) / 'execution' / name}/summary.json")
     return 0
-
-
-def _plain(settings) -> dict:
-    import dataclasses
-
-    d = dataclasses.asdict(settings)
-    return d
 
 
 if __name__ == "__main__":

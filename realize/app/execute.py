@@ -73,8 +73,7 @@ def execute_world(run_dir: str | Path, settings: ExecuteSettings, k: int, *, clo
     seed = settings.seed * SEED_STRIDE + k
     scheduled = draw(disturbances, np.random.default_rng([settings.seed, k]))
     out = Path(out) if out is not None else Path(run_dir) / EXECUTION_DIR / "default"
-    ex = Executor(run, spec, settings, scheduled, seed, k, closed_loop, out, planner, recorder, video)
-    ex.budget = budget
+    ex = Executor(run, spec, settings, scheduled, seed, k, closed_loop, out, planner, recorder, video, budget)
     try:
         wl = ex.run_world(choice.z)
         if trajectory is not None:

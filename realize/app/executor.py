@@ -62,8 +62,9 @@ class _Segment:
 class Executor:
     def __init__(self, run: Any, spec: Any, settings: ExecuteSettings, scheduled: list[Scheduled], world_seed: int,
                  k: int, closed: bool, out: Path, planner: Any, recorder: Any = None,
-                 video: str | Path | None = None) -> None:
+                 video: str | Path | None = None, budget: Any = None) -> None:
         self.run, self.spec, self.settings, self.closed = run, spec, settings, closed
+        self.budget = budget  # the replans' ReplanBudget (None: the planner's default)
         self.out, self.planner, self.k = out, planner, k
         env, self.video = None, None
         if video is not None:  # the existing video code: a render camera over the whole world, a step hook
@@ -280,8 +281,6 @@ class Executor:
         offset = res.from_action if rspec.config.get("task", {}).get("plan") == self.run.config["task"].get("plan") \
             and whole.endswith(rspec.task.describe()) else None
         return rec, _Segment(rspec.task, res.z, rspec.start, rspec.geometry, offset)
-
-    budget: Any = None
 
     def close(self) -> None:
         if self.video is not None:
