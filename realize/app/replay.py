@@ -153,6 +153,7 @@ def build_replay_spec(run: BestPlan, backend: str = "cpu") -> RunSpec:
                 f"the planner returns now ({[t.describe() for t in spec.candidates]})"
             )
         spec.task = spec.candidates[i]
+    spec.ce = dataclasses.replace(spec.ce, prune=False)  # a replay realizes every row to its end
     if len(run.best_z) != spec.task.layout.dim:
         raise ReplayError(
             f"{run.run_dir / RESULT_FILE}: best_z has {len(run.best_z)} values, the task's parameters "

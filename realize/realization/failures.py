@@ -25,6 +25,7 @@ class Failure(IntEnum):
     PLACE_NOT_RELEASED = 8
     GOAL_NOT_REACHED = 9
     PUSH_BLOCKED = 10
+    STOPPED = 11  # ce.prune: stopped once it could no longer be an elite (it might have succeeded)
 
     @property
     def label(self) -> str:

@@ -46,6 +46,7 @@ class RolloutResult:
     share: Tensor | None = None  # robust search: each sample's success share over its worlds
     world_cost: Tensor | None = None  # robust search: (N, R) each sample's cost in each world
     world_feasible: Tensor | None = None  # robust search: (N, R) its success in each world
+    stopped: Tensor | None = None  # (N,) bool, ce.prune: stopped as it could not be an elite (None: off)
 
     def ordinary(self) -> RolloutResult:
         """A copy whose tensors are ordinary ones (a rollout runs in inference mode, whose tensors
@@ -57,7 +58,7 @@ class RolloutResult:
         return EvalResult(cost=self.cost.double(), feasible=self.feasible, progress=self.progress.double(),
                           distance=self.distance.double(),
                           failure_cost=self.horizon_cost if math.isfinite(self.horizon_cost) else None,
-                          share=self.share)
+                          share=self.share, stopped=self.stopped)
 
 
 class TrajectoryRecorder:

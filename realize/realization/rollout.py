@@ -7,7 +7,8 @@ action fails or times out stops there and is held still),
 stepping physics for all plans together. One ``Rollout`` object holds the per-plan state and runs
 the phases of every control step: ``act`` (templates -> controllers -> commands), ``physics``,
 ``check_faults`` (a plan that diverges, NaN or exploding joint speeds, fails alone),
-``check_actions`` (success / failure of the current actions, begin the next), ``read_due_goals``;
+``check_actions`` (success / failure of the current actions, begin the next), ``read_due_goals``,
+``stop_hopeless`` (``ce.prune``: plans that can no longer be an elite stop, ``.pruning``);
 then ``settle`` (physics only, uncounted, until the last goals are due), ``cut_at_horizon`` and
 ``finish`` (a ``RolloutResult``: cost, per-action success, goal psi_g read from the simulator,
 feasibility, progress and a distance proxy for ranking infeasible plans, trajectories). A goal
@@ -36,6 +37,7 @@ from realize.realization.actions.base import Template
 from realize.realization.config import RolloutConfig
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
+from realize.realization.pruning import EliteBound
 from realize.tasks.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
 from realize.scene import BatchedScene
@@ -53,6 +55,7 @@ class RealizerSpec(Protocol):
     rollout: RolloutConfig
     seed: int
     start: SceneState | None
+    keep_best: int | None
 
 
 class Rollout:
@@ -86,6 +89,9 @@ class Rollout:
         self.goal_dist = torch.zeros(n, device=dev)
         self.settle_left = torch.full((n,), -1, dtype=torch.long, device=dev)
         self.settle_steps = int(round(self.cfg.goal_settle_s / self.ctx.dt)) if task.goal.reads_objects else 0
+        # ce.prune: plans that can no longer be among the keep_best cheapest feasible ones stop
+        self.elite_bound = None if realizer.keep_best is None else EliteBound(realizer.keep_best)
+        self.stopped = torch.zeros(n, dtype=torch.bool, device=dev)
 
     # ------------------------------------------------------------------ the whole rollout
     def run(self, t0: float) -> RolloutResult:
@@ -97,6 +103,7 @@ class Rollout:
             self.check_faults()
             self.check_actions()
             self.read_due_goals()
+            self.stop_hopeless()
         # the last finished plans settle with every robot asleep (physics only, no cost)
         while bool((self.settle_left > 0).any()):
             self.settle()
@@ -249,6 +256,20 @@ class Rollout:
             self.goal[due], self.goal_dist[due] = ok[due], dist[due]
             self.goal_read[due] = True
 
+    def stop_hopeless(self) -> None:
+        """``ce.prune``: running plans whose cost can no longer be among the ``keep_best``
+        cheapest feasible ones stop (``realize.realization.pruning``), held as failed plans are."""
+        if self.elite_bound is None:
+            return
+        bound = self.elite_bound.update(self.goal_read & self.goal & self.success.all(dim=1), self.steps)
+        if bound is None:
+            return
+        cut = self.running & (self.steps >= bound)
+        if cut.any():
+            self.stopped |= cut
+            self._stop_where(cut, Failure.STOPPED)
+            self.ctx.hold_arm(torch.nonzero(cut).flatten())
+
     def settle(self) -> None:
         """A physics-only step with every robot idle and held (no cost), then due goals."""
         ctx = self.ctx
@@ -262,12 +283,18 @@ class Rollout:
         """Plans still running at the horizon time out where they are."""
         cut = self.running.clone()
         if cut.any():
-            self.fail_code[cut] = Failure.TIMEOUT
-            self.fail_action[cut] = self.action[cut]
-            for a in range(self.n_actions):
-                rows = self._rows_in(a, cut)
-                if len(rows):
-                    self.distance[rows] = self._template(a).distance(self.ctx, rows)
+            self._stop_where(cut, Failure.TIMEOUT)
+
+    def _stop_where(self, cut: Tensor, code: Failure) -> None:
+        """Running plans ``cut`` (N,) stop in their current action with ``code``, and their
+        distance to that action's success is read (for ranking infeasible plans)."""
+        self.fail_code[cut] = code
+        self.fail_action[cut] = self.action[cut]
+        self.running &= ~cut
+        for a in range(self.n_actions):
+            rows = self._rows_in(a, cut)
+            if len(rows):
+                self.distance[rows] = self._template(a).distance(self.ctx, rows)
 
     def finish(self, t0: float) -> RolloutResult:
         """Read the goals not read yet, score every plan (eq. (2)), build the result."""
@@ -298,6 +325,7 @@ class Rollout:
             goal=goal[:m].cpu(), steps=self.steps[:m].cpu(), progress=progress[:m].cpu(),
             distance=self.distance[:m].cpu(), failure=failure, wall_time_s=time.perf_counter() - t0,
             sim_steps=self.step, horizon_cost=float(self.max_steps) + float(task.final_cost),
+            stopped=None if self.elite_bound is None else self.stopped[:m].cpu(),
         )
         if self.recorder is not None:
             self.recorder.store(res, m)
@@ -309,8 +337,11 @@ class PlanRealizer:
 
     def __init__(self, task: TaskSpec, scene: BatchedScene, cfg: RolloutConfig | None = None, seed: int = 0,
                  fabric_dtype: torch.dtype = torch.float32, start: SceneState | None = None,
-                 geometry: SceneGeometry | None = None):
+                 geometry: SceneGeometry | None = None, keep_best: int | None = None):
         self.task, self.scene = task, scene
+        # ce.prune: a plan stops once it cannot be among the batch's keep_best cheapest feasible
+        # ones (realize.realization.pruning); None: every plan runs to its end
+        self.keep_best = keep_best
         self.start = start  # every rollout starts from this state (None: the task's initial state)
         # called as hook(a, rows) when plans ``rows`` (copy indices) are about to begin action a
         # (replay uses it to capture the state there); None in a search
@@ -344,7 +375,7 @@ class PlanRealizer:
         """The realizer of a run spec: its task (or ``task``, e.g. a candidate plan's), its
         controller settings and its seed (or ``seed``), in ``scene``."""
         return cls(spec.task if task is None else task, scene, spec.rollout,
-                   seed=spec.seed if seed is None else seed, start=spec.start)
+                   seed=spec.seed if seed is None else seed, start=spec.start, keep_best=spec.keep_best)
 
     def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
         """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it."""

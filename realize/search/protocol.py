@@ -64,6 +64,7 @@ class EvalResult:
     distance: Tensor | None = None
     failure_cost: float | None = None
     share: Tensor | None = None  # robust search: each sample's success share over its worlds
+    stopped: Tensor | None = None  # (N,) bool, ce.prune: rows stopped as they could not be an elite
 
     def to_cpu(self, n: int, dtype: torch.dtype) -> EvalResult:
         """Validate shapes against ``n`` and return a CPU copy in ``dtype`` (bool feasibility)."""
@@ -83,6 +84,7 @@ class EvalResult:
             distance=None if self.distance is None else vec(self.distance, "distance", dtype),
             failure_cost=self.failure_cost,
             share=None if self.share is None else vec(self.share, "share", dtype),
+            stopped=None if self.stopped is None else vec(self.stopped, "stopped", torch.bool),
         )
 
 

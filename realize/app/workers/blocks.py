@@ -120,6 +120,7 @@ def join_results(parts: Sequence[RolloutResult]) -> RolloutResult:
         failure=[f for p in parts for f in p.failure],
         wall_time_s=max(p.wall_time_s for p in parts), sim_steps=max(p.sim_steps for p in parts),
         horizon_cost=parts[0].horizon_cost,
+        stopped=None if any(p.stopped is None for p in parts) else cat("stopped"),
     )
     recorded = [p for p in parts if p.traj_t is not None]
     if len(recorded) == len(parts):
