@@ -289,6 +289,28 @@ def test_min_std_floor_and_convergence_stop():
     assert bool((res.history[-1].Z[:, 0] == 1.0).all())
 
 
+def test_patience_stops_once_the_elites_stop_improving():
+    """``ce.patience``: the run is the same as without it up to the first iteration where the
+    elites' mean cost fell by <= ``min_improvement`` (relative) over ``patience`` iterations,
+    recomputed here from the unstopped run's records, and stops there."""
+
+    def offset_quadratic(Z: torch.Tensor) -> EvalResult:
+        r = quadratic([0.5, -0.5])(Z)
+        return EvalResult(cost=r.cost + 10.0, feasible=r.feasible)
+
+    base = dict(n_envs=60, n_elite=6, iterations=30, seed=2)
+    full = optimize(box_layout(), offset_quadratic, CEConfig(**base))
+    means = [float(h.cost[h.elite_idx].mean()) for h in full.history]
+    want = next(i for i in range(2, 30) if means[i - 2] - means[i] <= 0.01 * means[i - 2])
+    res = optimize(box_layout(), offset_quadratic, CEConfig(**base, patience=2, min_improvement=0.01))
+    assert res.converged and not full.converged
+    assert len(res.history) == want + 1 < 30
+    for a, b in zip(res.history, full.history):
+        assert torch.equal(a.Z, b.Z) and torch.equal(a.cost, b.cost)
+    with pytest.raises(ValueError, match=r"ce\.patience"):
+        CEConfig(patience=0)
+
+
 def test_uniform_share_and_rank_weighted():
     cfg = CEConfig(n_envs=100, n_elite=10, iterations=8, seed=2, uniform_share=0.25, rank_weighted=True)
     res = optimize(box_layout(), quadratic([-1.0, 2.0]), cfg)

@@ -61,6 +61,13 @@ class CEConfig(Settings):
     by their success share over the worlds first, then by ``risk`` of their successful worlds'
     costs: ``"mean"``, or ``"cvar"`` (the mean of the worst ``cvar_alpha`` share of them).
 
+    Speed levers (off by default: the paper's algorithm; the Hydra group ``levers`` turns them on):
+    ``prune`` lets the rollout stop a row that can no longer be among the batch's ``n_elite``
+    cheapest feasible rows (``realize.realization.pruning``; the elites, the refit and the best
+    stay bit-identical). ``patience`` makes ``iterations`` a maximum: the search stops once a
+    feasible plan is in hand and the elites' mean cost fell by less than ``min_improvement``
+    (relative) over the last ``patience`` iterations.
+
     ``dtype``: the search's bookkeeping dtype (sampling, ranking, refits). ``keep_samples``:
     keep each iteration's ``Z`` in its record.
     """
@@ -90,6 +97,10 @@ class CEConfig(Settings):
     replicas: int = setting(1, ge=1, help="robust search: each sample in this many perturbed worlds (1 = off)")
     risk: str = setting("mean", choices=RISKS, help="robust search: a sample's cost over its successful worlds")
     cvar_alpha: float = setting(0.25, gt=0, le=1, help="risk=cvar: the share of worst successful worlds averaged")
+    # speed levers (Hydra group ``levers``; all off is the seed paper's algorithm, bit for bit)
+    prune: bool = setting(False, help="stop a row once it can no longer be among the batch's best feasible rows")
+    patience: int | None = setting(None, ge=1, help="stopping rule: iterations looked back over (null = off)")
+    min_improvement: float = setting(0.005, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
 
     def check(self, where: str) -> None:
         if self.schedule == "linear":

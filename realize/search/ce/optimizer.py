@@ -13,7 +13,8 @@ row), so it runs and is tested without a simulator; it implements ``realize.sear
 * Elites are the ``n_elite`` best rows (``realize.search.ce.ranking``); the refit is the (optionally
   rank-weighted) elite mean and population std, floored at ``min_std`` and optionally smoothed
   with ``alpha`` (1 = paper, no smoothing).
-* It stops after ``iterations`` or, if ``converge_std`` is set, once every std is below it.
+* It stops after ``iterations`` or, if ``converge_std`` is set, once every std is below it, or,
+  with ``patience``, once the elites have stopped improving and a feasible best is in hand.
 
 The defaults of the multimodal/robust options take exactly the code paths and random draws of
 the single-Gaussian search, bit for bit. Bookkeeping (sampling, ranking, refits) runs on the
@@ -192,6 +193,9 @@ class CrossEntropyOptimizer:
         self._update_best(Z, r, int(best_order[0]))
         feas_cost = r.cost[r.feasible]
         elite_feas = r.cost[elite][r.feasible[elite]]
+        s.elite_costs.append(float(elite_feas.mean()) if refit == "elite" else math.nan)
+        if cfg.patience is not None and self._settled():
+            s.converged = True
         rec = IterationRecord(
             iteration=s.iteration,
             n_envs=n,
@@ -219,6 +223,7 @@ class CrossEntropyOptimizer:
             best_idx=int(best_order[0]),
             robust_cost=robust,
             share=None if r.share is None else r.share.clone(),
+            n_stopped=None if r.stopped is None else int(r.stopped.sum()),
         )
         s.iteration += 1
         s.rng_state = self._gen.get_state()
@@ -330,6 +335,17 @@ class CrossEntropyOptimizer:
         s.mean, s.std = new_mean, new_std.clamp_min(cfg.min_std)
         if cfg.converge_std is not None and float(s.std.max()) < cfg.converge_std:
             s.converged = True
+
+    def _settled(self) -> bool:
+        """The stopping rule (``CEConfig.patience``): a feasible best in hand, and the elites'
+        mean cost fell by less than ``min_improvement`` (relative) over the last ``patience``
+        iterations (both ends full elite sets of feasible samples)."""
+        s, p = self._state, self.config.patience
+        assert p is not None
+        if not s.best_feasible or len(s.elite_costs) <= p:
+            return False
+        old, new = s.elite_costs[-1 - p], s.elite_costs[-1]
+        return math.isfinite(old) and math.isfinite(new) and old - new <= self.config.min_improvement * old
 
     def _update_best(self, Z: Tensor, r: EvalResult, top: int) -> None:
         """Keep the batch's best single sample if it beats the best of all iterations."""

@@ -68,6 +68,9 @@ class CEState:
     best_share: float = 1.0  # robust search: the best sample's success share over its worlds
     converged: bool = False
     weights: Tensor | None = None
+    # the elites' mean cost of every iteration so far (NaN where they were not all feasible): the
+    # stopping rule's memory (``CEConfig.patience``)
+    elite_costs: list[float] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (lists, numbers, strings for inf/nan; the RNG state as a byte list)."""
@@ -86,6 +89,7 @@ class CEState:
             "best_iteration": self.best_iteration,
             "best_share": _f2j(self.best_share),
             "converged": self.converged,
+            "elite_costs": [_f2j(c) for c in self.elite_costs],
         }
         if self.weights is not None:
             d["weights"] = _t2l(self.weights)
@@ -112,6 +116,7 @@ class CEState:
             best_share=float(d.get("best_share", 1.0)),
             converged=bool(d.get("converged", False)),
             weights=t(d.get("weights")),
+            elite_costs=[float(c) for c in d.get("elite_costs", [])],
         )
 
     def copy(self) -> CEState:
@@ -131,6 +136,7 @@ class CEState:
             best_share=self.best_share,
             converged=self.converged,
             weights=_clone(self.weights),
+            elite_costs=list(self.elite_costs),
         )
 
 
@@ -196,6 +202,7 @@ class IterationRecord:
     best_idx: int = -1
     robust_cost: Tensor | None = None
     share: Tensor | None = None  # robust search: each sample's success share over its worlds
+    n_stopped: int | None = None  # ce.prune: rows stopped as they could not be an elite (None: off)
 
     def summary(self, candidate: int | None = None) -> IterationSummary:
         """This iteration's numbers without the per-sample tensors (``result.json``'s series and
@@ -220,6 +227,7 @@ class IterationRecord:
             converged=self.converged,
             weights=_t2l(self.weights),
             candidate=candidate,
+            n_stopped=self.n_stopped,
         )
 
 
