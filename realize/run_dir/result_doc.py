@@ -20,8 +20,9 @@ JSON keys (the ones readers rely on): ``status`` (running | done | interrupted |
 ``final_mean``/``final_std``/``final_weights``, ``wall_time_s``, ``seed``, ``task`` ({name,
 source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments``,
 ``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``,
-``warm_start`` (null, or the earlier run it started from: ``realize.search.warm_start``);
-top-k runs add ``top_k``, ``n_candidates``, ``leader``, ``winner``, ``budget``,
+``warm_start`` (null, or the earlier run it started from: ``realize.search.warm_start``),
+``n_stopped_per_iter`` (only with ``ce.prune``: rows stopped as they could not be an elite, which
+``success_per_iter`` counts as not succeeded); top-k runs add ``top_k``, ``n_candidates``, ``leader``, ``winner``, ``budget``,
 ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
 (``realize.run_dir.directory``).
@@ -168,6 +169,8 @@ class ResultDoc:
     iteration_best_cost_per_iter: list[float] = field(default_factory=list)
     n_envs_per_iter: list[int] = field(default_factory=list)
     n_feasible_per_iter: list[int] = field(default_factory=list)
+    # ce.prune: rows per iteration stopped as they could not be an elite (None: pruning off)
+    n_stopped_per_iter: list[int] | None = None
     elite_per_iter: list[EliteStats] = field(default_factory=list)
     iteration_time_s: list[float] = field(default_factory=list)
     final_mean: list[Any] | None = None
@@ -217,6 +220,7 @@ class ResultDoc:
             "iteration_best_cost_per_iter": encode_floats(self.iteration_best_cost_per_iter),
             "n_envs_per_iter": list(self.n_envs_per_iter),
             "n_feasible_per_iter": list(self.n_feasible_per_iter),
+            **({} if self.n_stopped_per_iter is None else {"n_stopped_per_iter": list(self.n_stopped_per_iter)}),
             "elite_per_iter": [e.to_json() for e in self.elite_per_iter],
             "iteration_time_s": encode_floats(self.iteration_time_s),
             "final_mean": encode_floats(self.final_mean),
@@ -270,6 +274,7 @@ class ResultDoc:
             iteration_best_cost_per_iter=_floats(d.get("iteration_best_cost_per_iter"), INF),
             n_envs_per_iter=[int(v) for v in d.get("n_envs_per_iter") or []],
             n_feasible_per_iter=[int(v) for v in d.get("n_feasible_per_iter") or []],
+            n_stopped_per_iter=None if d.get("n_stopped_per_iter") is None else [int(v) for v in d["n_stopped_per_iter"]],
             elite_per_iter=[EliteStats.from_json(e) for e in d.get("elite_per_iter") or []],
             iteration_time_s=_floats(d.get("iteration_time_s")),
             final_mean=decode_floats(d.get("final_mean")),

@@ -60,7 +60,10 @@ class IterationSummary:
     feasible elites (``nan``: none). ``mean``/``std``: the distribution after the update
     (``(D,)``, or ``(k, D)`` with ``weights`` ``(k,)`` for a mixture; ``None`` while uniform).
     Times in seconds (``eval_time`` ``nan`` when unknown). ``candidate``: the candidate plan of
-    a top-k run (``None`` in a single-plan run; then it is left out of the JSON).
+    a top-k run (``None`` in a single-plan run; then it is left out of the JSON). ``n_stopped``
+    (``ce.prune``): of the infeasible rows, those stopped because they could no longer be an
+    elite ("stopped: could not be an elite"; they might have succeeded, so ``success_share`` is
+    a lower bound then); ``None`` (left out) without pruning.
     """
 
     iteration: int
@@ -82,6 +85,7 @@ class IterationSummary:
     converged: bool = False
     weights: list[float] | None = None
     candidate: int | None = None
+    n_stopped: int | None = None  # ce.prune: rows stopped because they could not be an elite (None: off)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -107,6 +111,8 @@ class IterationSummary:
             out["weights"] = encode_floats(self.weights)
         if self.candidate is not None:
             out["candidate"] = self.candidate
+        if self.n_stopped is not None:
+            out["n_stopped"] = self.n_stopped
         return out
 
     @classmethod
@@ -134,6 +140,7 @@ class IterationSummary:
             converged=bool(d.get("converged", False)),
             weights=decode_floats(d.get("weights")),
             candidate=_opt_int(d.get("candidate")),
+            n_stopped=_opt_int(d.get("n_stopped")),
         )
 
 

@@ -1,8 +1,9 @@
 """The progress bar as a sink: one tqdm step per iteration, with its success share and best cost.
 
 What it does: ``ProgressSink`` shows ``iterations done / planned`` on stderr; the postfix says
-the iteration's success share and the best feasible cost so far of the plan searched (for a
-top-k run also which candidate ran, in which halving round). Off with ``logging.progress=false``.
+the iteration's success share (with ``ce.prune``, how many rows were stopped as they could not be
+an elite: they count as not succeeded) and the best feasible cost so far of the plan searched (for
+a top-k run also which candidate ran, in which halving round). Off with ``logging.progress=false``.
 Not critical.
 What it doesn't: log anything else (``logging`` does).
 """
@@ -39,7 +40,8 @@ class ProgressSink:
         rec = it.record
         where = "" if it.batch.candidate is None else f"candidate {it.batch.candidate} (round {it.report.round}), "
         cost = f"{rec.best_cost:.0f}" if math.isfinite(rec.best_cost) else "-"
-        self.bar.set_postfix_str(f"{where}success {rec.success_share:.0%}, best cost {cost}")
+        stopped = f" ({rec.n_stopped} stopped: could not be an elite)" if rec.n_stopped else ""
+        self.bar.set_postfix_str(f"{where}success {rec.success_share:.0%}{stopped}, best cost {cost}")
         self.bar.update(1)
 
     def close(self, status: str | None, error: str | None) -> None:
