@@ -25,7 +25,7 @@ __all__ = ["CONFIG_GROUPS", "compose_config", "apply_overrides", "set_key", "com
            "parse_overrides"]
 
 CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation",
-                 "experiment", "ablation")
+                 "experiment", "ablation", "levers")
 
 
 def group_options(group: str) -> list[str]:

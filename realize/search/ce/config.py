@@ -100,7 +100,7 @@ class CEConfig(Settings):
     # speed levers (Hydra group ``levers``; all off is the seed paper's algorithm, bit for bit)
     prune: bool = setting(False, help="stop a row once it can no longer be among the batch's best feasible rows")
     patience: int | None = setting(None, ge=1, help="stopping rule: iterations looked back over (null = off)")
-    min_improvement: float = setting(0.005, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
+    min_improvement: float = setting(0.03, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
 
     def check(self, where: str) -> None:
         if self.schedule == "linear":
