@@ -340,8 +340,11 @@ class _Assembly:
             hist, rrd = candidate_file(HISTORY_FILE, 0) + ", ...", candidate_file(spec.logging.rrd, 0) + ", ..."
         else:
             hist, rrd = HISTORY_FILE, spec.logging.rrd
+        early = ""
+        if o.status == "done" and not spec.halving and o.iterations_done < spec.ce.iterations:
+            early = " (converged: ce.patience / ce.converge_std)"
         print(
-            f"realize: {o.status} after {o.iterations_done}/{spec.ce.iterations} CE iterations; "
+            f"realize: {o.status} after {o.iterations_done}/{spec.ce.iterations} CE iterations{early}; "
             f"best cost {cost}; feasible {o.feasible}; wall time {o.wall_time_s:.1f} s\n"
             f"results: {o.run_dir / RESULT_FILE} (also {hist}, {CHECKPOINT_FILE}"
             + (f", {rrd}" if spec.logging.rerun else "")
