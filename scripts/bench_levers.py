@@ -44,28 +44,12 @@ sys.path.insert(0, str(REPO))
 
 from realize.run_dir.directory import RunDir  # noqa: E402
 
+sys.path.insert(0, str(REPO / "scripts"))
+from bench_seed_paper import commit_of, parse_seeds  # noqa: E402  (the same seed list and commit stamp)
+
 FIELDS = ["experiment", "seed", "variant", "overrides", "search_s", "wall_s", "iterations", "samples",
           "row_steps", "batch_steps", "stopped", "best_cost", "feasible", "validated", "commit"]
 RATIO_BOUND = {"seed_paper": 0.5, "wall": 0.6, "ramp": 0.6}
-
-
-def parse_seeds(text: str) -> list[int]:
-    seeds: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        seeds.extend(range(int(lo), int(hi or lo) + 1))
-    return seeds
-
-
-def commit() -> str:
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
-                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
-                               capture_output=True, text=True).stdout.strip()
-        return head + ("+dirty" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def run_one(experiment: str, seed: int, overrides: list[str], run_dir: Path) -> dict[str, object]:
@@ -153,7 +137,7 @@ def main() -> None:
                     with tempfile.TemporaryDirectory(prefix=f"{exp}-{seed}-{name}-") as tmp:
                         row = run_one(exp, seed, ov, Path(tmp) / "run")
                     row = {"experiment": exp, "seed": seed, "variant": name, "overrides": " ".join(ov),
-                           **row, "commit": commit()}
+                           **row, "commit": commit_of(REPO)}
                     w.writerow(row)
                     f.flush()
                     print(", ".join(f"{k}={v}" for k, v in row.items()), flush=True)

@@ -63,8 +63,9 @@ class CEConfig(Settings):
 
     Speed levers (off by default: the paper's algorithm; the Hydra group ``levers`` turns them on):
     ``prune`` lets the rollout stop a row that can no longer be among the batch's ``n_elite``
-    cheapest feasible rows (``realize.realization.pruning``; the elites, the refit and the best
-    stay bit-identical). ``patience`` makes ``iterations`` a maximum: the search stops once a
+    cheapest feasible rows (``realize.realization.pruning``; within a rollout every other row is
+    bit-identical, though a reused scene's later rollouts may drift a little: README "Speed
+    levers"). ``patience`` makes ``iterations`` a maximum: the search stops once a
     feasible plan is in hand and the elites' mean cost fell by less than ``min_improvement``
     (relative) over the last ``patience`` iterations.
 
