@@ -8,15 +8,20 @@
   of them); the ``keep`` cheapest feasible rows are the same rows at the same costs; and the
   pruned batch simulates fewer steps.
 
-The end-to-end check (a CE run's elites, refits and best plan unchanged) is
-``test_golden.test_pruning_keeps_the_search``.
+* end to end: the seed-task golden run (``tests/golden_runs.py``) with ``ce.prune`` on has the
+  fixture's best plan and best cost per iteration, bit for bit, and stopped some rows (here, not
+  in ``test_golden.py``, so that the two files' runs can go to two test workers).
 """
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 import torch
 
+from golden_runs import FIXTURE, run_golden
 from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, compose_config
 from realize.app.run_config import build_run_spec
 from realize.realization.pruning import EliteBound
@@ -99,3 +104,16 @@ def test_pruned_rows_could_not_win_and_the_rest_are_unchanged(both: tuple[Rollou
 
     assert top(pruned) == top(full)
     assert pruned.sim_steps < full.sim_steps
+
+
+def test_pruning_keeps_the_search(tmp_path: Path) -> None:
+    """``ce.prune`` stops only rows that could not be an elite: the seed task's golden run with it
+    on has the same best plan and best cost per iteration, bit for bit; only the success share
+    may fall (a stopped row might have succeeded), and the run says how many it stopped."""
+    want = json.loads(FIXTURE.read_text())["seed_task"]
+    got = run_golden("seed_task", tmp_path / "pruned", levers=["levers=exact", "ce.prune=true", "validation=off"])
+    for key in ("feasible", "best_cost", "best_cost_per_iter", "best_z"):
+        assert got[key] == want[key], f"{key} changed with ce.prune: {got[key]!r} != {want[key]!r}"
+    assert all(g <= w for g, w in zip(got["success_per_iter"], want["success_per_iter"]))
+    doc = json.loads((tmp_path / "pruned" / "result.json").read_text())
+    assert sum(doc["n_stopped_per_iter"]) > 0, "nothing was stopped: the test shows nothing"
