@@ -155,9 +155,9 @@ class RunSpec:
     @property
     def keep_best(self) -> int | None:
         """``ce.prune``: the rows of a batch that must end as they would unpruned, the ``n_elite``
-        cheapest feasible (or the validation's candidates, if it runs and they are more); a rollout may stop any other
-        row (``realize.realization.pruning``). None: pruning off, or a robust or kNN-ranked
-        search, where a row's score depends on other rows or worlds."""
+        cheapest feasible (or the validation's candidates, if it runs and they are more); a
+        rollout may stop any other row (``realize.realization.pruning``). None: pruning off, or
+        a robust or kNN-ranked search, where a row's score depends on other rows or worlds."""
         ce = self.ce
         if not ce.prune or ce.replicas > 1 or ce.knn_robust > 0:
             return None

@@ -102,8 +102,8 @@ class Rollout:
             self.physics(counted=True)
             self.check_faults()
             self.check_actions()
-            self.read_due_goals()
-            self.stop_hopeless()
+            if self.read_due_goals():
+                self.stop_hopeless()  # the bound can only move when a goal was read
         # the last finished plans settle with every robot asleep (physics only, no cost)
         while bool((self.settle_left > 0).any()):
             self.settle()
@@ -248,13 +248,15 @@ class Rollout:
         return goal_reached(self.task.goal, self.realizer.geometry, self.realizer.layout.regions, ctx.objects[:, :, :3],
                             ctx.object_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed)
 
-    def read_due_goals(self) -> None:
-        """Read psi_g of the plans whose settling time just ran out."""
+    def read_due_goals(self) -> bool:
+        """Read psi_g of the plans whose settling time just ran out; whether there were any."""
         due = (self.settle_left == 0) & ~self.goal_read
-        if due.any():
-            ok, dist = self._goal_now()
-            self.goal[due], self.goal_dist[due] = ok[due], dist[due]
-            self.goal_read[due] = True
+        if not due.any():
+            return False
+        ok, dist = self._goal_now()
+        self.goal[due], self.goal_dist[due] = ok[due], dist[due]
+        self.goal_read[due] = True
+        return True
 
     def stop_hopeless(self) -> None:
         """``ce.prune``: running plans whose cost can no longer be among the ``keep_best``

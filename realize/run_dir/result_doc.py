@@ -22,8 +22,8 @@ source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments
 ``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``,
 ``warm_start`` (null, or the earlier run it started from: ``realize.search.warm_start``),
 ``n_stopped_per_iter`` (only with ``ce.prune``: rows stopped as they could not be an elite, which
-``success_per_iter`` counts as not succeeded); top-k runs add ``top_k``, ``n_candidates``, ``leader``, ``winner``, ``budget``,
-``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
+``success_per_iter`` counts as not succeeded); top-k runs add ``top_k``, ``n_candidates``,
+``leader``, ``winner``, ``budget``, ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
 (``realize.run_dir.directory``).
 """
