@@ -70,7 +70,7 @@ log = logging.getLogger("realize")
 PoolSource = Callable[[RunSpec, Sequence[Any], Path], RolloutPool]
 
 # overrides a resumed run accepts (everything else comes from the run's saved config)
-RESUME_ALLOWED_PREFIXES = ("resume", "logging.", "workers.", "hydra.", "validation")
+RESUME_ALLOWED_PREFIXES = ("resume", "logging", "workers", "hydra.", "validation")
 
 
 @dataclass
@@ -104,21 +104,32 @@ def plain_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     return d
 
 
+RESUME_GROUPS = ("logging", "workers", "validation")
+
+
 def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequence[str]) -> dict[str, Any]:
-    """The config a resumed run uses: the saved one, with the current ``logging``, ``workers``
-    and ``validation`` groups (none changes the search's numbers: a run may go on with other
-    workers, e.g. on another machine, and validate its candidates once it ends)."""
+    """The config a resumed run uses: the saved one, every group of it included, with only what
+    ``overrides`` (the command line's) name of the ``logging``, ``workers`` and ``validation``
+    groups taken from ``current`` on top (none changes the search's numbers: a run may go on
+    with other workers, e.g. on another machine, and validate its candidates once it ends).
+    ``validation=off`` replaces the saved group; ``workers.n=2`` changes that one key."""
+    from realize.app.compose import parse_overrides
+
     extra = [o for o in overrides if not str(o).lstrip("+~").startswith(RESUME_ALLOWED_PREFIXES)]
     if extra:
         raise ConfigError(
             f"resume: a resumed run uses its saved config; drop the override(s) {extra} "
             "(only logging.*, workers.* and validation.* may change)"
         )
-    cfg = dict(ckpt.config)
+    base, cur = OmegaConf.create(dict(ckpt.config)), OmegaConf.create(dict(current))
+    for o in parse_overrides([str(x) for x in overrides]):
+        key = o.key_or_group
+        if key.split(".", 1)[0] in RESUME_GROUPS and not o.is_delete():
+            OmegaConf.update(base, key, OmegaConf.select(cur, key, throw_on_missing=False), merge=False,
+                             force_add=True)
+    cfg = OmegaConf.to_container(base, resolve=True)
+    assert isinstance(cfg, dict)
     cfg["resume"] = current.get("resume")
-    for group in ("logging", "workers", "validation"):
-        if group in current:
-            cfg[group] = current[group]
     return cfg
 
 
@@ -279,9 +290,9 @@ class _Assembly:
         ``until(iteration)`` true ends the search after that iteration (``stopped_early``)."""
         spec, run_dir = self.spec, self.run_dir
         self.stopped_early, self.search_s, self.validation_s = False, 0.0, 0.0
-        if self.searcher.done:  # a resumed run that had already finished
-            log.info("%s is already complete; nothing to run", run_dir)
-            self.result.write("done")
+        complete = self.searcher.done  # a resumed run that had already finished: nothing changes
+        if complete:
+            log.info("%s is already complete: nothing to run, its results stay as they are", run_dir)
             status, exit_code, n_done = "done", 0, self.start
         else:
             if self.start:
@@ -298,12 +309,16 @@ class _Assembly:
             self.search_s = time.perf_counter() - t_search
         report = self.result.report
         feasible = bool(report.state.best_feasible)
-        if status == "done" and feasible and spec.validation is not None and spec.validation.replicas > 0:
+        validated = complete and "validation" in (self.rd.result_json() or {})
+        if status == "done" and feasible and spec.validation is not None and spec.validation.replicas > 0 \
+                and not validated:  # (a complete run whose validation was cut off validates now)
             t_validation = time.perf_counter()
             self._validate()
             self.validation_s = time.perf_counter() - t_validation
         outcome = RunOutcome(run_dir, status, feasible, report.state.best_cost if feasible else math.inf, n_done,
                              self.clock.wall(), exit_code)
+        if complete:
+            print(f"realize: {run_dir} was already complete; nothing changed", flush=True)
         self._print(outcome, report)
         return outcome
 

@@ -75,7 +75,8 @@ class Planner:
 
     ``config``: a composed config (plain data or a DictConfig) or a list of overrides (composed
     with ``realize.app.compose.compose_config``). ``cli_overrides``: the command line's (a
-    resumed or replanned config checks them). ``max_pools``: sets of workers kept open.
+    resumed or replanned config checks them and takes what they name on top of the saved
+    config; default: the list of overrides given as ``config``). ``max_pools``: sets of workers kept open.
     """
 
     def __init__(self, config: Sequence[str] | Mapping[str, Any] | DictConfig = (), *,
@@ -88,7 +89,10 @@ class Planner:
             if isinstance(config, str):
                 raise ConfigError(f"Planner({config!r}): give a list of overrides, e.g. Planner([{config!r}])")
             self.config = compose_config(list(config))
-        self.cli_overrides = list(cli_overrides)
+        # what a resumed or replanned config takes on top of the saved one: the command line's,
+        # or the overrides given here
+        given = not isinstance(config, (DictConfig, Mapping))
+        self.cli_overrides = list(cli_overrides) if cli_overrides or not given else [str(o) for o in config]
         self.max_pools = max(1, int(max_pools))
         self._pools: dict[str, tuple[RolloutPool, str]] = {}  # processes key -> (workers, scenes key)
         self._built: set[str] = set()  # keys whose workers the current call built
