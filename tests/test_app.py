@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import time
@@ -359,6 +360,35 @@ def test_resume_refuses_changed_settings(uninterrupted: Path, no_sim: None) -> N
         run(cfg_of([f"resume={uninterrupted}"]), uninterrupted,
             cli_overrides=[f"resume={uninterrupted}", "ce.n_elite=3"])
     assert (uninterrupted / RESULT_FILE).read_text() == before  # the run's result is untouched
+
+
+def test_resume_keeps_the_runs_own_groups(tmp_path: Path) -> None:
+    """A run made with ``validation=off`` (and its logging), interrupted, resumes with its saved
+    groups, though the composed default validates: only what the command line names goes on top."""
+    def stop(i: int) -> None:
+        if i == 0:
+            raise KeyboardInterrupt
+
+    run_dir = tmp_path / "run"
+    assert run(cfg_of(tiny(ce__iterations=2) + ["validation=off"]), run_dir, after_iteration=stop).interrupted
+    composed = cfg_of([f"resume={run_dir}", "validation=default", "workers.n=1"])  # the defaults: 64 replicas
+    done = run(composed, tmp_path / "hydra", cli_overrides=[f"resume={run_dir}", "workers.n=1"])
+    assert done.status == "done" and done.iterations_done == 2
+    res = json.loads((run_dir / RESULT_FILE).read_text())
+    assert "validation" not in res and res["config"]["validation"]["replicas"] == 0
+    assert res["config"]["logging"]["progress"] is False and res["config"]["workers"]["n"] == 1
+
+
+def test_resume_of_a_finished_run_changes_nothing(tmp_path: Path, uninterrupted: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    run_dir = tmp_path / "done"
+    shutil.copytree(uninterrupted, run_dir)
+    files = (RESULT_FILE, CHECKPOINT_FILE, HISTORY_FILE)
+    before = {f: (run_dir / f).read_bytes() for f in files}
+    out = run(cfg_of([f"resume={run_dir}", "validation=default"]), run_dir, cli_overrides=[f"resume={run_dir}"])
+    assert out.status == "done" and out.exit_code == 0
+    assert "was already complete; nothing changed" in capsys.readouterr().out
+    assert {f: (run_dir / f).read_bytes() for f in files} == before
 
 
 def _checkpoint_iteration(run_dir: Path) -> int | None:
