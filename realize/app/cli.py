@@ -4,8 +4,9 @@ What it does: ``main()`` (console script ``realize`` and ``python -m realize``) 
 ``preflight`` on the arguments (config group choices such as ``experiment=``, a ``resume=`` or
 ``replan_from=`` directory, and, for a single run, the whole composition), then Hydra, whose
 task function calls ``realize.app.run.run``. Bad input ends with one line ``error: <message>`` on stderr and exit code 2
-(``realize.app.guard.EXIT_CONFIG``) before any simulator is built; in a sweep (``-m``) such a job is
-marked failed by Hydra (``SweepJobConfigError``) and the other jobs run. An interrupted run
+(``realize.app.guard.EXIT_CONFIG``) before any simulator is built; a sweep (``-m``) has every
+job's config checked first (``realize.app.sweep_check``), and a job that still fails on its
+config when it starts is marked failed by Hydra (``SweepJobConfigError``) while the other jobs run. An interrupted run
 exits with 130 (SIGINT) or 143 (SIGTERM); an interrupted sweep stops.
 What it doesn't: validate the config itself (``realize.app.run_config``) or run anything
 (``realize.app.run``).
@@ -28,6 +29,7 @@ from realize.config import ConfigError
 from realize.app.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
 from realize.app.run import run
+from realize.app.sweep_check import check_sweep
 from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.app.workers.errors import WorkerFailed
 
@@ -48,7 +50,7 @@ def preflight(args: list[str]) -> list[str]:
     Checks config group choices (``experiment=foo`` -> one-line error listing the presets), that
     every key exists (``secne=wall`` -> "did you mean 'scene'", ``realize.app.cli_keys``) and
     ``resume=`` (must be a run directory); a resumed single run writes its Hydra files into
-    the resumed directory. For a single run without Hydra flags it also composes the config
+    the resumed directory. A sweep has every job's config validated (``check_sweep``). For a single run without Hydra flags it also composes the config
     once, so composition errors become one line too.
     """
     flags = [a for a in args if a.startswith("-")]
@@ -85,6 +87,8 @@ def preflight(args: list[str]) -> list[str]:
     if check_groups:  # experiment=foo; secne=wall, ce.n_envz=3: one line with the closest known names
         check_group_choices(parsed)
         check_override_keys(parsed, CONFIG_GROUPS)
+        if multirun:  # ce.n_envs=20,abc: refused before job 0 simulates
+            check_sweep(plain)
     if resume_dir is not None and not multirun and not has_run_dir:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         args = args + [f"hydra.run.dir={resume_dir}", f"hydra.output_subdir=.hydra/resume-{stamp}"]

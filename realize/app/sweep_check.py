@@ -1,0 +1,98 @@
+"""Check every job of a sweep (``realize -m``) before the first one simulates.
+
+What it does: ``check_sweep(args)`` expands the sweep the command line describes (its
+``key=a,b`` / ``range(...)`` overrides and the ``hydra.sweeper.params`` a preset such as
+``experiment=ramp_ablation`` sets, the command line winning, as Hydra's basic sweeper merges
+them), composes each job's config and validates it (``realize.app.run_config.build_run_spec``,
+and a ``warm_start`` run's files: nothing is simulated). The first bad job is one ``ConfigError`` line naming its overrides, so
+``realize -m ce.n_envs=20,abc`` ends with exit code 2 before job 0 runs. A sweep of more than
+``MAX_JOBS`` jobs is checked value by value (each swept value once, the other sweeps at their
+first value) rather than job by job: every value is checked, combinations of them are not.
+What it doesn't: check sweeps whose values it cannot list (an Optuna sweeper's ``interval(...)``
+ranges: each trial is checked when it starts), run a job, or replace the per-job checks in
+``realize.app.assembly`` (which stay).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from typing import Any
+
+from realize.app.compose import parse_overrides
+from realize.config import ConfigError
+
+__all__ = ["check_sweep", "sweep_jobs", "MAX_JOBS"]
+
+MAX_JOBS = 64  # more jobs than this: each swept value is checked once (module docstring)
+
+
+def _listable(o: Any) -> bool:
+    """A sweep override whose values can be listed (choice or range; not an interval)."""
+    return o.is_sweep_override() and not o.is_interval_sweep()
+
+
+def _sweeper_params(fixed: Sequence[str]) -> dict[str, str]:
+    """``hydra.sweeper.params`` of the config the fixed overrides compose ({} if none)."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from realize.paths import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="realize"):
+        cfg = compose(config_name="config", overrides=list(fixed), return_hydra_config=True)
+    params = OmegaConf.select(cfg, "hydra.sweeper.params", default=None)
+    if params is None:
+        return {}
+    return {str(k): str(v) for k, v in OmegaConf.to_container(params, resolve=False).items()}
+
+
+def sweep_jobs(args: Sequence[str], max_jobs: int = MAX_JOBS) -> tuple[list[str], list[list[str]]]:
+    """The overrides every job shares, and the swept overrides of each job to check (every
+    job, or every value once past ``max_jobs``)."""
+    plain = [str(a) for a in args if not str(a).lstrip("+~").startswith(("hydra.", "hydra/"))]
+    parsed = parse_overrides(plain)
+    fixed = [o.input_line for o in parsed if not o.is_sweep_override()]
+    swept: dict[str, list[str]] = {}
+    for o in parsed:
+        if _listable(o):
+            swept[o.key_or_group] = [f"{o.input_line.split('=', 1)[0]}={v}" for v in o.sweep_string_iterator()]
+    named = {o.key_or_group for o in parsed}
+    for key, values in _sweeper_params(fixed).items():
+        if key in named:
+            continue
+        for o in parse_overrides([f"{key}={values}"]):
+            if _listable(o):
+                swept[key] = [f"{key}={v}" for v in o.sweep_string_iterator()]
+            elif not o.is_sweep_override():
+                fixed.append(o.input_line)
+    axes = list(swept.values())
+    n_jobs = 1
+    for values in axes:
+        n_jobs *= len(values)
+    if n_jobs <= max_jobs:
+        return fixed, [list(combo) for combo in itertools.product(*axes)]
+    first = [values[0] for values in axes]
+    jobs = [first]
+    for i, values in enumerate(axes):
+        jobs += [first[:i] + [v] + first[i + 1:] for v in values[1:]]
+    return fixed, jobs
+
+
+def check_sweep(args: Sequence[str], max_jobs: int = MAX_JOBS) -> int:
+    """Compose and validate every job of the sweep ``args`` (module docstring); returns how
+    many configs were checked. Raises one ``ConfigError`` line for the first bad job."""
+    from realize.app.compose import compose_config
+    from realize.app.run_config import build_run_spec
+
+    from realize.search.warm_start import load_warm_start
+
+    fixed, jobs = sweep_jobs(args, max_jobs)
+    for k, swept in enumerate(jobs):
+        try:
+            spec = build_run_spec(compose_config(fixed + swept))
+            if spec.warm_start is not None:  # its files, read as the run reads them (nothing simulated)
+                load_warm_start(spec.warm_start, spec.task, spec.geometry, spec.ce)
+        except ConfigError as e:
+            raise ConfigError(f"sweep job {k} ({' '.join(swept)}): {e}") from None
+    return len(jobs)
