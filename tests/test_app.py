@@ -473,17 +473,35 @@ def test_multirun_2x2_basic_launcher_summary(tmp_path: Path) -> None:
         assert float(r["final_success"]) == res["success_per_iter"][-1]
 
 
-def test_sweep_with_a_failing_job(tmp_path: Path) -> None:
+def test_sweep_values_are_checked_before_job_0(tmp_path: Path) -> None:
+    """``ce.n_elite=1,9,2`` with 4 plans: refused in one line, exit 2, before any job runs."""
     sweep = tmp_path / "sweep"
     p = realize_cli("-m", *tiny(ce__iterations=1, controller__max_time_s=3, ce__n_elite="1,9,2"),
                     f"hydra.sweep.dir={sweep}", cwd=tmp_path, timeout=240)
-    assert p.returncode != 0  # the sweep reports the failure ...
-    assert "ce.n_elite = 9" in p.stderr and "Traceback" not in p.stderr
+    assert p.returncode == 2, p.stderr[-3000:]
+    assert p.stderr.strip().splitlines()[-1].startswith("error: sweep job 1 (ce.n_elite=9): ce.n_elite = 9")
+    assert "Traceback" not in p.stderr and not sweep.exists()  # nothing ran
+    p = realize_cli("-m", *tiny(ce__iterations=1), "ce.n_envs=4,abc", f"hydra.sweep.dir={sweep}", cwd=tmp_path,
+                    timeout=240)
+    assert p.returncode == 2 and "sweep job 1 (ce.n_envs=abc): ce.n_envs = 'abc'" in p.stderr
+    p = realize_cli("-m", *tiny(ce__iterations=1), f"warm_start=null,{tmp_path / 'nope'}", f"hydra.sweep.dir={sweep}",
+                    cwd=tmp_path, timeout=240)
+    assert p.returncode == 2 and "sweep job 1 (warm_start=" in p.stderr and not sweep.exists()
+
+
+def test_sweep_with_a_job_that_fails_when_it_starts(tmp_path: Path) -> None:
+    """What only a job's start can find (a resumed run's corrupt checkpoint) fails that job;
+    the others run, and every job is in the summary."""
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / CHECKPOINT_FILE).write_text("{not json")
+    sweep = tmp_path / "sweep"
+    p = realize_cli("-m", *tiny(ce__iterations=1, controller__max_time_s=3), f"resume=null,{broken}",
+                    f"hydra.sweep.dir={sweep}", cwd=tmp_path, timeout=240)
+    assert p.returncode != 0 and "Traceback" not in p.stderr  # the sweep reports the failure ...
     rows = _read_summary(sweep / "summary.csv")  # ... and every job is in the table
-    status = {r["overrides"].split("ce.n_elite=")[1].split()[0]: r for r in rows}
-    assert [status[k]["status"] for k in ("1", "9", "2")] == ["done", "failed", "done"]
-    assert "ce.n_elite = 9" in status["9"]["error"] and "ce.n_envs = 4" in status["9"]["error"]
-    assert (sweep / status["9"]["run_dir"] / "error.txt").is_file()
+    assert [r["status"] for r in rows] == ["done", "failed"]
+    assert "resume:" in rows[1]["error"] and (sweep / rows[1]["run_dir"] / "error.txt").is_file()
 
 
 def _two_seeds_done(tmp_path: Path, *launcher: str) -> None:
