@@ -168,7 +168,7 @@ def bench_rollout(n: int, horizon_s: float, cfg: RolloutConfig) -> dict[str, flo
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--quick", action="store_true", help="fewer repetitions and a shorter rollout")
     ap.add_argument("--horizon", type=float, default=None, help="sim seconds of the N=200 rollout")
     ap.add_argument("--sizes", type=int, nargs="+", default=[200, 2000])

@@ -110,7 +110,7 @@ def report(rows: list[dict[str, str]]) -> bool:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--experiments", default="seed_paper", help="comma-separated presets")
     ap.add_argument("--seeds", default="0", help="e.g. 0-2 or 0,3")
     ap.add_argument("--variant", action="append", default=None,

@@ -44,7 +44,7 @@ class _Enough(Exception):
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--history", help="a run's history.npz")
     ap.add_argument("--key", default="Z_005", help="the samples' key in --history")
     ap.add_argument("--uniform", action="store_true", help="uniform samples instead of --history")

@@ -48,7 +48,7 @@ def _repairs(study: Path) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     p.add_argument("--study", action="append", required=True, help="an execution/<family> folder (repeatable)")
     p.add_argument("--no-cold", action="store_true", help="skip the cold run (report replans only)")
     p.add_argument("--cold-args", nargs="*", default=[], help="overrides of the cold run")

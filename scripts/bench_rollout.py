@@ -184,7 +184,7 @@ def load_batch() -> tuple[list[str], torch.Tensor]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--quick", action="store_true", help="one rollout (default: --reps 2)")
     ap.add_argument("--reps", type=int, default=None, help="rollouts of the batch (fastest reported)")
     ap.add_argument("--n", type=int, default=None, help="plans (and copies): the batch's first N (default: all 200)")

@@ -141,7 +141,7 @@ def compare(new: dict[int, dict[str, float]], ref: dict[int, dict[str, float]]) 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 0,3,5")
     ap.add_argument("--out", type=Path, help="CSV to append rows to (seeds already in it are skipped)")
     ap.add_argument("--code", type=Path, default=REPO, help="checkout whose realize to run (default: this one)")

@@ -83,7 +83,7 @@ def bench_naive(plans: int, seconds: float, sim: SimSettings) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--quick", action="store_true", help="short horizons (whole run under a minute)")
     ap.add_argument("--seconds", type=float, default=None, help="robot seconds simulated per plan")
     ap.add_argument("--sizes", type=int, nargs="+", default=[1, 50, 200])

@@ -59,7 +59,7 @@ def journal_rows(start: int = 3000, end: int = 300, iterations: int = 20) -> lis
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--quick", action="store_true", help="one CE iteration (ce.iterations=1)")
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="worker counts, first is the baseline")
     ap.add_argument("--node-cores", type=int, default=32, help="cores per node of the scaling estimate")

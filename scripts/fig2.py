@@ -20,7 +20,7 @@ from realize.figures.common import report_written  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
     ap.add_argument("--iterations", type=int, nargs="+", default=None,
                     help="CE iterations to show (default: first, middle and last with trajectories)")

@@ -20,7 +20,7 @@ from realize.figures.common import report_written  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
     ap.add_argument("--out", type=Path, default=None, help="PNG path (the CSV goes beside it)")
     ap.add_argument("--no-final", action="store_true", help="leave out the distribution refit after the last iteration")

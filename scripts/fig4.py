@@ -25,7 +25,7 @@ from realize.figures.launch import launch_runs, run_status  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--runs", type=int, default=10, help="number of runs (seeds --seed0 .. --seed0 + runs - 1)")
     ap.add_argument("--seed0", type=int, default=0, help="first seed")
     ap.add_argument("--run-dirs", type=Path, nargs="+", default=None,

@@ -195,7 +195,7 @@ def _parse_counts(items: list[str]) -> dict[str, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("robot", nargs="?", help="configs/robot/ROBOT.yaml (needed unless --urdf and --out are given)")
     ap.add_argument("--urdf", help="read this URDF instead of the robot config's")
     ap.add_argument("--links", nargs="+", help="fit only these links (default: every link with collision geometry)")

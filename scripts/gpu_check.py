@@ -356,7 +356,7 @@ def default_urdf() -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--device", default="cuda", help="cuda (default) or cpu (a check of this script itself)")
     ap.add_argument("--sizes", default="200,3000,30000", help="comma-separated N")
     ap.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated subset of {','.join(PARTS)}")

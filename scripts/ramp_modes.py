@@ -112,7 +112,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("dirs", type=Path, nargs="+", help="run, study or multirun directories")
     ap.add_argument("--out", type=Path, default=None, help="CSV of the per-run rows (summary beside it)")
     args = ap.parse_args(argv)

@@ -37,7 +37,7 @@ from realize.config import ConfigError  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
     ap.add_argument("--video", type=Path, default=None, help="write an MP4 of the replay here")
     ap.add_argument("--fps", type=float, default=20.0, help="video frames per second (default 20)")

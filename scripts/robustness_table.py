@@ -66,7 +66,7 @@ def row(preset: str, seed: int, out: Path, replicas: int, overrides: list[str], 
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--presets", nargs="+", default=["seed_paper", "ramp", "wall", "move_and_push"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     ap.add_argument("--replicas", type=int, default=64, help="worlds per check (default 64)")

@@ -117,7 +117,7 @@ def report(spec: RunSpec, Z: torch.Tensor, res: Any) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=200, help="number of uniform samples (parallel plans)")
     ap.add_argument("--seed", type=int, default=0, help="sampler and simulator seed")

@@ -51,7 +51,7 @@ def _range(ap: argparse.ArgumentParser, values: list[str] | None, flag: str) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("run_dir", type=Path, help="a run directory written by `realize`")
     ap.add_argument("--replicas", type=int, default=None,
                     help="worlds per plan, simulated at once (default: the run's validation.replicas, 64 if it had none)")
