@@ -46,6 +46,7 @@ from realize.app.loop import search_loop
 from realize.app.replan import replan_config
 from realize.app.workers.pool import RolloutPool, open_pool
 from realize.app.run_config import RunSpec, build_run_spec
+from realize.app.task_plans import load_task_file
 from realize.run_dir.build import RunInfo, failure_doc, result_doc
 from realize.run_dir.checkpoint import Checkpoint, CheckpointError, load_checkpoint
 from realize.run_dir.directory import RunDir
@@ -157,8 +158,21 @@ def prepare_run(cfg: DictConfig | Mapping[str, Any], out_dir: Path | str, cli_ov
             current = replan_config(current, cli_overrides)
         return _Assembly(build_run_spec(current), run_dir, ckpt, clock)
     except ConfigError as e:
-        RunDir(out_dir).write_failure(failure_doc(str(e), config=current))
+        RunDir(out_dir).write_failure(failure_doc(str(e), config=_as_given(current)))
         raise
+
+
+def _as_given(config: dict[str, Any] | None) -> dict[str, Any] | None:
+    """A failed run's config as it was given: with ``task_file``, the file's content as its
+    ``task`` (None where the file cannot be read), not the default task group it replaces."""
+    if config is None or config.get("task_file") is None:
+        return config
+    out = dict(config)
+    try:
+        out["task"], _ = load_task_file(config["task_file"])
+    except ConfigError:
+        out["task"] = None
+    return out
 
 
 class _Assembly:
