@@ -190,6 +190,16 @@ def test_task_file_errors_name_the_file(tmp_path: Path, no_sim: None) -> None:
     with pytest.raises(ConfigError) as ei:
         run(cfg_of(TINY + [f"task_file={path}"]), tmp_path / "run")
     assert f"{path}:params.Cube_p" in str(ei.value) and "polar_max" in str(ei.value)
+    # result.json records the task the run was given (the file's), not the default task group
+    res = json.loads((tmp_path / "run" / RESULT_FILE).read_text())
+    assert res["status"] == "failed" and res["config"]["task"] == task and res["config"]["task_file"] == str(path)
+
+
+def test_a_missing_task_file_records_no_task(tmp_path: Path, no_sim: None) -> None:
+    with pytest.raises(ConfigError, match="file not found"):
+        run(cfg_of(TINY + [f"task_file={tmp_path / 'nope.yaml'}"]), tmp_path / "run")
+    res = json.loads((tmp_path / "run" / RESULT_FILE).read_text())
+    assert res["config"]["task"] is None and res["config"]["task_file"] == str(tmp_path / "nope.yaml")
 
 
 def test_resume_dir_that_is_not_a_run(tmp_path: Path, no_sim: None) -> None:
