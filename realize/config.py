@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import contextvars
 import dataclasses
+import difflib
 import math
 import types
 import typing
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
-__all__ = ["ConfigError", "Settings", "setting", "read_mapping", "check_unknown", "as_mapping"]
+__all__ = ["ConfigError", "Settings", "setting", "read_mapping", "check_unknown", "as_mapping", "closest", "did_you_mean"]
 
 _WHERE: contextvars.ContextVar[str | None] = contextvars.ContextVar("realize_config_where", default=None)
 
@@ -65,11 +66,28 @@ def as_mapping(value: Any, where: str) -> dict[str, Any]:
     return dict(value)
 
 
-def check_unknown(d: Mapping[str, Any], allowed: Sequence[str], where: str) -> None:
-    """Refuse keys of ``d`` that are not in ``allowed``."""
+def closest(name: str, known: Sequence[str], n: int = 3) -> list[str]:
+    """The up to ``n`` names of ``known`` closest to ``name`` (case-insensitive), best first."""
+    lower = {str(k).lower(): str(k) for k in known}
+    return [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=n, cutoff=0.6)]
+
+
+def did_you_mean(names: str | Sequence[str], known: Sequence[str]) -> str:
+    """`` (did you mean 'goal'?)`` for the known names closest to ``names`` (one, or several
+    misspelled ones: ``'goals' -> 'goal'``); ``""`` when none is close. Appended to the
+    one-line errors that refuse an unknown name."""
+    if isinstance(names, str):
+        near = closest(names, known, 2)
+        return f" (did you mean {' or '.join(repr(c) for c in near)}?)" if near else ""
+    pairs = [f"{b!r} -> " + " or ".join(repr(c) for c in cs) for b in names if (cs := closest(str(b), known, 2))]
+    return f" (did you mean: {', '.join(pairs)}?)" if pairs else ""
+
+
+def check_unknown(d: Mapping[str, Any], allowed: Sequence[str], where: str, what: str = "key(s)") -> None:
+    """Refuse keys of ``d`` that are not in ``allowed`` (with the closest allowed names)."""
     bad = sorted(str(k) for k in d if k not in allowed)
     if bad:
-        raise ConfigError(f"{where}: unknown key(s) {bad}; allowed: {sorted(allowed)}")
+        raise ConfigError(f"{where}: unknown {what} {bad}; allowed: {sorted(allowed)}{did_you_mean(bad, allowed)}")
 
 
 def _key(where: str, name: str) -> str:

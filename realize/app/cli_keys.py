@@ -12,20 +12,13 @@ readers do); ``+key``/``++key`` additions, ``~key`` deletions and ``hydra.*`` ke
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from realize.config import ConfigError
+from realize.config import ConfigError, closest
 from realize.paths import CONFIG_DIR
 
 __all__ = ["check_override_keys", "closest"]
-
-
-def closest(name: str, known: Sequence[str], n: int = 3) -> list[str]:
-    """The up to ``n`` names of ``known`` closest to ``name`` (case-insensitive), best first."""
-    lower = {k.lower(): k for k in known}
-    return [lower[m] for m in difflib.get_close_matches(name.lower(), list(lower), n=n, cutoff=0.6)]
 
 
 def _compose(group_choices: list[str]) -> Mapping[str, Any]:

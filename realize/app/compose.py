@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from realize.app.cli_keys import check_override_keys
-from realize.config import ConfigError
+from realize.config import ConfigError, did_you_mean
 from realize.paths import CONFIG_DIR
 
 __all__ = ["CONFIG_GROUPS", "compose_config", "apply_overrides", "set_key", "compose_or_error", "check_group_choices", "group_options",
@@ -59,8 +59,8 @@ def check_group_choices(parsed: Sequence[Any]) -> None:
         for v in values:
             if v not in options and v != "null":
                 what = "preset" if key == "experiment" else "option"
-                raise ConfigError(f"{key}={v}: unknown {key} {what} {v!r}; available: {', '.join(options)} "
-                                  f"(files in configs/{key}/)")
+                raise ConfigError(f"{key}={v}: unknown {key} {what} {v!r}{did_you_mean(v, options)}; available: "
+                                  f"{', '.join(options)} (files in configs/{key}/)")
 
 
 def compose_or_error(overrides: Sequence[str]) -> Any:

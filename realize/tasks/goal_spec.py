@@ -21,7 +21,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from realize.config import ConfigError
+from realize.config import ConfigError, check_unknown, did_you_mean
 from realize.tasks.regions import Box, Fixed, Region
 from realize.world.geometry import SceneGeometry
 
@@ -100,9 +100,7 @@ def goal_from_dict(d: Any, scene: SceneGeometry, regions: Mapping[str, Region], 
     for old, new in _OLD.items():
         if old in d or (old == "True" and True in d):
             raise ConfigError(f"{where}.{old}: goals name their object now; write {new}")
-    unknown = sorted(set(d) - set(GOAL_KEYS))
-    if unknown:
-        raise ConfigError(f"{where}: unknown predicates {unknown}; allowed: {list(GOAL_KEYS)}")
+    check_unknown(d, list(GOAL_KEYS), where, "predicates")
     objects = list(scene.object_names)
     on = _names(d["rests_on"], f"{where}.rests_on") if d.get("rests_on") is not None else {}
     inside = _names(d["rests_in"], f"{where}.rests_in") if d.get("rests_in") is not None else {}
@@ -126,16 +124,19 @@ def goal_from_dict(d: Any, scene: SceneGeometry, regions: Mapping[str, Region], 
     for key, mapping in (("rests_on", on), ("rests_in", inside), ("rests_at", at)):
         for name, target in mapping.items():
             if name not in objects:
-                raise ConfigError(f"{where}.{key}.{name}: unknown object {name!r}; the scene's objects: {objects}")
+                raise ConfigError(f"{where}.{key}.{name}: unknown object {name!r}; the scene's objects: {objects}"
+                                  f"{did_you_mean(name, objects)}")
             if key == "rests_on" and target not in tables:
-                raise ConfigError(f"{where}.rests_on.{name} = {target!r} names no table; tables: {tables}")
+                raise ConfigError(f"{where}.rests_on.{name} = {target!r} names no table; tables: {tables}"
+                                  f"{did_you_mean(str(target), list(tables))}")
             if key == "rests_in" and target not in containers:
-                raise ConfigError(f"{where}.rests_in.{name} = {target!r} names no container; containers: {containers}")
+                raise ConfigError(f"{where}.rests_in.{name} = {target!r} names no container; containers: {containers}"
+                                  f"{did_you_mean(str(target), list(containers))}")
             if key == "rests_at":
                 r = regions.get(target.region)
                 if r is None:
                     raise ConfigError(f"{where}.rests_at.{name}.region names unknown parameter {target.region!r}; "
-                                      f"defined: {list(regions)}")
+                                      f"defined: {list(regions)}{did_you_mean(str(target.region), list(regions))}")
                 if not (isinstance(r, (Box, Fixed)) and r.dim in (2, 3)):
                     raise ConfigError(f"{where}.rests_at.{name}.region: {target.region!r} must be a 2-D or 3-D fixed point "
                                       "or box region")
@@ -145,7 +146,8 @@ def goal_from_dict(d: Any, scene: SceneGeometry, regions: Mapping[str, Region], 
     if base_in is not None:
         base_in = str(base_in)
         if base_in not in regions:
-            raise ConfigError(f"{where}.base_in names unknown parameter {base_in!r}; defined: {list(regions)}")
+            raise ConfigError(f"{where}.base_in names unknown parameter {base_in!r}; defined: {list(regions)}"
+                              f"{did_you_mean(base_in, list(regions))}")
         r = regions[base_in]
         if not (isinstance(r, Box) and r.dim == 2):
             raise ConfigError(f"{where}.base_in: {base_in!r} must be a 2-D box region")

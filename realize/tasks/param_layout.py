@@ -24,7 +24,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from realize.config import ConfigError
+from realize.config import ConfigError, did_you_mean
 from realize.tasks.hemisphere import Hemisphere
 from realize.tasks.regions import DEFAULT_TOL, Annulus, Box, Fixed, Region, check_batch
 
@@ -47,7 +47,8 @@ def region_from_dict(d: Mapping[str, Any], where: str = "region") -> Region:
         raise ConfigError(f"{where}: missing key 'type' (one of: {allowed})")
     kind = str(d["type"]).lower()
     if kind not in REGION_TYPES:
-        raise ConfigError(f"{where}: unknown region type {d['type']!r} in key 'type' (allowed: {allowed})")
+        raise ConfigError(f"{where}: unknown region type {d['type']!r} in key 'type' (allowed: {allowed})"
+                          f"{did_you_mean(kind, sorted(REGION_TYPES))}")
     cls = REGION_TYPES[kind]
     rest = {str(k): v for k, v in d.items() if k != "type"}
     required = [f.name for f in fields(cls) if f.init and f.default is MISSING and f.default_factory is MISSING]

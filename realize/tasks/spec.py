@@ -21,7 +21,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
-from realize.config import ConfigError
+from realize.config import ConfigError, check_unknown, did_you_mean
 from realize.tasks.frames import WORLD, object_frames, place_region
 from realize.world.geometry import SceneGeometry
 from realize.tasks.goal_spec import GoalSpec, goal_from_dict
@@ -138,7 +138,8 @@ def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mappi
     for i, a in enumerate(plan):
         key = f"{where}[{i}]"
         if a.template not in templates:
-            raise ConfigError(f"{key}: unknown action template {a.template!r} in {a}; known: {sorted(templates)}")
+            raise ConfigError(f"{key}: unknown action template {a.template!r} in {a}; known: {sorted(templates)}"
+                              f"{did_you_mean(a.template, sorted(templates))}")
         tpl = templates[a.template]
         if len(a.params) != tpl.n_params:
             raise ConfigError(f"{key}: {a.template} takes {tpl.n_params} parameter(s), got {len(a.params)} in {a}")
@@ -146,12 +147,14 @@ def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mappi
             if a.obj is None:
                 raise ConfigError(f"{key}: {a} names no object; write {a.template}(<object>, <Param>)")
             if objects is not None and a.obj not in objects:
-                raise ConfigError(f"{key}: {a} names unknown object {a.obj!r}; the scene's objects: {list(objects)}")
+                raise ConfigError(f"{key}: {a} names unknown object {a.obj!r}; the scene's objects: {list(objects)}"
+                                  f"{did_you_mean(a.obj, list(objects))}")
         elif a.obj is not None:
             raise ConfigError(f"{key}: {a.template} handles no object, got {a}")
         for p in a.params:
             if p not in layout.names:
-                raise ConfigError(f"{key}: {a} is bound to undefined parameter {p!r}; defined: {layout.names}")
+                raise ConfigError(f"{key}: {a} is bound to undefined parameter {p!r}; defined: {layout.names}"
+                                  f"{did_you_mean(p, layout.names)}")
             region = layout.regions[p]
             if not tpl.accepts(region):
                 raise ConfigError(
@@ -166,9 +169,7 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
     if not isinstance(d, Mapping):
         raise ConfigError(f"{source}: a task config is a mapping, got {type(d).__name__}")
     allowed = {"name", "params", "plan", "goal", "final_cost", "planner", "perturbation"}
-    unknown = set(d) - allowed
-    if unknown:
-        raise ConfigError(f"{source}: unknown keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+    check_unknown(d, sorted(allowed), source)
     for key in ("params", "goal"):
         if key not in d:
             raise ConfigError(f"{source}: missing key {key!r}")

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from realize.config import ConfigError
+from realize.config import ConfigError, check_unknown
 
 __all__ = ["ObjectPose", "SceneState", "STATE_FORMAT", "save_state", "load_state"]
 
@@ -162,9 +162,7 @@ class SceneState:
         if fmt not in (STATE_FORMAT, _FORMAT_1):
             raise ConfigError(f"{where}: format = {fmt!r} is not {STATE_FORMAT!r} (or {_FORMAT_1!r})")
         keys, required = (_KEYS, ("base", "objects")) if fmt == STATE_FORMAT else (_KEYS_1, ("base", "cube"))
-        unknown = sorted(set(d) - set(keys))
-        if unknown:
-            raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {list(keys)}")
+        check_unknown(d, list(keys), where)
         missing = [k for k in required if k not in d]
         if missing:
             raise ConfigError(f"{where}: missing key(s) {missing}")
