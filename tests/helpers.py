@@ -1,7 +1,10 @@
 """What several test files share (a plain module: pytest does not collect it; fixtures are in
 ``conftest.py``): the app's composed config and the ``realize`` command in a subprocess (both
 with ``validation=off`` unless a test chooses a validation), the tiny
-run of the command tests, the seed task's known plans, the scripts as modules."""
+run of the command tests, the seed task's known plans, the scripts as modules, the kinematics
+tests' joint vectors, the A* tests' path check, rollouts in a fresh scene with the simulator's
+state read back (the rollout and push tests), and the thread that kills a worker mid-rollout
+(the worker tests, processes and Ray actors)."""
 
 from __future__ import annotations
 
@@ -9,12 +12,21 @@ import importlib.util
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import pytest
+
+if TYPE_CHECKING:
+    import torch
+
+    from realize.app.run_config import RunSpec
+    from realize.scene import BatchedScene
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -194,3 +206,97 @@ def random_q(kin, n: int, seed: int = 0):
     lo = torch.nan_to_num(kin.lower, neginf=-torch.pi).clamp(min=-2.0)
     hi = torch.nan_to_num(kin.upper, posinf=torch.pi).clamp(max=2.0)
     return lo + (hi - lo) * torch.rand(n, kin.n_dof, generator=g, dtype=kin.dtype)
+
+
+# ----------------------------------------------------------------------------- A* paths
+def assert_path_valid(occ: torch.Tensor, path: torch.Tensor, length: int, start: Any, goal: Any,
+                      cost: float) -> None:
+    """A planned grid path on the occupancy grid ``occ``: its first ``length`` cells run from
+    ``start`` to ``goal``, the rest is ``-1`` padding; consecutive cells are adjacent (8-connected),
+    every cell is free, no diagonal step cuts an occupied corner, and the steps (1 orthogonal,
+    sqrt 2 diagonal) sum to ``cost``."""
+    from realize.controllers.astar_search import SQRT2
+
+    p = path[:length].tolist()
+    assert p[0] == list(start) and p[-1] == list(goal)
+    assert (path[length:] == -1).all()
+    total = 0.0
+    for (r0, c0), (r1, c1) in zip(p[:-1], p[1:]):
+        dr, dc = r1 - r0, c1 - c0
+        assert max(abs(dr), abs(dc)) == 1, (p, (r0, c0), (r1, c1))
+        if dr and dc:
+            assert not occ[r0 + dr, c0] and not occ[r0, c0 + dc], "corner cut"
+            total += SQRT2
+        else:
+            total += 1.0
+    for r, c in p:
+        assert not occ[r, c]
+    assert total == pytest.approx(cost, abs=1e-9)
+
+
+# ----------------------------------------------------------------------------- rollouts in a fresh scene
+class StepCounter:
+    """Counts ``scene.step`` calls (the physics the rollout actually asked for); with
+    ``monkeypatch`` the scene gets its own ``step`` back when the test ends."""
+
+    def __init__(self, scene: BatchedScene, monkeypatch: pytest.MonkeyPatch | None = None):
+        self.calls = 0
+        inner = scene.step
+
+        def step() -> None:
+            self.calls += 1
+            inner()
+
+        if monkeypatch is not None:
+            monkeypatch.setattr(scene, "step", step)
+        else:
+            scene.step = step  # type: ignore[method-assign]
+
+
+def run_fresh(spec: RunSpec, Z: torch.Tensor, readback: Callable[[BatchedScene], dict[str, Any]],
+              record: bool = False, repeat: int = 1) -> list[dict[str, Any]]:
+    """Realize Z ``repeat`` times in one newly built scene of len(Z) copies: per rollout, its
+    result (``res``), the ``scene.step`` calls it made (``calls``) and ``readback(scene)`` (the
+    simulator's state right after it)."""
+    from realize.realization.rollout import PlanRealizer
+    from realize.scene import BatchedScene
+
+    out = []
+    with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
+        counter = StepCounter(scene)
+        realizer = PlanRealizer.from_spec(spec, None, scene)
+        for _ in range(repeat):
+            before = counter.calls
+            res = realizer.rollout(Z, record=record)
+            out.append(dict(res=res, calls=counter.calls - before, **readback(scene)))
+    return out
+
+
+def run_alone(spec: RunSpec, Z: torch.Tensor, readback: Callable[[BatchedScene], dict[str, Any]],
+              record: bool = True) -> list[dict[str, Any]]:
+    """Each row of Z realized on its own (N = 1), each in its own fresh scene: ``run_fresh``'s
+    dict of every row, in Z's order."""
+    return [run_fresh(spec, Z[i:i + 1], readback, record=record)[0] for i in range(len(Z))]
+
+
+# ----------------------------------------------------------------------------- worker faults
+def kill_on_rollout(victim: Callable[[list[int]], int | None], times: int,
+                    timeout_s: float = 300.0) -> threading.Thread:
+    """A started daemon thread that polls ``victim(killed)`` every 50 ms (``killed``: the pids it
+    has killed so far, in order) and SIGKILLs the pid it returns (None: nothing to kill yet),
+    until it has killed ``times`` times or ``timeout_s`` s have passed. ``victim`` says when the
+    worker under test is mid-rollout (from its log) and which process it is."""
+
+    def run() -> None:
+        killed: list[int] = []
+        deadline = time.monotonic() + timeout_s
+        while len(killed) < times and time.monotonic() < deadline:
+            pid = victim(killed)
+            if pid is not None:
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+            time.sleep(0.05)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t

@@ -8,16 +8,16 @@ from __future__ import annotations
 
 import math
 
+import networkx as nx
 import pytest
 import torch
 
-nx = pytest.importorskip("networkx")
-
-from realize.controllers.astar import AStarStatus, astar, astar_world  # noqa: E402
-from realize.controllers.astar_search import SQRT2  # noqa: E402
-from realize.controllers.grid_cells import components  # noqa: E402
-from realize.controllers.waypoints import path_to_waypoints  # noqa: E402
-from realize.controllers.occupancy import (  # noqa: E402
+from helpers import assert_path_valid
+from realize.controllers.astar import AStarStatus, astar, astar_world
+from realize.controllers.astar_search import SQRT2
+from realize.controllers.grid_cells import components
+from realize.controllers.waypoints import path_to_waypoints
+from realize.controllers.occupancy import (
     GridSpec,
     cell_in_grid,
     cell_to_world,
@@ -57,25 +57,6 @@ def oracle_cost(g, s, t) -> float:
         return nx.astar_path_length(g, s, t, heuristic=octile_h, weight="weight")
     except nx.NetworkXNoPath:
         return math.inf
-
-
-def assert_path_valid(occ: torch.Tensor, path: torch.Tensor, length: int, start, goal, cost: float):
-    """Consecutive cells adjacent, all free, corner rule held, endpoints right, cost sums up."""
-    p = path[:length].tolist()
-    assert p[0] == list(start) and p[-1] == list(goal)
-    assert (path[length:] == -1).all()
-    total = 0.0
-    for (r0, c0), (r1, c1) in zip(p[:-1], p[1:]):
-        dr, dc = r1 - r0, c1 - c0
-        assert max(abs(dr), abs(dc)) == 1, (p, (r0, c0), (r1, c1))
-        if dr and dc:
-            assert not occ[r0 + dr, c0] and not occ[r0, c0 + dc], "corner cut"
-            total += SQRT2
-        else:
-            total += 1.0
-    for r, c in p:
-        assert not occ[r, c]
-    assert total == pytest.approx(cost, abs=1e-9)
 
 
 def random_pairs(gen, n, h, w):

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import math
 
+import networkx as nx
 import pytest
 import torch
 
+from helpers import assert_path_valid
 from realize.controllers import astar_field, grid_cache
 from realize.controllers.astar import AStarStatus, astar, astar_world
 from realize.controllers.astar_search import SQRT2, _heuristic, _TIE, octile
@@ -41,20 +43,6 @@ def random_world_pairs(spec, n: int, seed: int):
     lo = torch.tensor(spec.origin)
     span = torch.tensor([spec.width, spec.height], dtype=torch.float32) * spec.resolution
     return lo + span * torch.rand(n, 2, generator=gen), lo + span * torch.rand(n, 2, generator=gen)
-
-
-def assert_path_valid(occ, path, length, start, goal, cost):
-    p = path[:length].tolist()
-    assert p[0] == list(start) and p[-1] == list(goal)
-    total = 0.0
-    for (r0, c0), (r1, c1) in zip(p[:-1], p[1:]):
-        dr, dc = r1 - r0, c1 - c0
-        assert max(abs(dr), abs(dc)) == 1
-        if dr and dc:
-            assert not occ[r0 + dr, c0] and not occ[r0, c0 + dc], "corner cut"
-        total += SQRT2 if (dr and dc) else 1.0
-    assert all(not occ[r, c] for r, c in p)
-    assert total == pytest.approx(cost, abs=1e-9)
 
 
 # ------------------------------------------------------------------ bit-identical rewrites
@@ -153,7 +141,6 @@ def test_field_matches_astar_on_scenes(variant):
 
 
 def test_field_costs_match_networkx_on_random_grids():
-    nx = pytest.importorskip("networkx")
     gen = torch.Generator().manual_seed(21)
     for _ in range(6):
         occ = torch.rand(20, 27, generator=gen) < 0.3

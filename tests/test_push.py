@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import torch
 
-from helpers import blas_batch_invariant, compose_config as _compose
+from helpers import blas_batch_invariant, compose_config as _compose, run_alone, run_fresh
 from realize.config import ConfigError
 from realize.tasks.goals import object_in_container
 from realize.realization.result import RolloutResult
@@ -58,26 +58,16 @@ def _readback(scene: BatchedScene) -> dict[str, torch.Tensor]:
     return dict(cube=scene.object_pose("cube"), speed=scene.object_velocity("cube")[:, :3].norm(dim=1), stick=stick)
 
 
-def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False, repeat: int = 1) -> list[dict[str, Any]]:
-    """Realize Z ``repeat`` times in one newly built scene of len(Z) copies."""
-    out = []
-    with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
-        realizer = PlanRealizer.from_spec(spec, None, scene)
-        for _ in range(repeat):
-            res = realizer.rollout(Z, record=record)
-            out.append(dict(res=res, **_readback(scene)))
-    return out
-
-
 @pytest.fixture(scope="module")
 def batch(spec: RunSpec) -> list[dict[str, Any]]:
     """VECTORS realized together, twice in the same scene."""
-    return run_fresh(spec, VECTORS, record=True, repeat=2)
+    return run_fresh(spec, VECTORS, _readback, record=True, repeat=2)
 
 
 @pytest.fixture(scope="module")
 def alone(spec: RunSpec) -> list[dict[str, Any]]:
-    return [run_fresh(spec, VECTORS[i:i + 1], record=True)[0] for i in range(len(VECTORS))]
+    """Each of VECTORS realized on its own (N = 1)."""
+    return run_alone(spec, VECTORS, _readback)
 
 
 def test_push_towards_the_box_drops_the_cube_in(spec: RunSpec, batch: list[dict[str, Any]]) -> None:
@@ -132,7 +122,7 @@ def test_reset_is_deterministic(spec: RunSpec, batch: list[dict[str, Any]]) -> N
     reset takes the cubes and the sticks out of the PhysX scene and back in, in an order that
     gives every body its own internal handle back (the cube resting on the stick is solved in
     the same order; out-and-in one by one was measured ~1 cm apart after a push)."""
-    fresh = run_fresh(spec, VECTORS, record=True)[0]
+    fresh = run_fresh(spec, VECTORS, _readback, record=True)[0]
     first = batch[0]
     for other in (batch[1], fresh):
         r1, r2 = first["res"], other["res"]
@@ -214,7 +204,7 @@ def test_carry_or_push_both_skeletons_realize_and_carry_is_cheaper() -> None:
                        ("carry", ["move_to(StickSide)", "grasp(cube, Cube_g)", "place(cube, Cube_p)"])):
         d["task"]["plan"] = plan
         spec = build_run_spec(d)
-        res = run_fresh(spec, torch.tensor([CARRY_OR_PUSH], dtype=torch.float64))[0]
+        res = run_fresh(spec, torch.tensor([CARRY_OR_PUSH], dtype=torch.float64), _readback)[0]
         assert res["res"].feasible.tolist() == [True], (name, res["res"].failure)
         assert object_in_container(res["cube"][:, :3], res["speed"], spec.geometry, "box").item()
         cost[name] = float(res["res"].cost[0])

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 
 import pytest
+import pytorch_kinematics as pk
 import torch
 
 from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import known_robots, load_robot_spec
 from helpers import full_qpos, random_q
 
-pk = pytest.importorskip("pytorch_kinematics")
 F64 = torch.float64
 N = 1000
 TOL = 1e-9

@@ -28,7 +28,8 @@ import pytest
 import torch
 import yaml
 
-from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, blas_batch_invariant, compose_config
+from helpers import (FAR_SIDE, GOOD, SEED_TASK, SIDE, StepCounter, blas_batch_invariant, compose_config, run_alone,
+                     run_fresh)
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
@@ -68,43 +69,21 @@ def task_variant(spec: RunSpec, base: dict[str, Any], name: str, **changes: Any)
     return build_task(d, spec.geometry, name)
 
 
-class StepCounter:
-    """Counts ``scene.step`` calls (the physics the rollout actually asked for); with
-    ``monkeypatch`` the scene gets its own ``step`` back when the test ends."""
-
-    def __init__(self, scene: BatchedScene, monkeypatch: pytest.MonkeyPatch | None = None):
-        self.calls = 0
-        inner = scene.step
-
-        def step() -> None:
-            self.calls += 1
-            inner()
-
-        if monkeypatch is not None:
-            monkeypatch.setattr(scene, "step", step)
-        else:
-            scene.step = step  # type: ignore[method-assign]
-
-
-def run_fresh(spec: RunSpec, Z: torch.Tensor, record: bool = False) -> dict[str, Any]:
-    """Realize Z in a newly built scene of len(Z) copies; result plus simulator read-backs."""
-    with BatchedScene(len(Z), spec.geometry_cfg, spec.sim) as scene:
-        counter = StepCounter(scene)
-        realizer = PlanRealizer.from_spec(spec, None, scene)
-        res = realizer.rollout(Z, record=record)
-        return dict(res=res, calls=counter.calls, cube=scene.object_pose("cube"), base=scene.base_pose())
+def _readback(scene: BatchedScene) -> dict[str, torch.Tensor]:
+    """The cube's and the base's poses, read from the simulator."""
+    return dict(cube=scene.object_pose("cube"), base=scene.base_pose())
 
 
 @pytest.fixture(scope="module")
 def alone(spec: RunSpec) -> list[dict[str, Any]]:
     """Each of VECTORS realized on its own (N = 1)."""
-    return [run_fresh(spec, VECTORS[i:i + 1], record=True) for i in range(len(VECTORS))]
+    return run_alone(spec, VECTORS, _readback)
 
 
 @pytest.fixture(scope="module")
 def batch(spec: RunSpec) -> dict[str, Any]:
     """VECTORS realized together (N = 3) in a fresh scene."""
-    return run_fresh(spec, VECTORS, record=True)
+    return run_fresh(spec, VECTORS, _readback, record=True)[0]
 
 
 @pytest.fixture(scope="module")
@@ -220,7 +199,7 @@ def test_batched_equals_per_sample(alone: list[dict[str, Any]], batch: dict[str,
 
 
 def test_same_seed_same_numbers(spec: RunSpec, batch: dict[str, Any]) -> None:
-    again = run_fresh(spec, VECTORS, record=True)
+    again = run_fresh(spec, VECTORS, _readback, record=True)[0]
     r1, r2 = batch["res"], again["res"]
     for name in ("cost", "feasible", "action_success", "goal", "steps", "progress", "distance",
                  "traj_t", "traj_base", "traj_ee", "traj_objects"):

@@ -22,12 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("trimesh")
-
-from realize.robot.spec import load_robot_spec  # noqa: E402
-from realize.robot.sphere_file import load_spheres  # noqa: E402
-from realize.robot.sphere_fit import Sphere, collision_links, coverage, fit_spheres, link_geometry  # noqa: E402
-from realize.robot.urdf import source_urdf  # noqa: E402
+from realize.robot.spec import load_robot_spec
+from realize.robot.sphere_file import load_spheres
+from realize.robot.sphere_fit import Sphere, collision_links, coverage, fit_spheres, link_geometry
+from realize.robot.urdf import source_urdf
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -1,8 +1,14 @@
-"""The package's shape, checked from its source text: module size, import cycles, backend branches.
+"""The package's shape, checked from its source text: module size, import cycles, backend branches;
+and the tests' own: a broken install fails them instead of skipping them.
 
 Import cycles are found on the import statements of every module in ``realize/`` and ``envs/``
 (read with ``ast``, so ``if TYPE_CHECKING:`` and function-local imports count too), as a
 directed graph whose strongly connected components must all be single modules (networkx).
+
+Skips are found the same way in every file under ``tests/``: a ``pytest.skip(...)`` or
+``pytest.importorskip(...)`` call, ``skip`` / ``importorskip`` imported from pytest, or an
+``except ImportError`` clause (a missing package made a branch) is an error unless it is one of
+``ALLOWED_SKIPS``, the skips on the machine (its OS, a CUDA device) rather than the install.
 """
 
 from __future__ import annotations
@@ -158,3 +164,72 @@ def test_scene_task_ids_agree_with_envs() -> None:
     from realize.world.geometry import VARIANTS
 
     assert all(task_id(v) == envs.env_id_for(v) for v in VARIANTS)
+
+
+# ------------------------------------------------------------------------------ tests fail on a broken install
+TESTS = REPO / "tests"
+# the only skips a test may take, (file under tests/, reason): the machine's, never the install's
+# (every dependency, the ray extra and a Vulkan driver come with scripts/setup.sh)
+ALLOWED_SKIPS = {
+    ("test_gpu_backend.py", "the library is checked on Linux only"),
+    ("test_gpu_check.py", "a CUDA device is here: the check runs instead of refusing"),
+}
+SKIP_NAMES = {"skip", "importorskip"}
+IMPORT_ERRORS = {"ImportError", "ModuleNotFoundError"}
+
+
+def _caught(handler: ast.ExceptHandler) -> set[str]:
+    """The exception names an ``except`` clause catches (``except (A, b.B):`` -> {A, B})."""
+    kinds = handler.type.elts if isinstance(handler.type, ast.Tuple) else [handler.type]
+    return {k.attr if isinstance(k, ast.Attribute) else getattr(k, "id", "") for k in kinds if k is not None}
+
+
+def _skips(source: str) -> list[tuple[int, str, str]]:
+    """Every skip in a test file's source, in line order: (line, what, the skip's reason as
+    written, or "")."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in SKIP_NAMES
+                and isinstance(node.func.value, ast.Name) and node.func.value.id == "pytest"):
+            arg = node.args[0] if node.args else None
+            reason = arg.value if isinstance(arg, ast.Constant) else ast.unparse(arg) if arg is not None else ""
+            found.append((node.lineno, f"pytest.{node.func.attr}", str(reason)))
+        elif isinstance(node, ast.ImportFrom) and node.module == "pytest":
+            found += [(node.lineno, f"from pytest import {a.name}", "") for a in node.names if a.name in SKIP_NAMES]
+        elif isinstance(node, ast.ExceptHandler) and _caught(node) & IMPORT_ERRORS:
+            found.append((node.lineno, "except " + "/".join(sorted(_caught(node) & IMPORT_ERRORS)), ""))
+    return sorted(found)
+
+
+def _test_skips() -> list[tuple[str, int, str, str]]:
+    """``_skips`` of every Python file under tests/: (file relative to tests/, line, what, reason)."""
+    return [(p.relative_to(TESTS).as_posix(), line, what, reason) for p in sorted(TESTS.rglob("*.py"))
+            for line, what, reason in _skips(p.read_text())]
+
+
+def test_skip_finder_sees_every_form() -> None:
+    """The finder on a made-up test file holding each form once (an unrelated except beside)."""
+    src = """import pytest
+from pytest import importorskip
+nx = pytest.importorskip("networkx")
+try:
+    import ray
+except (ModuleNotFoundError, KeyError):
+    ray = None
+def test_x():
+    pytest.skip(f"no device: {ray}")
+"""
+    assert _skips(src) == [(2, "from pytest import importorskip", ""), (3, "pytest.importorskip", "networkx"),
+                           (6, "except ModuleNotFoundError", ""), (9, "pytest.skip", "f'no device: {ray}'")]
+
+
+def test_tests_fail_instead_of_skipping_on_a_broken_install() -> None:
+    """A missing dependency, a missing Vulkan device or an ImportError in the project itself must
+    fail a test: the only skips are the allowed ones (the machine's OS, a CUDA device)."""
+    found = _test_skips()
+    bad = [f"tests/{f}:{line} {what}" + (f"({reason!r})" if reason else "") for f, line, what, reason in found
+           if (f, reason) not in ALLOWED_SKIPS]
+    assert not bad, ("skips of a broken install (import the package, let a missing one fail; or add a skip on "
+                     "the machine to ALLOWED_SKIPS):\n" + "\n".join(bad))
+    stale = ALLOWED_SKIPS - {(f, reason) for f, _, _, reason in found}
+    assert not stale, f"ALLOWED_SKIPS names skips no test takes: {sorted(stale)}"

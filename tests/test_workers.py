@@ -11,17 +11,16 @@ behind (the process table is read).
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 import pytest
 import torch
 
-from helpers import KEYS, RUN16, compose_config, realize_cli, realize_result
+from helpers import KEYS, RUN16, compose_config, kill_on_rollout, realize_cli, realize_result
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.app.run_config import build_run_spec
@@ -172,23 +171,16 @@ def _pool(tmp_path: Path):
     return spec, ProcessPool(spec, [spec.task], group_shards(shards, 2), physx_threads=0, log_dir=tmp_path), Z
 
 
-def _kill_on_rollout(pool, log: Path, times: int) -> threading.Thread:
-    """Kill worker 1 with SIGKILL each time it starts a rollout, ``times`` times."""
+def _worker_1_in_rollout(pool, log: Path) -> Callable[[list[int]], int | None]:
+    """``kill_on_rollout``'s victim: worker 1's pid each time its log (``log``: one file for the
+    worker and its replacements) shows one more rollout started than it was killed."""
 
-    def run() -> None:
-        killed = 0
-        deadline = time.monotonic() + 300
-        while killed < times and time.monotonic() < deadline:
-            if log.is_file() and log.read_text().count("rollout of") > killed:
-                pid = pool.slots[1].pid
-                if pid is not None:
-                    os.kill(pid, signal.SIGKILL)
-                    killed += 1
-            time.sleep(0.05)
+    def victim(killed: list[int]) -> int | None:
+        if log.is_file() and log.read_text().count("rollout of") > len(killed):
+            return pool.slots[1].pid
+        return None
 
-    t = threading.Thread(target=run, daemon=True)
-    t.start()
-    return t
+    return victim
 
 
 def test_a_killed_worker_is_replaced_and_its_rows_rerun(tmp_path: Path) -> None:
@@ -197,7 +189,7 @@ def test_a_killed_worker_is_replaced_and_its_rows_rerun(tmp_path: Path) -> None:
     spec, pool, Z = _pool(tmp_path / "logs")
     with pool:
         first_pids = pool.pids()
-        killer = _kill_on_rollout(pool, tmp_path / "logs" / "worker-1.log", times=1)
+        killer = kill_on_rollout(_worker_1_in_rollout(pool, tmp_path / "logs" / "worker-1.log"), times=1)
         res = pool.rollout(None, Z)
         killer.join(timeout=5)
         assert pool.pids()[0] == first_pids[0] and pool.pids()[1] != first_pids[1]
@@ -212,7 +204,7 @@ def test_a_killed_worker_is_replaced_and_its_rows_rerun(tmp_path: Path) -> None:
 def test_a_worker_that_dies_twice_stops_the_run_with_its_name(tmp_path: Path) -> None:
     _, pool, Z = _pool(tmp_path / "logs")
     with pool:
-        _kill_on_rollout(pool, tmp_path / "logs" / "worker-1.log", times=2)
+        kill_on_rollout(_worker_1_in_rollout(pool, tmp_path / "logs" / "worker-1.log"), times=2)
         with pytest.raises(WorkerFailed) as e:
             pool.rollout(None, Z)
     msg = str(e.value)

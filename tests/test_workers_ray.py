@@ -9,7 +9,8 @@ replaced and its rows re-run to the same result; a second kill stops with an err
 worker, Ray's cause and its last log lines; closing the pool, Ctrl-C (exit 130), SIGTERM (exit
 143) and a killed run leave no Ray process (raylet, gcs_server, agents, actors: the process
 table is read); a run on a running cluster puts its actors there and leaves the cluster
-running. The Ray tests are skipped where Ray is not installed (``pip install -e '.[ray]'``).
+running. Ray is part of the install (``scripts/setup.sh`` installs the ``ray`` extra): without it
+this file fails instead of skipping.
 """
 
 from __future__ import annotations
@@ -21,25 +22,21 @@ import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 import pytest
+import ray
 import torch
 
-from helpers import KEYS, RUN16, compose_config, realize_cli, realize_result
+from helpers import KEYS, RUN16, compose_config, kill_on_rollout, realize_cli, realize_result
 from realize.app.run_config import build_run_spec
 from realize.app.workers.errors import WorkerFailed
 
 from realize.config import ConfigError
 from realize.app.workers.ray_pool import actor_cpus, ray_cores
 
-try:
-    import ray
-except ImportError:  # pragma: no cover - setup.sh installs the ray extra
-    ray = None
-needs_ray = pytest.mark.skipif(ray is None, reason="Ray is not installed (pip install -e '.[ray]')")
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -112,7 +109,6 @@ def _realize(*args: str, run_dir: Path, timeout: float = 600, env: dict[str, str
     return realize_result(*args, run_dir=run_dir, timeout=timeout, env=env), time.perf_counter() - t0
 
 
-@needs_ray
 @pytest.mark.slow  # two runs, about 100 s on a 2-core machine
 def test_two_ray_actors_give_the_numbers_of_one_process(tmp_path: Path) -> None:
     one, t1 = _realize(*RUN16, "workers.n=1", run_dir=tmp_path / "one")
@@ -148,25 +144,19 @@ def _log_of(slot) -> Path:
     return Path(slot.info["logs"][0])  # the actor's stderr: its log lines
 
 
-def _kill_on_rollout(pool, times: int) -> threading.Thread:
-    """SIGKILL the process of worker 1 once it starts a rollout, ``times`` actors in a row."""
+def _actor_1_in_rollout(pool) -> Callable[[list[int]], int | None]:
+    """``kill_on_rollout``'s victim: the pid of worker 1's actor once its own log shows a
+    rollout started, each actor once (a replacement actor has a new pid and a new log)."""
 
-    def run() -> None:
-        killed: set[int] = set()
-        deadline = time.monotonic() + 300
-        while len(killed) < times and time.monotonic() < deadline:
-            s = pool.slots[1] if len(pool.slots) > 1 else None
-            if s is not None and s.info and s.info["pid"] not in killed and "rollout of" in _log_of(s).read_text():
-                os.kill(s.info["pid"], signal.SIGKILL)
-                killed.add(s.info["pid"])
-            time.sleep(0.05)
+    def victim(killed: list[int]) -> int | None:
+        s = pool.slots[1] if len(pool.slots) > 1 else None
+        if s is not None and s.info and s.info["pid"] not in killed and "rollout of" in _log_of(s).read_text():
+            return s.info["pid"]
+        return None
 
-    t = threading.Thread(target=run, daemon=True)
-    t.start()
-    return t
+    return victim
 
 
-@needs_ray
 def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and_batch) -> None:
     _, pool, Z, _ = pool_and_batch
     pids = pool.pids()
@@ -177,13 +167,12 @@ def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and
     assert pool.pids() == pids  # a bug is not re-run
 
 
-@needs_ray
 def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
     from realize.app.workers.pool import InProcessPool, run_shards
 
     spec, pool, Z, _ = pool_and_batch
     first = pool.pids()
-    killer = _kill_on_rollout(pool, times=1)
+    killer = kill_on_rollout(_actor_1_in_rollout(pool), times=1)
     res = pool.rollout(None, Z)
     killer.join(timeout=5)
     assert pool.pids()[0] == first[0] and pool.pids()[1] != first[1]
@@ -195,10 +184,9 @@ def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
     assert res.failure == want.failure
 
 
-@needs_ray
 def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> None:
     _, pool, Z, _ = pool_and_batch
-    _kill_on_rollout(pool, times=2)
+    kill_on_rollout(_actor_1_in_rollout(pool), times=2)
     with pytest.raises(WorkerFailed) as e:
         pool.rollout(None, Z)
     msg = str(e.value)
@@ -208,7 +196,6 @@ def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> No
     assert "rollout of 4 rows" in msg.split("last log lines:")[1]  # the actor's own log, read on its node
 
 
-@needs_ray
 def test_close_leaves_no_ray_process(pool_and_batch) -> None:
     _, pool, _, (before, tree) = pool_and_batch
     assert {"raylet", "gcs_server"} <= _ray_processes(tree), tree
@@ -237,7 +224,6 @@ def _start_run(tmp_path: Path) -> tuple[subprocess.Popen, dict[int, str], str]:
     return p, tree, session
 
 
-@needs_ray
 @pytest.mark.parametrize("how", ["ctrl-c", pytest.param("sigterm", marks=pytest.mark.slow)])
 def test_ctrl_c_stops_every_ray_process(tmp_path: Path, how: str) -> None:
     p, tree, session = _start_run(tmp_path)
@@ -254,7 +240,6 @@ def test_ctrl_c_stops_every_ray_process(tmp_path: Path, how: str) -> None:
     assert res["interrupted"] is True
 
 
-@needs_ray
 @pytest.mark.slow
 def test_ray_processes_do_not_outlive_a_killed_run(tmp_path: Path) -> None:
     p, tree, session = _start_run(tmp_path)
@@ -297,7 +282,6 @@ def _stop_cluster(temp_dir: str) -> None:
             return
 
 
-@needs_ray
 @pytest.mark.slow  # starts a cluster with `ray start --head`: about 35 s
 def test_a_run_on_a_running_cluster_leaves_the_cluster_running(tmp_path: Path) -> None:
     """``ray start --head`` (as the README says), then a run with ``workers.ray_address``: its
