@@ -25,10 +25,11 @@ another object stays above its top), and the robot's start xy by up to ``robot_x
 (``robot_xy`` (N, 2); ``object_xy`` {name: (N, 2)}, ``object_yaw`` {name: (N,)}, copies in
 ``BatchedScene`` order): the perturbed worlds of ``realize.tasks.worlds``.
 
-**Success conditions** (``evaluate``): the ``goal`` kwarg, written as a task config's goal
-(``realize.tasks.goal_spec``; ``base_in: exit`` is the exit rectangle); by default every object
-that starts on a table rests on table 2 (its centre above table 2's top footprint, within 2 cm
-of resting height, nearly still) AND the base is inside the exit rectangle.
+**Success conditions** (``evaluate``): the ``goal`` kwarg, a task config's goal
+(``realize.tasks.goal_spec``) whose ``base_in`` names one of the ``goal_regions`` (a task's
+regions; default: the default task's ``Exit``). By default every object that starts on a table
+rests on table 2 (within 2 cm of resting height above its top, nearly still) AND the base is in
+``Exit``: the goal of ``configs/task/pick_place.yaml``, whose region is the one exit.
 """
 
 from __future__ import annotations
@@ -50,16 +51,15 @@ from mani_skill.utils.structs.types import SceneConfig, SimConfig
 
 from envs import robot_agent
 from envs.tiling import TILE_MARGIN, gpu_memory_config, tile_offsets, yaw_pitch_quat
+from envs.goal_check import EXIT, default_goal_regions, goal_info
 from realize.config import ConfigError
 from realize.world.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
 from realize.world.objects import FLOOR, SceneObject
 from realize.tasks.goal_spec import GoalSpec, goal_from_dict
-from realize.tasks.goals import base_in_rectangle, goal_reached, object_in_container, object_on_table
-from realize.tasks.regions import Box as RegionBox
+from realize.tasks.regions import Region
 from realize.robot.spec import RobotSpec
 
 ENV_ID = "RealizePickPlace-v1"
-EXIT = "exit"  # what a task goal's base_in names: the geometry's exit rectangle
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizePickPlaceEnv(BaseEnv):
     SUPPORTED_ROBOTS: list = []  # any robot of configs/robot/ (or a RobotSpec): set per instance
@@ -88,19 +88,18 @@ class RealizePickPlaceEnv(BaseEnv):
     @classmethod
     def default_goal(cls, geometry: SceneGeometry) -> dict[str, Any]:
         """The goal ``gym.make`` evaluates without a ``goal`` kwarg: every object resting on a
-        table at the start ends on table 2 (else the last table), and the base in the exit."""
+        table at the start ends on table 2 (else the last table), and the base in ``Exit``."""
         goal_table = "table2" if any(t.name == "table2" for t in geometry.tables) else geometry.tables[-1].name
         tables = {t.name for t in geometry.tables}
         return {"rests_on": {o.name: goal_table for o in geometry.objects if o.rests_on in tables}, "base_in": EXIT}
 
     def checked_goal(self, goal: GoalSpec | Mapping[str, Any] | None) -> GoalSpec:
         """The ``goal`` kwarg as a checked ``GoalSpec`` (``realize.tasks.goal_spec``; its
-        ``base_in`` may only name ``exit``)."""
+        ``base_in`` names one of ``self.goal_regions``)."""
         if isinstance(goal, GoalSpec):
             return goal
         d = self.default_goal(self.geometry) if goal is None else goal
-        regions = {EXIT: RegionBox(low=tuple(self.geometry.exit_low), high=tuple(self.geometry.exit_high))}
-        return goal_from_dict(d, self.geometry, regions, source=self.TASK_ID)
+        return goal_from_dict(d, self.geometry, self.goal_regions, source=self.TASK_ID)
 
     def __init__(
         self,
@@ -115,6 +114,7 @@ class RealizePickPlaceEnv(BaseEnv):
         object_xy_noise: float = 0.02,
         object_yaw_noise: float = math.pi / 4,
         goal: GoalSpec | Mapping[str, Any] | None = None,
+        goal_regions: Mapping[str, Region] | None = None,
         robot_xy_noise: float = 0.05,
         robot_uids: str = "fetch_omni",
         robot: RobotSpec | Mapping[str, Any] | None = None,
@@ -132,6 +132,7 @@ class RealizePickPlaceEnv(BaseEnv):
         self.offsets = tile_offsets(n_tiles, self.geometry.extent)
         self.object_xy_noise = object_xy_noise
         self.object_yaw_noise = object_yaw_noise
+        self.goal_regions = dict(default_goal_regions() if goal_regions is None else goal_regions)
         self.goal: GoalSpec = self.checked_goal(goal)
         self.robot_xy_noise = robot_xy_noise
         self._sim_settings = dict(
@@ -361,25 +362,14 @@ class RealizePickPlaceEnv(BaseEnv):
 
     def evaluate(self) -> dict:
         """The task's goal (the ``goal`` kwarg, default ``default_goal``) for every copy (tiled
-        or not), by ``realize.tasks.goals.goal_reached``; ``exit`` names the exit rectangle."""
+        or not), by ``realize.tasks.goals.goal_reached``, in the ``goal_regions``."""
         g = self.geometry
         pos, speed = self.object_states()
         start = torch.tensor(g.robot_start[:2], dtype=torch.float32, device=self.device)
         names = list(self.agents[0].robot.active_joints_map.keys())
         xy = [names.index(j) for j in self.robot_spec.base.joints[:2]]
         base = torch.cat([a.robot.get_qpos()[:, xy] for a in self.agents]) + start
-        regions = {EXIT: RegionBox(low=tuple(g.exit_low), high=tuple(g.exit_high))}
-        ok, _ = goal_reached(self.goal, g, regions, pos, speed, base)
-        info = dict(success=ok)
-        for name, table in self.goal.on.items():
-            k = g.object_index(name)
-            info[f"{name}_on_{table}"] = object_on_table(pos[:, k], speed[:, k], g, name, table)
-        for name, box in self.goal.inside.items():
-            k = g.object_index(name)
-            info[f"{name}_in_{box}"] = object_in_container(pos[:, k], speed[:, k], g, box)
-        if self.goal.base_in is not None:
-            info["base_in_exit"] = base_in_rectangle(base, g.exit_low, g.exit_high)
-        return info
+        return goal_info(self.goal, g, self.goal_regions, pos, speed, base)
 
     def _get_obs_extra(self, info: dict):
         return dict()

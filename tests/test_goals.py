@@ -13,7 +13,9 @@ import math
 
 import pytest
 import torch
+import yaml
 
+from realize.paths import CONFIG_DIR
 from realize.world.geometry import ContainerCfg, GeometryCfg, build_geometry
 from realize.tasks.goals import (
     HEIGHT_TOL,
@@ -90,11 +92,13 @@ def test_pick_place_evaluate_reads_every_copy() -> None:
         scene.reset(seed=0)
         start = list(g.object("cube").position)
         scene.place_object("cube", torch.tensor([start, _on_top(g, "table2"), _on_top(g, "table2")]))
-        exit_xy = [(g.exit_low[0] + g.exit_high[0]) / 2, (g.exit_low[1] + g.exit_high[1]) / 2]
-        _teleport_base(scene, 2, exit_xy)
+        # the exit is the default task's region (configs/task/pick_place.yaml), not the scene's
+        task = yaml.safe_load((CONFIG_DIR / "task" / "pick_place.yaml").read_text())
+        low, high = task["params"]["Exit"]["low"], task["params"]["Exit"]["high"]
+        _teleport_base(scene, 2, [(low[0] + high[0]) / 2, (low[1] + high[1]) / 2])
         info = scene.u.evaluate()
     assert info["cube_on_table2"].tolist() == [False, True, True]
-    assert info["base_in_exit"].tolist() == [False, False, True]
+    assert info["base_in_Exit"].tolist() == [False, False, True]
     assert info["success"].tolist() == [False, False, True]
 
 

@@ -80,7 +80,7 @@ def test_ellipses_are_two_sigma_of_the_sampling_distribution(synthetic, summary)
 def test_scene_and_samples(synthetic, summary):
     paths = set(summary["entity_paths"])
     static = set(summary["static_paths"])
-    for p in ("/world/obstacles", "/world/obstacles_padded", "/world/exit", "/world/objects", "/world/robot_start"):
+    for p in ("/world/obstacles", "/world/obstacles_padded", "/world/objects", "/world/robot_start"):
         assert p in static
     for name in synthetic.layout.names:
         assert f"/world/regions/{name}" in static

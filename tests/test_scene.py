@@ -112,7 +112,7 @@ def test_renders_a_frame_to_png(tmp_path) -> None:
         (None, dict(sim_freq=100, control_freq=30), 1, "sim.sim_freq"),
         (None, dict(backend="tpu"), 1, "sim.backend"),
         (None, dict(cpu_workers=-1), 1, "sim.cpu_workers = -1 is invalid: must be >= 0"),
-        (dict(exit_low=(2.0, 0.0), exit_high=(1.0, 1.0)), {}, 1, "scene.exit_low"),
+        (dict(bounds_low=(2.0, 0.0), bounds_high=(1.0, 1.0)), {}, 1, "scene.bounds_low"),
         (dict(wrong_key=1), {}, 1, "wrong_key"),
     ],
 )

@@ -95,8 +95,8 @@ def test_worker_count_and_threads() -> None:
         worker_count(WorkersSettings(n=3), 2, True, cores=8)
     with pytest.raises(ConfigError, match="GPU backend holds every copy"):
         worker_count(WorkersSettings(n=2), 4, False, cores=8)
-    assert physx_threads(auto, 2, cores=2) == 0 and physx_threads(auto, 2, cores=8) == 4
-    assert physx_threads(auto, 1, cores=8) is None and physx_threads(WorkersSettings(physx_threads=3), 2, 2) == 3
+    assert physx_threads(None, 2, cores=2) == 0 and physx_threads(None, 2, cores=8) == 4
+    assert physx_threads(None, 1, cores=8) is None and physx_threads(3, 2, 2) == 3  # sim.cpu_workers=3
 
 
 def test_config_edge_refuses_more_workers_than_shards() -> None:

@@ -71,7 +71,7 @@ log = logging.getLogger("realize")
 PoolSource = Callable[[RunSpec, Sequence[Any], Path], RolloutPool]
 
 # overrides a resumed run accepts (everything else comes from the run's saved config)
-RESUME_ALLOWED_PREFIXES = ("resume", "logging", "workers", "hydra.", "validation")
+RESUME_ALLOWED_PREFIXES = ("resume", "logging", "workers", "hydra.", "validation", "sim.cpu_workers")
 
 
 @dataclass
@@ -105,14 +105,13 @@ def plain_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     return d
 
 
-RESUME_GROUPS = ("logging", "workers", "validation")
-
 
 def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequence[str]) -> dict[str, Any]:
     """The config a resumed run uses: the saved one, every group of it included, with only what
     ``overrides`` (the command line's) name of the ``logging``, ``workers`` and ``validation``
-    groups taken from ``current`` on top (none changes the search's numbers: a run may go on
-    with other workers, e.g. on another machine, and validate its candidates once it ends).
+    groups and ``sim.cpu_workers`` taken from ``current`` on top (none changes the search's
+    numbers: a run may go on with other workers and threads, e.g. on another machine, and
+    validate its candidates once it ends).
     ``validation=off`` replaces the saved group; ``workers.n=2`` changes that one key."""
     from realize.app.compose import parse_overrides
 
@@ -120,12 +119,12 @@ def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequenc
     if extra:
         raise ConfigError(
             f"resume: a resumed run uses its saved config; drop the override(s) {extra} "
-            "(only logging.*, workers.* and validation.* may change)"
+            "(only logging.*, workers.*, validation.* and sim.cpu_workers may change)"
         )
     base, cur = OmegaConf.create(dict(ckpt.config)), OmegaConf.create(dict(current))
     for o in parse_overrides([str(x) for x in overrides]):
         key = o.key_or_group
-        if key.split(".", 1)[0] in RESUME_GROUPS and not o.is_delete():
+        if not key.startswith(("resume", "hydra")) and not o.is_delete():  # (the others were refused)
             OmegaConf.update(base, key, OmegaConf.select(cur, key, throw_on_missing=False), merge=False,
                              force_add=True)
     cfg = OmegaConf.to_container(base, resolve=True)

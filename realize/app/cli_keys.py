@@ -17,6 +17,7 @@ from typing import Any
 
 from realize.config import ConfigError, closest
 from realize.paths import CONFIG_DIR
+from realize.run_dir.upgrade import RETIRED
 
 __all__ = ["check_override_keys", "closest"]
 
@@ -80,6 +81,9 @@ def check_override_keys(overrides: Sequence[Any], groups: Sequence[str]) -> None
         i, known = miss
         bad, where = ".".join(parts[: i + 1]), ".".join(parts[:i])
         text = o.input_line or o.key_or_group
+        instead = RETIRED.get((parts[0], parts[1])) if len(parts) == 2 else None
+        if instead is not None:
+            raise ConfigError(f"{text}: {bad} is not a config key any more: {instead}")
         near = closest(parts[i], known)
         what = "config group or key" if i == 0 else "key"
         if near:

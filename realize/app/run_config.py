@@ -40,6 +40,7 @@ from realize.config import ConfigError, Settings, as_mapping, check_unknown, set
 from realize.app.task_plans import (PlannerSettings, TaskOrigin, build_task_candidates, check_halving_budget,
                                 load_task_file)
 from realize.app.workers.settings import WorkersSettings, worker_count
+from realize.run_dir.upgrade import check_retired
 
 if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` starts fast
     from realize.world.geometry import GeometryCfg, SceneGeometry
@@ -242,6 +243,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
     check_unknown(d, list(TOP_LEVEL_KEYS), "config")
+    check_retired(d)  # a saved run's are dropped when it is read (realize.run_dir.upgrade)
     top = {k: v for k, v in d.items() if k not in GROUPS and k not in ("replan", "task_origin")}
     for k in ("resume", "task_file", "warm_start", "replan_from"):
         if top.get(k) is not None:

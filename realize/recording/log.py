@@ -8,7 +8,7 @@ What it does: ``RerunLogger`` writes a recording (no viewer needed) and, per CE 
 * scalars: best cost so far, best cost of the iteration, elite cost min/mean/max, share of
   successful samples, sample counts, evaluation time; and a text line with failure reasons;
 * through ``realize.recording.scene``, the top-down scene (the paper's Fig. 2: obstacles, regions,
-  exit, objects, start) once, and per iteration the sampled parameters, the base trajectories of all
+  objects, start) once, and per iteration the sampled parameters, the base trajectories of all
   samples coloured by success and the iteration's best plan;
 * through ``realize.recording.world3d`` (given the plan), the world in 3-D under ``/world3d``: its boxes,
   the robot's links, objects and current action along each iteration's best plan on the

@@ -3,7 +3,7 @@ iteration, the sampled parameters and the rollouts' trajectories.
 
 What it does (the paper's Fig. 2, in rerun):
 * :func:`log_static_scene`: obstacle footprints, padded obstacles (rounded rectangles, as the A*
-  grid inflates them), the exit box, the world bounds, the movable objects, the robot's start and the
+  grid inflates them), the world bounds, the movable objects, the robot's start and the
   parameter regions projected on the floor (also under each parameter's distribution view), and
   the y-flip that makes rerun's 2-D views show +y upwards;
 * :func:`log_world_samples`: every sample's parameters coloured by success, and the iteration's
@@ -89,17 +89,6 @@ def log_static_scene(
                 ),
                 static=True,
             )
-    rec.log(
-        entity(ENTITY_WORLD, "exit"),
-        rr.LineStrips2D(
-            [rectangle((np.add(g.exit_low, g.exit_high)) / 2, np.subtract(g.exit_high, g.exit_low) / 2)],
-            colors=[(120, 120, 200, 255)],
-            radii=0.01,
-            labels=["exit"],
-            draw_order=11.0,
-        ),
-        static=True,
-    )
     rec.log(
         entity(ENTITY_WORLD, "bounds"),
         rr.LineStrips2D(

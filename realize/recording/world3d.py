@@ -4,7 +4,7 @@ iteration's best plan, the samples and why they failed.
 What it does: ``Scene3D`` logs under ``/world3d`` (z up, metres, the copy's world frame)
 
 * once: every static box of the world (tables, wall, ramp, container walls; ``Boxes3D`` with
-  their yaw and pitch), the exit area, every movable object where it starts and the robot's link meshes
+  their yaw and pitch), every 2-D box parameter region as a floor patch (the exit), every movable object where it starts and the robot's link meshes
   (``realize.recording.robot``);
 * per CE iteration ``k``, when the rollout recorded trajectories: the best plan's robot (every
   link's pose from the recorded whole-body joints, ``RobotKinematics.link_poses``), its objects and
@@ -30,6 +30,7 @@ import rerun as rr
 from realize.tasks.frames import position_columns
 from realize.world.geometry import Box, SceneGeometry
 from realize.tasks.param_layout import ParamLayout
+from realize.tasks.regions import Box as RegionBox
 from realize.recording.paths import ENTITY_WORLD_3D, TIMELINE, param_path
 from realize.recording.robot import RobotLogger, robot_model
 from realize.tasks.topdown import BEST_RGB, to_numpy
@@ -43,7 +44,7 @@ __all__ = ["Scene3D", "ENTITY_3D", "STEP_TIMELINE", "STEP_STRIDE"]
 ENTITY_3D = ENTITY_WORLD_3D
 STEP_TIMELINE = "control_step"
 STEP_STRIDE = 100_000  # control_step = iteration * STEP_STRIDE + the step within the best plan
-_EXIT_RGB = (90, 170, 90, 120)
+_AREA_RGB = (90, 170, 90, 120)
 _SETTLE_S = 2.0  # s of a plan's frames shown after its counted steps (an object goal settles 1.5 s)
 
 
@@ -88,10 +89,12 @@ class Scene3D:
             centers=[b.center for b in boxes], half_sizes=[b.half_size for b in boxes],
             quaternions=[_box_quat_xyzw(b) for b in boxes], colors=[_rgba(b.color) for b in boxes],
             labels=[b.name for b in boxes], fill_mode=rr.components.FillMode.Solid), static=True)
-        (x0, y0), (x1, y1) = g.exit_low, g.exit_high
-        rec.log(f"{ENTITY_3D}/exit", rr.Boxes3D(centers=[[(x0 + x1) / 2, (y0 + y1) / 2, 0.005]],
-                                                half_sizes=[[(x1 - x0) / 2, (y1 - y0) / 2, 0.005]],
-                                                colors=[_EXIT_RGB], labels=["exit"]), static=True)
+        for name, region in self.layout.regions.items():  # a base's target area (the exit): a floor patch
+            if isinstance(region, RegionBox) and region.dim == 2:
+                (x0, y0), (x1, y1) = region.low, region.high
+                rec.log(param_path(f"{ENTITY_3D}/areas", name), rr.Boxes3D(
+                    centers=[[(x0 + x1) / 2, (y0 + y1) / 2, 0.005]], half_sizes=[[(x1 - x0) / 2, (y1 - y0) / 2, 0.005]],
+                    colors=[_AREA_RGB], labels=[name]), static=True)
         for o in g.objects:  # where each object starts (faint), and the best plan's object (solid)
             rgb = [int(round(255 * c)) for c in o.color[:3]]
             rec.log(f"{ENTITY_3D}/objects_start/{o.name}", rr.Boxes3D(

@@ -19,6 +19,7 @@ from typing import Any
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import CHECKPOINT_FILE
 from realize.run_dir.summaries import IterationSummary
+from realize.run_dir.upgrade import upgrade_config
 
 __all__ = ["CHECKPOINT_FORMAT", "Checkpoint", "CheckpointError", "save_checkpoint", "load_checkpoint"]
 
@@ -59,6 +60,7 @@ class Checkpoint:
         try:
             it = int(d["iteration"])
             ce_state, config, raw = d["ce_state"], d["config"], d["records"]
+            config = upgrade_config(config) if isinstance(config, dict) else config
             wall = float(d.get("wall_time_s", 0.0))
             segments = int(d.get("segments", 1))
         except (KeyError, TypeError, ValueError) as e:

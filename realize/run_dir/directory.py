@@ -57,6 +57,7 @@ from realize.run_dir.scene_files import (
     trajectory_iterations,
 )
 from realize.run_dir.summaries import JobStatusDoc
+from realize.run_dir.upgrade import upgrade_config
 
 __all__ = ["RunDir", "RunDirError", "BestPlan"]
 
@@ -142,7 +143,7 @@ class RunDir:
         cfg = d.get("config")
         if not isinstance(cfg, dict):
             cfg = (read_json(self.checkpoint_path) or {}).get("config")
-        return cfg if isinstance(cfg, dict) else None
+        return upgrade_config(cfg) if isinstance(cfg, dict) else None
 
     def best_plan(self) -> BestPlan:
         """The run's best plan (``RunDirError`` if ``result.json`` is missing, unreadable, or
@@ -164,7 +165,7 @@ class RunDir:
             raise RunDirError(f"{path}: malformed ({type(e).__name__}: {e})") from None
         n_envs = doc.n_envs if doc.n_envs is not None else (d["config"].get("ce") or {}).get("n_envs")
         return BestPlan(
-            run_dir=self.path, config=d["config"], best_z=[float(v) for v in z], columns=doc.columns,
+            run_dir=self.path, config=upgrade_config(d["config"]), best_z=[float(v) for v in z], columns=doc.columns,
             best_cost=doc.best_cost,
             feasible=doc.feasible, n_envs=int(n_envs) if isinstance(n_envs, (int, float)) else None,
             backend=doc.backend, status=doc.status, leader=None if doc.halving is None else doc.halving.leader,

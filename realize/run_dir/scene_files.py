@@ -30,6 +30,7 @@ from realize.world.objects import SceneObject
 from realize.tasks.param_layout import ParamLayout
 from realize.run_dir.jsonio import atomic_write_json, atomic_write_npz, read_json
 from realize.run_dir.names import SCENE_FILE, TRAJ_PATTERN, trajectories_name
+from realize.run_dir.upgrade import upgrade_config
 
 __all__ = [
     "SceneInfo",
@@ -99,7 +100,7 @@ def geometry_from_dict(d: Mapping[str, Any]) -> SceneGeometry:
 def scene_from_config(cfg: Mapping[str, Any]) -> SceneInfo | None:
     """The scene of a run's resolved config, or ``None`` if the config does not describe one."""
     try:
-        geometry = build_geometry(GeometryCfg.from_mapping(cfg["scene"]))
+        geometry = build_geometry(GeometryCfg.from_mapping(upgrade_config(cfg)["scene"]))
         params = cfg.get("task", {}).get("params")
         if cfg.get("task_file"):
             import yaml

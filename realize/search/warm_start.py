@@ -37,6 +37,7 @@ from realize.tasks.frames import WORLD, move_points, object_frames
 from realize.world.geometry import GeometryCfg, SceneGeometry, build_geometry
 from realize.run_dir.directory import RunDir
 from realize.tasks.spec import TaskSpec
+from realize.run_dir.upgrade import upgrade_config
 
 __all__ = ["WarmStart", "load_warm_start", "merge_modes"]
 
@@ -109,7 +110,7 @@ def _columns_of(d: dict[str, Any], run_dir: str, task: TaskSpec) -> list[int]:
 
 
 def _old_frames(d: dict[str, Any], run_dir: str) -> dict[str, Any]:
-    scene = (d.get("config") or {}).get("scene")
+    scene = upgrade_config(d.get("config") or {}).get("scene")
     if not isinstance(scene, dict):
         raise _err(run_dir, "result.json has no resolved scene config to tell where its objects stood")
     try:

@@ -1,6 +1,6 @@
 """World geometry of the realize scenes: the config (``GeometryCfg``) and the boxes it makes.
 
-What it does: describes the world (tables, walls, ramps and open boxes by name, the exit area,
+What it does: describes the world (tables, walls, ramps and open boxes by name, the world bounds,
 the movable objects by name (``objects``, ``realize.world.objects``) and the robot's start pose) in one copy's local frame, checks it (``GeometryCfg`` is a
 ``realize.config.Settings``: bad values raise ``ConfigError`` naming the key), and offers the
 obstacle boxes that the controllers (A* occupancy grid, fabric collision terms), the figures and
@@ -74,8 +74,6 @@ class SceneGeometry:
     objects: tuple[SceneObject, ...]  # movable, by name, in config order
     robot_start: tuple[float, float, float]  # x, y, yaw
     robot_radius: float
-    exit_low: tuple[float, float]
-    exit_high: tuple[float, float]
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
     containers: tuple[Box, ...] = ()  # open boxes, outer bounds (their floor and walls are in extras)
@@ -214,8 +212,9 @@ class GeometryCfg(Settings):
     ManiSkill task that builds the world (``push``: ``RealizeMoveAndPush-v1``; the others
     ``RealizePickPlace-v1``) and labels results; every fixture listed is built whatever it says.
     Single-value bounds are field metadata; how the parts fit together (objects on their
-    supports, nothing under the robot's start, bounds and exit non-empty, unique names) is
-    ``check``, which builds the boxes once to see."""
+    supports, nothing under the robot's start, bounds non-empty, unique names) is
+    ``check``, which builds the boxes once to see. Where the robot must end (the exit) is not
+    the world's: it is the task's goal region (``goal.base_in``, e.g. ``task.params.Exit``)."""
 
     config_key: ClassVar[str] = "scene"
 
@@ -233,10 +232,8 @@ class GeometryCfg(Settings):
     containers: list[ContainerCfg] = setting(default_factory=list)
     robot_start: tuple[float, float, float] = setting((-2.0, 0.0, 0.0))
     robot_radius: float = setting(0.32, gt=0)
-    exit_low: tuple[float, float] = setting((1.8, -0.4))
-    exit_high: tuple[float, float] = setting((2.6, 0.4))
-    bounds_low: tuple[float, float] = setting((-3.0, -3.0))
-    bounds_high: tuple[float, float] = setting((3.2, 3.0))
+    bounds_low: tuple[float, float] = setting((-3.0, -2.5))
+    bounds_high: tuple[float, float] = setting((3.0, 2.5))
 
     def check(self, where: str) -> None:
         _assemble(self, where)
@@ -314,9 +311,6 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         raise _err(where, "bounds_low", (bl, bh), "bounds_low must be < bounds_high in x and y")
     if not (bl[0] + cfg.robot_radius <= sx <= bh[0] - cfg.robot_radius and bl[1] + cfg.robot_radius <= sy <= bh[1] - cfg.robot_radius):
         raise _err(where, "robot_start", cfg.robot_start, f"must lie inside the bounds {bl}..{bh}")
-    el, eh = cfg.exit_low, cfg.exit_high
-    if not (el[0] < eh[0] and el[1] < eh[1]):
-        raise _err(where, "exit_low", (el, eh), "the exit rectangle is empty (exit_low must be < exit_high)")
     return SceneGeometry(
         variant=cfg.variant,
         tables=tuple(tables),
@@ -324,8 +318,6 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         objects=objects,
         robot_start=(sx, sy, syaw),
         robot_radius=cfg.robot_radius,
-        exit_low=tuple(el),
-        exit_high=tuple(eh),
         bounds_low=tuple(bl),
         bounds_high=tuple(bh),
         containers=tuple(containers),

@@ -110,7 +110,7 @@ def _process_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], 
         return InProcessPool(spec, tasks, shards)
     from realize.app.workers.process import ProcessPool
 
-    return ProcessPool(spec, tasks, group_shards(shards, n), physx_threads=physx_threads(ws, n, cores),
+    return ProcessPool(spec, tasks, group_shards(shards, n), physx_threads=physx_threads(spec.sim.cpu_workers, n, cores),
                        log_dir=log_dir, start_timeout_s=ws.start_timeout_s)
 
 
@@ -130,7 +130,7 @@ def _ray_pool(spec: RunSpec, tasks: list[TaskSpec], shards: list[RowBlock], log_
         ray_release()
         return InProcessPool(spec, tasks, shards)
     # the pool undoes ray_cores when it closes (or fails to open)
-    return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(ws, n, cores))
+    return RayPool(spec, tasks, group_shards(shards, n), ws, physx_threads=physx_threads(spec.sim.cpu_workers, n, cores))
 
 
 _OPENERS = {"process": _process_pool, "ray": _ray_pool}  # by workers.backend

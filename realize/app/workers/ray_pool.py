@@ -244,7 +244,7 @@ class RayPool:
         try:
             nodes = [float(nd["Resources"].get("CPU", 0)) for nd in _alive_nodes(ray)]
             self.cpus = actor_cpus(nodes, self.n_workers, max(1, physx_threads or 0))
-            threads = physx_threads if settings.physx_threads is not None else (int(self.cpus) if self.cpus >= 2 else 0)
+            threads = physx_threads if spec.sim.cpu_workers is not None else (int(self.cpus) if self.cpus >= 2 else 0)
             if self.cpus < 1:
                 log.warning("%d Ray actors on %d CPU(s): %.2f CPU each (oversubscribed)", self.n_workers,
                             int(sum(nodes)), self.cpus)

@@ -31,7 +31,6 @@ class WorkersSettings(Settings):
     n: int | None = setting(None, ge=1)  # None: min(cores, shards)
     backend: str = setting("process", choices=WORKER_BACKENDS)
     ray_address: str | None = None  # ray backend: "auto", "host:port", or None (start a local Ray instance)
-    physx_threads: int | None = setting(None, ge=0)  # per worker; None: the cores / n (0 with one core)
     start_timeout_s: float = setting(600.0, gt=0)  # a worker that has not built its scenes by then fails
 
 
@@ -53,12 +52,12 @@ def worker_count(settings: WorkersSettings, n_shards: int, shardable: bool, core
     return max(1, min(cores, n_shards))
 
 
-def physx_threads(settings: WorkersSettings, n_workers: int, cores: int) -> int | None:
-    """PhysX CPU threads of one worker: the setting, else (several workers) its share of the
-    cores: 0, PhysX on the calling thread, when the share is one core or less; None for one
-    worker (the scene's own rule, ``sim.cpu_workers``)."""
-    if settings.physx_threads is not None:
-        return settings.physx_threads
+def physx_threads(cpu_workers: int | None, n_workers: int, cores: int) -> int | None:
+    """PhysX CPU threads of one worker's scenes: ``sim.cpu_workers`` (the one key for them),
+    else (several workers) its share of the cores: 0, PhysX on the calling thread, when the
+    share is one core or less; None for one worker (the scene's own rule)."""
+    if cpu_workers is not None:
+        return cpu_workers
     if n_workers == 1:
         return None
     share = cores // n_workers

@@ -34,7 +34,7 @@ __all__ = ["ShardWorker", "worker_spec"]
 
 def worker_spec(spec: RunSpec, physx_threads: int | None) -> RunSpec:
     """``spec`` with ``physx_threads`` PhysX threads per scene (None, or ``sim.cpu_workers``
-    set by the user: as it is)."""
+    set by the user, the one key for them: as it is)."""
     if physx_threads is None or spec.sim.cpu_workers is not None:
         return spec
     out = copy.copy(spec)

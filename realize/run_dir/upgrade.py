@@ -1,0 +1,56 @@
+"""Configs that earlier versions saved, read as today's: keys retired since are moved or dropped.
+
+What it does: ``upgrade_config(cfg)`` returns a run's saved config (``result.json``'s or
+``checkpoint.json``'s ``config``) as today's code reads it, so that a run recorded before still
+replays, resumes, validates and draws. ``RETIRED`` names each retired key (group, key) with
+what replaced it:
+  * ``scene.exit_low`` / ``scene.exit_high`` (retired 2026-12-04): a second copy of the exit,
+    which the task's goal region (``task.params.Exit``, named by ``goal.base_in``) gives; dropped;
+  * ``workers.physx_threads`` (retired 2026-12-04): a second key for PhysX threads; its value
+    moves to ``sim.cpu_workers`` where that is unset.
+``check_retired(cfg)`` refuses a retired key in a new config in one line, saying what replaced it
+(``realize.app.run_config`` calls it before anything is read).
+What it doesn't: upgrade anything but configs (``scene.json``'s reader,
+``realize.run_dir.scene_files``, skips fields it does not know by itself).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from realize.config import ConfigError
+
+__all__ = ["RETIRED", "upgrade_config", "check_retired"]
+
+_EXIT = "the exit is the task's goal region (task.params.Exit, named by task.goal.base_in)"
+RETIRED: dict[tuple[str, str], str] = {
+    ("scene", "exit_low"): _EXIT,
+    ("scene", "exit_high"): _EXIT,
+    ("workers", "physx_threads"): "sim.cpu_workers is the one key for PhysX threads (per worker; null: its share "
+                                  "of the cores)",
+}
+
+
+def upgrade_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """``cfg`` (a saved run config) without its retired keys; the rest as it was."""
+    out = dict(cfg)
+    for (group, key) in RETIRED:
+        node = out.get(group)
+        if not isinstance(node, Mapping) or key not in node:
+            continue
+        node = dict(node)
+        value = node.pop(key)
+        out[group] = node
+        sim = out.get("sim")
+        if (group, key) == ("workers", "physx_threads") and isinstance(sim, Mapping) and sim.get("cpu_workers") is None:
+            out["sim"] = dict(sim, cpu_workers=value)
+    return out
+
+
+def check_retired(cfg: Mapping[str, Any]) -> None:
+    """Refuse a retired key of a new config (``ConfigError``, one line naming it)."""
+    for (group, key), instead in RETIRED.items():
+        node = cfg.get(group)
+        if isinstance(node, Mapping) and key in node:
+            raise ConfigError(f"{group}.{key}: not a config key any more: {instead}; delete it")
