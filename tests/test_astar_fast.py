@@ -29,7 +29,9 @@ from realize.world.geometry import GeometryCfg, WallCfg, build_geometry
 
 
 def scene_grid(variant: str):
-    geo = build_geometry(GeometryCfg(variant=variant, walls=[WallCfg()] if variant == "wall" else []))
+    # wider than configs/scene/ (y +-2.5), so that the test's routes behind the tables exist
+    geo = build_geometry(GeometryCfg(variant=variant, walls=[WallCfg()] if variant == "wall" else [],
+                                     bounds_low=(-3.0, -3.0), bounds_high=(3.2, 3.0)))
     spec = grid_from_bounds((geo.bounds_low[0], geo.bounds_low[1], geo.bounds_high[0], geo.bounds_high[1]), 0.05)
     obs = geo.obstacles
     occ = occupancy_from_boxes(spec, torch.tensor([b.center[:2] for b in obs]),

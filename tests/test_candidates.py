@@ -49,7 +49,7 @@ def fake(base: list[float], feasible: list[bool] | None = None, progress: list[f
     return evaluate
 
 
-CE = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=3)
+CE = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=3, patience=None)  # no stopping rule: halving's budget
 
 
 # ---------------------------------------------------------------- the budget rule
@@ -186,7 +186,7 @@ def test_ties_keep_planner_order_and_stop_callback() -> None:
 def test_converged_candidates_leave_their_iterations_to_the_winner() -> None:
     """Only the loser converges (after its first iteration); the budget rule gives the winner the
     nominal final iterations plus the loser's unspent round iterations: the run spends T in all."""
-    cfg = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=0, converge_std=0.5, min_std=0.01)
+    cfg = CEConfig(n_envs=16, n_elite=4, iterations=10, seed=0, converge_std=0.5, min_std=0.01, patience=None)
     # the winner: parameters over +-100, a cost that ignores them (seeded noise in [1, 1.1)), so its
     # elites are random draws and their std (~58 at first) stays far above converge_std
     wide = CandidateSpec("wide", ParamLayout({"P0": Box([-100.0] * 2, [100.0] * 2)}), n_actions=3)

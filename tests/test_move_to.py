@@ -34,6 +34,7 @@ TABLE1 = {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25}
 TABLE2 = {"type": "annulus", "center": [0.0, -1.2], "r_min": 0.75, "r_max": 1.25}
 FIT_MARGIN = 0.05  # m: goals where the robot's disc clears every footprint by this much
 TRACK_SLACK = 0.02  # m: the simulated base may cut a corner of the A* path by this much
+WIDE = dict(bounds_low=(-3.0, -3.0), bounds_high=(3.2, 3.0))  # the world bounds of these tests (wall_scene)
 N_PLANS = 12
 
 
@@ -74,7 +75,9 @@ def sample_goals(spec: dict, n: int, geometry: SceneGeometry, zone: str, g: torc
 
 @pytest.fixture(scope="module")
 def wall_scene():
-    scene = BatchedScene(N_PLANS, geometry=dict(variant="wall", walls=[{}]), sim=SimSettings(backend="cpu"))
+    # wider than configs/scene/ (y +-2.5): with 1 m between a table and the world's edge, the
+    # padded grid has no way behind the tables, and these tests drive there
+    scene = BatchedScene(N_PLANS, geometry=dict(variant="wall", walls=[{}], **WIDE), sim=SimSettings(backend="cpu"))
     yield scene
     scene.close()
 

@@ -108,12 +108,12 @@ class Placement:
 class ValidationSettings(Settings):
     """Hydra ``validation`` group: validate the run's candidates after its search
     (``realize.app.candidate_validation``, called by ``realize.app.run``); ``replicas: 0`` turns it off.
-    The group's file (``configs/validation/default.yaml``) turns it on with 64; the dataclass
-    default, off, is what a config without the group gets (a run recorded before it existed)."""
+    The defaults are the group file's (``configs/validation/default.yaml``, test_defaults.py); a
+    config without the group (a run recorded before it existed) gets ``replicas: 0``."""
 
     config_key = "validation"
 
-    replicas: int = setting(0, ge=0)  # R replicas of the task's perturbations per candidate (0: off)
+    replicas: int = setting(64, ge=0)  # R replicas of the task's perturbations per candidate (0: off)
     candidates: int = setting(5, ge=1)  # K cheapest distinct feasible samples of the last iterations
     min_success: float = setting(0.9, ge=0, le=1)  # return the cheapest whose 95 % lower bound reaches this
     iterations: int = setting(3, ge=1)  # the last iterations the candidates come from
@@ -317,5 +317,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         budget=budget,
         warm_start=keys.warm_start,
         replan=replan,
-        validation=ValidationSettings.from_mapping(d.get("validation")),
+        validation=ValidationSettings.from_mapping(d.get("validation", {"replicas": 0})),
     )

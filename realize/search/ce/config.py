@@ -61,7 +61,8 @@ class CEConfig(Settings):
     by their success share over the worlds first, then by ``risk`` of their successful worlds'
     costs: ``"mean"``, or ``"cvar"`` (the mean of the worst ``cvar_alpha`` share of them).
 
-    Speed levers (off by default: the paper's algorithm; the Hydra group ``levers`` turns them on):
+    Speed levers (on by default, as the default Hydra group ``levers=all`` has them;
+    ``levers=exact``, or ``prune=False, patience=None``, is the paper's algorithm exactly):
     ``prune`` lets the rollout stop a row that can no longer be among the batch's ``n_elite``
     cheapest feasible rows (``realize.realization.pruning``; within a rollout every other row is
     bit-identical, though a reused scene's later rollouts may drift a little: README "Speed
@@ -99,8 +100,8 @@ class CEConfig(Settings):
     risk: str = setting("mean", choices=RISKS, help="robust search: a sample's cost over its successful worlds")
     cvar_alpha: float = setting(0.25, gt=0, le=1, help="risk=cvar: the share of worst successful worlds averaged")
     # speed levers (Hydra group ``levers``; all off is the seed paper's algorithm, bit for bit)
-    prune: bool = setting(False, help="stop a row once it can no longer be among the batch's best feasible rows")
-    patience: int | None = setting(None, ge=1, help="stopping rule: iterations looked back over (null = off)")
+    prune: bool = setting(True, help="stop a row once it can no longer be among the batch's best feasible rows")
+    patience: int | None = setting(2, ge=1, help="stopping rule: iterations looked back over (null = off)")
     min_improvement: float = setting(0.03, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
 
     def check(self, where: str) -> None:

@@ -1,0 +1,129 @@
+"""One source for each default: the composed default config (``configs/``, no overrides) and the
+config dataclasses agree on every leaf both give, and what was given twice is given once.
+
+Every leaf of a group's YAML that its dataclass also defaults (nested settings, named entries and
+lists of entries included) must be equal; a leaf only the YAML gives, or only the dataclass, has
+one source already. Retired keys (``realize.run_dir.upgrade``) are refused in new configs and
+dropped from saved ones; the exit is the task's region only; PhysX threads have one key."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from realize.app.compose import compose_config
+from realize.app.run_config import LoggingSettings, ValidationSettings, _TopLevel, build_run_spec
+from realize.app.replan import ReplanSettings
+from realize.app.workers.settings import WorkersSettings
+from realize.config import ConfigError
+from realize.paths import CONFIG_DIR
+from realize.realization.config import RolloutConfig
+from realize.run_dir.upgrade import RETIRED, upgrade_config
+from realize.scene.settings import SimSettings
+from realize.search.ce.config import CEConfig
+from realize.world.geometry import GeometryCfg
+
+DEFAULT = compose_config([])  # (device=auto is the CPU backend, also where CUDA is)
+GROUPS = {"sim": SimSettings, "controller": RolloutConfig, "ce": CEConfig, "logging": LoggingSettings,
+          "workers": WorkersSettings, "validation": ValidationSettings, "scene": GeometryCfg, "replan": ReplanSettings}
+
+
+def _leaves(x: Any, path: str = "") -> Iterator[tuple[str, Any]]:
+    if isinstance(x, dict):
+        for k, v in x.items():
+            yield from _leaves(v, f"{path}.{k}" if path else str(k))
+    elif isinstance(x, (list, tuple)) and x and all(isinstance(v, dict) for v in x):
+        for i, v in enumerate(x):
+            yield from _leaves(v, f"{path}[{i}]")
+    else:
+        yield path, x
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, (list, tuple)):
+        return [_plain(a) for a in v]
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return float(v)
+    return v
+
+
+def _dataclass_leaves(cls: type) -> dict[str, Any]:
+    return dict(_leaves(json.loads(json.dumps(dataclasses.asdict(cls()), default=str))))
+
+
+@pytest.mark.parametrize("group", list(GROUPS))
+def test_the_yaml_and_the_dataclass_agree_on_every_default(group: str) -> None:
+    yaml_leaves = dict(_leaves(DEFAULT[group]))
+    ours = _dataclass_leaves(GROUPS[group])
+    both = sorted(set(yaml_leaves) & set(ours))
+    assert both, f"{group}: no leaf in common"
+    drift = {k: (yaml_leaves[k], ours[k]) for k in both if _plain(yaml_leaves[k]) != _plain(ours[k])}
+    assert not drift, f"{group}: configs/ says (left) and {GROUPS[group].__name__} says (right): {drift}"
+
+
+def test_the_top_level_defaults_agree() -> None:
+    ours = dataclasses.asdict(_TopLevel())
+    drift = {k: (DEFAULT[k], v) for k, v in ours.items() if DEFAULT.get(k, v) != v}
+    assert not drift
+
+
+def test_the_exit_is_given_once_as_the_tasks_region() -> None:
+    for path in sorted((CONFIG_DIR / "scene").glob("*.yaml")):
+        assert "exit_" not in path.read_text(), f"{path.name} gives an exit: the task's region is the one"
+    spec = build_run_spec(DEFAULT)
+    assert spec.task.goal.base_in == "Exit" and not hasattr(spec.geometry, "exit_low")
+
+
+@pytest.mark.parametrize("group, key", list(RETIRED))
+def test_a_retired_key_is_refused_in_one_line(group: str, key: str) -> None:
+    with pytest.raises(ConfigError) as e:
+        build_run_spec(compose_config(["device=cpu", f"+{group}.{key}=1"]))
+    assert str(e.value).startswith(f"{group}.{key}: not a config key any more") and "\n" not in str(e.value)
+    with pytest.raises(ConfigError, match=f"{group}.{key} is not a config key any more"):
+        compose_config([f"{group}.{key}=1"])
+
+
+def test_a_saved_config_with_retired_keys_still_builds() -> None:
+    """What a run recorded before the keys retired saved: the exit twice, PhysX threads under workers."""
+    old = json.loads(json.dumps(DEFAULT))
+    old["scene"].update(exit_low=[1.8, -0.4], exit_high=[2.6, 0.4])
+    old["workers"]["physx_threads"] = 0
+    new = upgrade_config(old)
+    assert "exit_low" not in new["scene"] and "physx_threads" not in new["workers"]
+    assert new["sim"]["cpu_workers"] == 0  # the old key's value, under the one key
+    assert build_run_spec(new).sim.cpu_workers == 0
+
+
+def _settings_classes() -> list[type]:
+    from realize.config import Settings
+
+    out, todo = [], list(Settings.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        out.append(cls)
+        todo += cls.__subclasses__()
+    return out
+
+
+def test_every_config_key_is_read_somewhere() -> None:
+    """A settings field that no module reads would be a key that changes nothing: each one is
+    named (``.key`` or ``"key"``) somewhere in ``realize/`` or ``envs/`` (unknown keys are refused
+    by the readers themselves)."""
+    import re
+
+    from helpers import REPO
+
+    sources = [p.read_text() for d in ("realize", "envs") for p in (REPO / d).rglob("*.py")]
+    unread = []
+    for cls in _settings_classes():
+        if not cls.__module__.startswith(("realize", "envs")):
+            continue  # a test's own settings class
+        for f in dataclasses.fields(cls):
+            pattern = re.compile(rf"\.{f.name}\b|[\"']{f.name}[\"']")
+            if not any(pattern.search(s) for s in sources):
+                unread.append(f"{cls.__name__}.{f.name}")
+    assert not unread, f"config keys nothing reads: {unread}"
