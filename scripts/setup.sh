@@ -58,7 +58,7 @@ fi
 # 3. the project
 say "installing realize (editable) with its test and ray extras"
 $PIP install -q -e ".[test,ray]" 2>&1 | grep -v -i "is ignored" || true
-"$VENV/bin/python" -c 'import realize, envs, mani_skill, sapien, hydra, rerun, ray' \
+"$VENV/bin/python" -c 'import realize, envs, mani_skill, sapien, hydra, rerun, ray, optuna, hydra_plugins.hydra_optuna_sweeper' \
   || { echo "[setup] error: the package install failed (see pip output above)" >&2; exit 1; }
 
 # 4. Vulkan for SAPIEN

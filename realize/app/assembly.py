@@ -85,6 +85,7 @@ class RunOutcome:
     iterations_done: int
     wall_time_s: float
     exit_code: int = 0
+    objective: float = math.inf  # what a sweep minimizes (realize.app.objective; result.json: objective)
 
     @property
     def interrupted(self) -> bool:
@@ -330,10 +331,24 @@ class _Assembly:
             self.validation_s = time.perf_counter() - t_validation
         outcome = RunOutcome(run_dir, status, feasible, report.state.best_cost if feasible else math.inf, n_done,
                              self.clock.wall(), exit_code)
+        if status == "done":
+            outcome.objective = self._objective()
         if complete:
             print(f"realize: {run_dir} was already complete; nothing changed", flush=True)
         self._print(outcome, report)
         return outcome
+
+    def _objective(self) -> float:
+        """``realize.app.objective`` of the finished run, also written into result.json."""
+        from realize.app.objective import run_objective
+
+        spec, d = self.spec, self.rd.result_json() or {}
+        if "objective" in d:  # a resumed complete run keeps its record
+            return float(d["objective"])
+        horizon = round(spec.rollout.max_time_s * spec.sim.control_freq) + float(spec.task.final_cost)
+        value = run_objective(d, horizon)
+        self.rd.add_to_result("objective", value)
+        return value
 
     def _validate(self) -> None:
         """``validation``: the run's candidates under the task's perturbations, into result.json
@@ -370,7 +385,7 @@ class _Assembly:
             hist, rrd = HISTORY_FILE, spec.logging.rrd
         early = ""
         if o.status == "done" and not spec.halving and o.iterations_done < spec.ce.iterations:
-            early = " (converged: ce.patience / ce.converge_std)"
+            early = " (stopped early: ce.patience / ce.converge_std / ce.sample_budget)"
         print(
             f"realize: {o.status} after {o.iterations_done}/{spec.ce.iterations} CE iterations{early}; "
             f"best cost {cost}; feasible {o.feasible}; wall time {o.wall_time_s:.1f} s\n"

@@ -24,7 +24,7 @@ from hydra.errors import CompactHydraException
 from omegaconf import DictConfig
 
 from realize.app.cli_keys import check_override_keys
-from realize.app.compose import CONFIG_GROUPS, check_group_choices, compose_or_error, parse_overrides
+from realize.app.compose import CONFIG_GROUPS, check_group_choices, compose_or_error, override_values, parse_overrides
 from realize.config import ConfigError
 from realize.app.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
@@ -72,7 +72,7 @@ def preflight(args: list[str]) -> list[str]:
             has_run_dir = True
         if o.is_delete():
             continue
-        values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+        values = override_values(o)
         if key == "resume":
             for v in values:
                 if v in ("null", "None"):
@@ -125,7 +125,7 @@ def _hydra_task(cfg: DictConfig) -> Any:
         if multirun:
             raise KeyboardInterrupt  # stop the sweep, as a user's Ctrl-C means
         sys.exit(outcome.exit_code)
-    return {"feasible": outcome.feasible, "best_cost": outcome.best_cost, "run_dir": str(outcome.run_dir)}
+    return outcome.objective  # what a sweeper minimizes (hydra/sweeper=optuna; realize.app.objective)
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -65,8 +65,11 @@ def check_override_keys(overrides: Sequence[Any], groups: Sequence[str]) -> None
         if key.startswith("hydra") or o.is_add() or o.is_force_add() or o.package is not None:
             continue
         if key in groups:
-            value = next(iter(o.sweep_string_iterator())) if o.is_sweep_override() else o.get_value_element_as_str()
-            if not o.is_delete():
+            from realize.app.compose import override_values
+
+            values = override_values(o)
+            value = values[0] if values else None
+            if not o.is_delete() and value is not None:
                 choices.append(f"{key}={value}")
             continue
         keyed.append(o)

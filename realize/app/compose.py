@@ -22,10 +22,31 @@ from realize.config import ConfigError, did_you_mean
 from realize.paths import CONFIG_DIR
 
 __all__ = ["CONFIG_GROUPS", "compose_config", "apply_overrides", "set_key", "compose_or_error", "check_group_choices", "group_options",
-           "parse_overrides"]
+           "parse_overrides", "override_values", "register_resolvers"]
 
 CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation",
                  "experiment", "ablation", "levers")
+
+
+def _sqlite_in(directory: str, name: str) -> str:
+    """``${realize_sqlite:DIR,NAME}``: the SQLite URL of ``DIR/NAME``, ``DIR`` made first (an
+    Optuna study stored in a sweep directory that Hydra creates only when the first job starts)."""
+    from pathlib import Path
+
+    d = Path(str(directory)).resolve()
+    d.mkdir(parents=True, exist_ok=True)
+    return f"sqlite:///{d / str(name)}"
+
+
+def register_resolvers() -> None:
+    """The config's own resolvers (``realize_sqlite``); idempotent."""
+    from omegaconf import OmegaConf
+
+    if not OmegaConf.has_resolver("realize_sqlite"):
+        OmegaConf.register_new_resolver("realize_sqlite", _sqlite_in)
+
+
+register_resolvers()
 
 
 def group_options(group: str) -> list[str]:
@@ -48,13 +69,24 @@ def parse_overrides(overrides: Sequence[str]) -> list[Any]:
     return parsed
 
 
+def override_values(o: Any) -> list[str]:
+    """The values an override gives: one, a sweep's listed ones (``a,b``, ``range(3)``,
+    ``choice(a,b)``), or none for a range it cannot list (``interval(0.5, 1.0)``: an Optuna
+    sweeper's; each trial's value is checked when it starts)."""
+    if not o.is_sweep_override():
+        return [o.get_value_element_as_str()]
+    if o.is_interval_sweep():
+        return []
+    return list(o.sweep_string_iterator())
+
+
 def check_group_choices(parsed: Sequence[Any]) -> None:
     """``experiment=foo``, ``scene=nope``: one line listing the options (sweep values included)."""
     for o in parsed:
         key = o.key_or_group
         if o.is_delete() or key not in CONFIG_GROUPS or o.package is not None:
             continue
-        values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+        values = override_values(o)
         options = group_options(key)
         for v in values:
             if v not in options and v != "null":

@@ -7,10 +7,11 @@ them), composes each job's config and validates it (``realize.app.run_config.bui
 and a ``warm_start`` run's files: nothing is simulated). The first bad job is one ``ConfigError`` line naming its overrides, so
 ``realize -m ce.n_envs=20,abc`` ends with exit code 2 before job 0 runs. A sweep of more than
 ``MAX_JOBS`` jobs is checked value by value (each swept value once, the other sweeps at their
-first value) rather than job by job: every value is checked, combinations of them are not.
-What it doesn't: check sweeps whose values it cannot list (an Optuna sweeper's ``interval(...)``
-ranges: each trial is checked when it starts), run a job, or replace the per-job checks in
-``realize.app.assembly`` (which stay).
+first value) rather than job by job: every value is checked, combinations of them are not. An
+Optuna sweeper's ``interval(a, b)`` is checked at its two ends, so a search space that admits
+invalid trials (``ce.n_elite`` above ``ce.n_envs``) is refused before the study starts.
+What it doesn't: check the values between an interval's ends (each trial is checked when it
+starts), run a job, or replace the per-job checks in ``realize.app.assembly`` (which stay).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import itertools
 from collections.abc import Sequence
 from typing import Any
 
-from realize.app.compose import parse_overrides
+from realize.app.compose import override_values, parse_overrides
 from realize.config import ConfigError
 
 __all__ = ["check_sweep", "sweep_jobs", "MAX_JOBS"]
@@ -28,8 +29,18 @@ MAX_JOBS = 64  # more jobs than this: each swept value is checked once (module d
 
 
 def _listable(o: Any) -> bool:
-    """A sweep override whose values can be listed (choice or range; not an interval)."""
-    return o.is_sweep_override() and not o.is_interval_sweep()
+    """A sweep override whose values can be checked: listed ones (choice, range) or an
+    interval's two ends (an Optuna sweeper's search space)."""
+    return o.is_sweep_override()
+
+
+def _values(o: Any) -> list[str]:
+    """The values to check of a sweep override: its listed ones, or an interval's ends."""
+    listed = override_values(o)
+    if listed or not o.is_interval_sweep():
+        return listed
+    v = o.value()
+    return [str(v.start), str(v.end)]
 
 
 def _sweeper_params(fixed: Sequence[str]) -> dict[str, str]:
@@ -56,14 +67,14 @@ def sweep_jobs(args: Sequence[str], max_jobs: int = MAX_JOBS) -> tuple[list[str]
     swept: dict[str, list[str]] = {}
     for o in parsed:
         if _listable(o):
-            swept[o.key_or_group] = [f"{o.input_line.split('=', 1)[0]}={v}" for v in o.sweep_string_iterator()]
+            swept[o.key_or_group] = [f"{o.input_line.split('=', 1)[0]}={v}" for v in _values(o)]
     named = {o.key_or_group for o in parsed}
     for key, values in _sweeper_params(fixed).items():
         if key in named:
             continue
         for o in parse_overrides([f"{key}={values}"]):
             if _listable(o):
-                swept[key] = [f"{key}={v}" for v in o.sweep_string_iterator()]
+                swept[key] = [f"{key}={v}" for v in _values(o)]
             elif not o.is_sweep_override():
                 fixed.append(o.input_line)
     axes = list(swept.values())

@@ -11,8 +11,8 @@ rebuilds it once more.
 
 Columns: ``job``, then one column per key the jobs override (``ce.n_envs``, ``seed``: the swept
 keys and any fixed override, each job's value; empty where a job lacks it), then ``overrides,
-status, error, feasible, best_cost, final_success, wall_time_s, iterations_done, interrupted,
-run_dir``. ``status`` is ``done``, ``failed`` or ``interrupted``; ``final_success`` is the share
+status, error, feasible, best_cost, objective, final_success, wall_time_s, iterations_done,
+interrupted, run_dir`` (``objective``: what the run returned to the sweeper, ``realize.app.objective``). ``status`` is ``done``, ``failed`` or ``interrupted``; ``final_success`` is the share
 of successful samples in the job's last iteration. Each update prints where it wrote the table.
 Both files are read and written through ``realize.run_dir.directory.RunDir`` (``JobStatusDoc``,
 ``ResultDoc``/``FailureDoc``).
@@ -47,6 +47,7 @@ COLUMNS = (
     "error",
     "feasible",
     "best_cost",
+    "objective",
     "final_success",
     "wall_time_s",
     "iterations_done",
@@ -82,13 +83,14 @@ def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
         "overrides": " ".join(st.overrides),
         "status": status,
         "error": _one_line(error) if error else "",
-        "feasible": "", "best_cost": "", "final_success": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
+        "feasible": "", "best_cost": "", "objective": "", "final_success": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
         "run_dir": rel,
     }
     if res is not None:
         row.update(
             feasible=res.feasible,
             best_cost=res.best_cost if math.isfinite(res.best_cost) else "",
+            objective=res.extra.get("objective", "") if isinstance(getattr(res, "extra", None), dict) else "",
             wall_time_s=round(res.wall_time_s, 3) if math.isfinite(res.wall_time_s) else "",
             iterations_done=res.iterations_done,
             interrupted=res.interrupted,

@@ -103,6 +103,9 @@ class CEConfig(Settings):
     prune: bool = setting(True, help="stop a row once it can no longer be among the batch's best feasible rows")
     patience: int | None = setting(2, ge=1, help="stopping rule: iterations looked back over (null = off)")
     min_improvement: float = setting(0.03, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
+    # a fixed budget (experiment=tune_ce): the search stops before an iteration whose copies would
+    # take the copies simulated past it; null: ce.iterations alone bounds the run
+    sample_budget: int | None = setting(None, ge=1, help="copies simulated at most (null = no budget)")
 
     def check(self, where: str) -> None:
         if self.schedule == "linear":
@@ -128,6 +131,9 @@ class CEConfig(Settings):
                 f"{where}.n_elite = {self.n_elite} is invalid: must be <= {where}.n_envs = {self.n_envs} "
                 "(elites are chosen among the samples of an iteration)"
             )
+        if self.sample_budget is not None and self.sample_budget < self.n_envs_at(0):
+            raise ConfigError(f"{where}.sample_budget = {self.sample_budget} is invalid: it must hold one iteration "
+                              f"({where}.n_envs = {self.n_envs_at(0)} copies)")
         if self.converge_std is not None and self.converge_std <= self.min_std:
             raise ConfigError(
                 f"{where}.converge_std ({self.converge_std}) must be > {where}.min_std ({self.min_std}), "
@@ -158,6 +164,12 @@ class CEConfig(Settings):
         if self.n_elite > n_min:
             raise ConfigError(f"{where}.n_elite = {self.n_elite} is invalid with {where}.replicas = {R}: only "
                               f"{n_min} samples ({where}.n_envs / {where}.replicas) in an iteration")
+
+    def within_budget(self, iteration: int) -> bool:
+        """Whether iteration ``iteration`` (0-based) fits ``sample_budget`` after the ones before it."""
+        if self.sample_budget is None:
+            return True
+        return sum(self.n_envs_at(i) for i in range(iteration + 1)) <= self.sample_budget
 
     def samples_at(self, iteration: int) -> int:
         """Samples drawn at ``iteration``: the copies ``n_envs_at(iteration)`` over ``replicas``

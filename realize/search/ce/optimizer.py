@@ -146,7 +146,8 @@ class CrossEntropyOptimizer:
 
     @property
     def done(self) -> bool:
-        return self._state.iteration >= self.config.iterations or self._state.converged
+        s = self._state
+        return s.iteration >= self.config.iterations or s.converged or not self.config.within_budget(s.iteration)
 
     def ask(self) -> Batch | None:
         """The batch of the current iteration (``Z`` on ``self.device``), ``None`` once done.
