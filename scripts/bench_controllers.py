@@ -35,6 +35,7 @@ import torch
 import yaml
 
 from realize.world.geometry import GeometryCfg, build_geometry
+from realize.robot.spec import DEFAULT_ROBOT, load_robot_spec
 from realize.controllers.astar import astar_world
 from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
 from realize.controllers.pid import pid_init, pid_step
@@ -94,7 +95,7 @@ def bench_astar_pid(n: int, reps: int, cfg: RolloutConfig, dt: float) -> tuple[f
     obs = geometry.obstacles
     occ = occupancy_from_boxes(
         grid, torch.tensor([b.center[:2] for b in obs]), torch.tensor([b.footprint_half_size() for b in obs]),
-        torch.tensor([b.yaw for b in obs]), padding=cfg.astar.padding + geometry.robot_radius)
+        torch.tensor([b.yaw for b in obs]), padding=cfg.astar.padding + load_robot_spec(DEFAULT_ROBOT).base.footprint_radius)
     task = _load_task(geometry)
     g = torch.Generator().manual_seed(0)
     goal = task.layout.regions["Table1"].sample_uniform(n, g, torch.float32)

@@ -145,13 +145,15 @@ class Parts:
     def build_astar(self, dev: Any) -> tuple[Any, Any]:
         """The seed world's grid and padded occupancy (on ``dev``), as the rollout builds them."""
         from realize.controllers.occupancy import grid_from_bounds, occupancy_from_boxes
+        from realize.robot.spec import DEFAULT_ROBOT, load_robot_spec
 
         t, g, a = self.torch, self.geometry, self.cfg.astar
+        footprint = load_robot_spec(DEFAULT_ROBOT).base.footprint_radius
         grid = grid_from_bounds((g.bounds_low[0], g.bounds_low[1], g.bounds_high[0], g.bounds_high[1]), a.resolution)
         obs = g.obstacles
         occ = occupancy_from_boxes(grid, t.tensor([b.center[:2] for b in obs]),
                                    t.tensor([list(b.footprint_half_size()) for b in obs]),
-                                   t.tensor([b.yaw for b in obs]), padding=a.padding + g.robot_radius)
+                                   t.tensor([b.yaw for b in obs]), padding=a.padding + footprint)
         return grid, occ.to(dev)
 
     build_field = build_astar

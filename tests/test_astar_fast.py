@@ -26,6 +26,9 @@ from realize.controllers.grid_cache import clear_grid_cache, grid_cached
 from realize.controllers.occupancy import cell_in_grid, cell_to_world, grid_from_bounds, occupancy_from_boxes, world_to_cell
 from realize.controllers.waypoints import _compact, path_to_waypoints
 from realize.world.geometry import GeometryCfg, WallCfg, build_geometry
+from realize.robot.spec import DEFAULT_ROBOT, load_robot_spec
+
+FOOTPRINT = load_robot_spec(DEFAULT_ROBOT).base.footprint_radius  # the default robot's (A* pads by it)
 
 
 def scene_grid(variant: str):
@@ -36,7 +39,7 @@ def scene_grid(variant: str):
     obs = geo.obstacles
     occ = occupancy_from_boxes(spec, torch.tensor([b.center[:2] for b in obs]),
                                torch.tensor([b.footprint_half_size() for b in obs]),
-                               torch.tensor([b.yaw for b in obs]), padding=0.2 + geo.robot_radius)
+                               torch.tensor([b.yaw for b in obs]), padding=0.2 + FOOTPRINT)
     return spec, occ
 
 

@@ -92,10 +92,24 @@ def test_a_saved_config_with_retired_keys_still_builds() -> None:
     old = json.loads(json.dumps(DEFAULT))
     old["scene"].update(exit_low=[1.8, -0.4], exit_high=[2.6, 0.4])
     old["workers"]["physx_threads"] = 0
+    old["scene"]["robot_radius"] = 0.3
+    del old["robot"]["base"]["footprint_radius"]  # (a robot spec from before it had one)
     new = upgrade_config(old)
     assert "exit_low" not in new["scene"] and "physx_threads" not in new["workers"]
     assert new["sim"]["cpu_workers"] == 0  # the old key's value, under the one key
-    assert build_run_spec(new).sim.cpu_workers == 0
+    assert "robot_radius" not in new["scene"] and new["robot"]["base"]["footprint_radius"] == 0.3
+    spec = build_run_spec(new)
+    assert spec.sim.cpu_workers == 0 and spec.robot.base.footprint_radius == 0.3
+
+
+def test_the_footprint_is_the_robots() -> None:
+    """A* pads obstacles by the robot spec's footprint, and the start is checked against it."""
+    for robot in ("fetch_omni", "mobile_panda"):
+        assert build_run_spec(compose_config([f"robot={robot}"])).robot.base.footprint_radius == 0.32
+    for path in sorted((CONFIG_DIR / "scene").glob("*.yaml")):
+        assert "robot_radius" not in path.read_text(), path.name
+    with pytest.raises(ConfigError, match=r"scene.robot_start .*footprint \(robot.base.footprint_radius = 1.2\)"):
+        build_run_spec(compose_config(["robot.base.footprint_radius=1.2"]))
 
 
 def _settings_classes() -> list[type]:

@@ -3,7 +3,7 @@ simulated ``wall`` scene on CPU, through the rollout itself (``PlanRealizer`` wi
 plans, trajectories recorded every control step).
 
 Goals are uniform points of the seed task's annuli around table 1 and table 2 where the robot
-fits (its footprint disc, ``scene.robot_radius``, clears every table and the wall by 5 cm;
+fits (its footprint disc, the robot spec's ``base.footprint_radius``, clears every table and the wall by 5 cm;
 annulus points closer than that, e.g. on the wall, are not places the base can be). Two zones:
 ``clear`` goals also lie outside A*'s padded obstacles (robot radius + ``controller.astar.padding``),
 ``padded`` goals lie inside the padding, where A* snaps the goal cell to the nearest free one
@@ -29,11 +29,13 @@ from realize.realization.rollout import PlanRealizer
 from realize.tasks.regions import Annulus
 from realize.scene import BatchedScene, SimSettings
 from realize.tasks.spec import task_from_dict
+from realize.robot.spec import DEFAULT_ROBOT, load_robot_spec
 
 TABLE1 = {"type": "annulus", "center": [0.0, 1.2], "r_min": 0.75, "r_max": 1.25}  # the seed task's
 TABLE2 = {"type": "annulus", "center": [0.0, -1.2], "r_min": 0.75, "r_max": 1.25}
 FIT_MARGIN = 0.05  # m: goals where the robot's disc clears every footprint by this much
 TRACK_SLACK = 0.02  # m: the simulated base may cut a corner of the A* path by this much
+FOOTPRINT = load_robot_spec(DEFAULT_ROBOT).base.footprint_radius  # m: the robot's disc (wall_scene: the default robot)
 WIDE = dict(bounds_low=(-3.0, -3.0), bounds_high=(3.2, 3.0))  # the world bounds of these tests (wall_scene)
 N_PLANS = 12
 
@@ -58,8 +60,8 @@ def sample_goals(spec: dict, n: int, geometry: SceneGeometry, zone: str, g: torc
     A*'s padding or inside the "padded" band), and where ``keep`` holds; by rejection."""
     region = Annulus(spec["center"], spec["r_min"], spec["r_max"])
     astar = RolloutConfig().astar
-    fit = geometry.robot_radius + FIT_MARGIN
-    pad = geometry.robot_radius + astar.padding + astar.resolution  # beyond every padded cell
+    fit = FOOTPRINT + FIT_MARGIN
+    pad = FOOTPRINT + astar.padding + astar.resolution  # beyond every padded cell
     out = torch.empty(0, 2)
     for _ in range(100):
         xy = region.sample_uniform(8 * n, g, torch.float32)
@@ -95,8 +97,8 @@ def _check_paths(res: RolloutResult, geometry: SceneGeometry) -> float:
     assert res.traj_base is not None and res.traj_base.shape[1] > 50
     clearance = footprint_clearance(res.traj_base, geometry).min(dim=-1).values  # (N, T)
     worst = float(clearance.min())
-    assert worst >= geometry.robot_radius - TRACK_SLACK, (
-        f"base came within {worst:.3f} m of an obstacle footprint (robot radius {geometry.robot_radius})")
+    assert worst >= FOOTPRINT - TRACK_SLACK, (
+        f"base came within {worst:.3f} m of an obstacle footprint (robot radius {FOOTPRINT})")
     return worst
 
 
@@ -133,7 +135,7 @@ def test_move_around_the_wall_between_the_tables(wall_scene: BatchedScene) -> No
     assert bool(cross.any(dim=1).all()), "every plan crosses from table 1's side to table 2's"
     x_at = base[:, 1:, 0][cross]
     beyond = (x_at - wall.center[0]).abs() - wall.half_size[0]
-    assert float(beyond.min()) >= geometry.robot_radius - TRACK_SLACK, float(beyond.min())
+    assert float(beyond.min()) >= FOOTPRINT - TRACK_SLACK, float(beyond.min())
     # and the detour is real: longer than the straight line between the two goals
     length = (base[:, 1:] - base[:, :-1]).norm(dim=-1).sum(dim=1)
     assert bool((length > (z2 - z1).norm(dim=1)).all())

@@ -255,6 +255,9 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     placement = resolve_placement(keys.device, sim, ce)
     geometry_cfg, geometry = _read_geometry(d.get("scene"))
     robot = read_robot(d.get("robot"))
+    from realize.world.geometry import check_robot_start
+
+    check_robot_start(geometry, robot.base.footprint_radius)
 
     config = dict(d)
     origin = TaskOrigin.from_json(d.get("task_origin"))

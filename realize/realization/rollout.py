@@ -361,11 +361,12 @@ class PlanRealizer:
         centers = torch.tensor([[b.center[0], b.center[1]] for b in obs], dtype=torch.float32)
         halves = torch.tensor([list(b.footprint_half_size()) for b in obs], dtype=torch.float32)
         yaws = torch.tensor([b.yaw for b in obs], dtype=torch.float32)
+        footprint = scene.robot.base.footprint_radius  # the robot spec's, not the world's
         self.occupancy = occupancy_from_boxes(self.grid, centers, halves, yaws,
-                                              padding=self.cfg.astar.padding + g.robot_radius).to(self.device)
+                                              padding=self.cfg.astar.padding + footprint).to(self.device)
         tight = self.cfg.astar.fallback_padding
         self.occupancy_tight = None if tight is None else occupancy_from_boxes(
-            self.grid, centers, halves, yaws, padding=tight + g.robot_radius).to(self.device)
+            self.grid, centers, halves, yaws, padding=tight + footprint).to(self.device)
         self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
                                       dtype=fabric_dtype, robot=scene.robot)
         self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}

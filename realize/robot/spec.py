@@ -64,6 +64,9 @@ class BaseSpec(Settings):
     damping: float = setting(1e4, gt=0)  # velocity drive
     force: float = setting(2e3, gt=0)
     speed_limit: float = setting(1.5, gt=0)  # |joint velocity target| bound of ManiSkill's controller
+    # the base's footprint as a disc (m): A* pads obstacles by it (plus controller.astar.padding),
+    # and the robot's start must keep it clear of every obstacle and inside the world's bounds
+    footprint_radius: float = setting(0.32, gt=0)
 
 
 @dataclass

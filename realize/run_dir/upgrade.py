@@ -7,7 +7,9 @@ what replaced it:
   * ``scene.exit_low`` / ``scene.exit_high`` (retired 2026-12-04): a second copy of the exit,
     which the task's goal region (``task.params.Exit``, named by ``goal.base_in``) gives; dropped;
   * ``workers.physx_threads`` (retired 2026-12-04): a second key for PhysX threads; its value
-    moves to ``sim.cpu_workers`` where that is unset.
+    moves to ``sim.cpu_workers`` where that is unset;
+  * ``scene.robot_radius`` (retired 2026-12-04): a robot's footprint, which is its spec's; its
+    value moves to ``robot.base.footprint_radius`` where that is unset.
 ``check_retired(cfg)`` refuses a retired key in a new config in one line, saying what replaced it
 (``realize.app.run_config`` calls it before anything is read).
 What it doesn't: upgrade anything but configs (``scene.json``'s reader,
@@ -29,7 +31,10 @@ RETIRED: dict[tuple[str, str], str] = {
     ("scene", "exit_high"): _EXIT,
     ("workers", "physx_threads"): "sim.cpu_workers is the one key for PhysX threads (per worker; null: its share "
                                   "of the cores)",
+    ("scene", "robot_radius"): "a robot's footprint is its spec's: robot.base.footprint_radius",
 }
+# where a retired key's value goes (group, key), if there is nowhere it is set already
+_MOVED = {("workers", "physx_threads"): ("sim", "cpu_workers"), ("scene", "robot_radius"): ("robot", "base", "footprint_radius")}
 
 
 def upgrade_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
@@ -42,10 +47,23 @@ def upgrade_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
         node = dict(node)
         value = node.pop(key)
         out[group] = node
-        sim = out.get("sim")
-        if (group, key) == ("workers", "physx_threads") and isinstance(sim, Mapping) and sim.get("cpu_workers") is None:
-            out["sim"] = dict(sim, cpu_workers=value)
+        to = _MOVED.get((group, key))
+        if to is not None:
+            _set_unset(out, to, value)
     return out
+
+
+def _set_unset(cfg: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
+    """``cfg[path] = value`` unless a value is there already (copies on the way: ``cfg`` only is changed)."""
+    node = cfg
+    for part in path[:-1]:
+        child = node.get(part)
+        if not isinstance(child, Mapping):
+            return  # no such group in this config: its reader's default stands
+        node[part] = dict(child)
+        node = node[part]
+    if node.get(path[-1]) is None:
+        node[path[-1]] = value
 
 
 def check_retired(cfg: Mapping[str, Any]) -> None:

@@ -32,7 +32,7 @@ import torch
 
 from realize.config import ConfigError
 from realize.robot.layout import BASE, BASE_XY, UPPER, YAW
-from realize.world.geometry import GeometryCfg, SceneGeometry
+from realize.world.geometry import GeometryCfg, SceneGeometry, build_geometry, check_robot_start
 from realize.scene.backends import open_backend
 from realize.scene.object_properties import ObjectProperties
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
@@ -90,6 +90,7 @@ class BatchedScene(ObjectProperties):
         self.options = env or EnvOptions()
         self.robot: RobotSpec = robot or load_robot_spec(DEFAULT_ROBOT)
         gcfg = geometry if isinstance(geometry, GeometryCfg) else GeometryCfg.from_mapping(geometry)
+        check_robot_start(build_geometry(gcfg), self.robot.base.footprint_radius)  # before any simulator
         self.n_envs = n_envs
         self._impl = open_backend(n_envs, gcfg, self.sim, self.options, self.robot)
         self.backend: str = self._impl.name

@@ -27,7 +27,7 @@ from realize.config import ConfigError, Settings, setting
 from realize.world.objects import FLOOR, ObjectCfg, SceneObject, place_objects
 
 __all__ = ["VARIANTS", "Box", "SceneGeometry", "TableCfg", "WallCfg", "RampCfg", "ContainerCfg", "GeometryCfg",
-           "build_geometry"]
+           "build_geometry", "check_robot_start"]
 
 VARIANTS = ("plain", "wall", "ramp", "push")
 
@@ -73,7 +73,6 @@ class SceneGeometry:
     extras: tuple[Box, ...]  # the containers' floors and walls, then walls, then ramps
     objects: tuple[SceneObject, ...]  # movable, by name, in config order
     robot_start: tuple[float, float, float]  # x, y, yaw
-    robot_radius: float
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
     containers: tuple[Box, ...] = ()  # open boxes, outer bounds (their floor and walls are in extras)
@@ -231,7 +230,6 @@ class GeometryCfg(Settings):
     ramps: list[RampCfg] = setting(default_factory=list)
     containers: list[ContainerCfg] = setting(default_factory=list)
     robot_start: tuple[float, float, float] = setting((-2.0, 0.0, 0.0))
-    robot_radius: float = setting(0.32, gt=0)
     bounds_low: tuple[float, float] = setting((-3.0, -2.5))
     bounds_high: tuple[float, float] = setting((3.0, 2.5))
 
@@ -241,6 +239,22 @@ class GeometryCfg(Settings):
 
 def _err(where: str, key: str, value: Any, allowed: str) -> ConfigError:
     return ConfigError(f"{where}.{key} = {value!r} is invalid: {allowed}")
+
+
+def check_robot_start(g: SceneGeometry, footprint_radius: float, where: str = "scene") -> None:
+    """The robot's start keeps its footprint (the robot spec's ``base.footprint_radius``) off
+    every obstacle the base avoids and inside the world's bounds (``ConfigError`` naming
+    ``scene.robot_start``). The world alone cannot say: the footprint is the robot's."""
+    sx, sy, _ = g.robot_start
+    r = float(footprint_radius)
+    for b in g.obstacles:
+        if b.contains_xy(sx, sy, margin=r):
+            raise _err(where, "robot_start", g.robot_start,
+                       f"the robot's footprint (robot.base.footprint_radius = {r}) overlaps {b.name}")
+    (x0, y0), (x1, y1) = g.bounds_low, g.bounds_high
+    if not (x0 + r <= sx <= x1 - r and y0 + r <= sy <= y1 - r):
+        raise _err(where, "robot_start", g.robot_start, f"must keep the robot's footprint (robot.base.footprint_radius "
+                   f"= {r}) inside the bounds {g.bounds_low}..{g.bounds_high}")
 
 
 def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
@@ -302,14 +316,13 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
                 color=(0.55, 0.55, 0.6, 1.0), friction=r.friction)
         )
     sx, sy, syaw = cfg.robot_start
-    floor_boxes = [Box(o.name, o.position, o.half_size, yaw=o.yaw) for o in objects if o.rests_on == FLOOR]
-    for b in tables + extras + floor_boxes:
-        if b.contains_xy(sx, sy, margin=cfg.robot_radius):
-            raise _err(where, "robot_start", cfg.robot_start, f"the robot's footprint overlaps {b.name}")
+    for b in tables + extras:
+        if b.contains_xy(sx, sy):
+            raise _err(where, "robot_start", cfg.robot_start, f"the robot's base stands inside {b.name}")
     bl, bh = cfg.bounds_low, cfg.bounds_high
     if not (bl[0] < bh[0] and bl[1] < bh[1]):
         raise _err(where, "bounds_low", (bl, bh), "bounds_low must be < bounds_high in x and y")
-    if not (bl[0] + cfg.robot_radius <= sx <= bh[0] - cfg.robot_radius and bl[1] + cfg.robot_radius <= sy <= bh[1] - cfg.robot_radius):
+    if not (bl[0] <= sx <= bh[0] and bl[1] <= sy <= bh[1]):
         raise _err(where, "robot_start", cfg.robot_start, f"must lie inside the bounds {bl}..{bh}")
     return SceneGeometry(
         variant=cfg.variant,
@@ -317,7 +330,6 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
         extras=tuple(extras),
         objects=objects,
         robot_start=(sx, sy, syaw),
-        robot_radius=cfg.robot_radius,
         bounds_low=tuple(bl),
         bounds_high=tuple(bh),
         containers=tuple(containers),

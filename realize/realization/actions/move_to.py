@@ -87,7 +87,7 @@ class MoveTo(Template):
         kin = ctx.fabric.kin
         centres, radii = kin.collision_spheres(ctx.q[rows].to(ctx.fabric.dtype))
         offsets = centres[..., :2].float() - ctx.base[rows, None, :2]
-        reach = cfg.padding + ctx.geometry.robot_radius
+        reach = cfg.padding + ctx.scene.robot.base.footprint_radius
         return carry_blocked(ctx.grid, self._boxes, offsets, centres[..., 2].float(), radii.float(), reach,
                              cfg.carry_margin)
 
