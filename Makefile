@@ -3,7 +3,7 @@
 PY := .venv/bin/python
 ARGS ?=
 
-.PHONY: setup run test test-all bench gpu-check
+.PHONY: setup run test test-all bench gpu-check docs
 setup:
 	@bash scripts/setup.sh
 
@@ -20,6 +20,11 @@ test: setup
 
 test-all: setup
 	$(PY) -m pytest -q $(PARALLEL) $(ARGS)
+
+# the docs site into site/ (mkdocs.yml; --strict: a broken link or a page outside the nav fails; not -q,
+# which hides the warnings that --strict counts)
+docs: setup
+	NO_MKDOCS_2_WARNING=1 .venv/bin/mkdocs build --strict
 
 bench: setup
 	$(PY) scripts/bench_sim.py --quick

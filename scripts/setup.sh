@@ -56,9 +56,9 @@ if ! "$VENV/bin/python" -c 'import torch' 2>/dev/null; then
 fi
 
 # 3. the project
-say "installing realize (editable) with its test and ray extras"
-$PIP install -q -e ".[test,ray]" 2>&1 | grep -v -i "is ignored" || true
-"$VENV/bin/python" -c 'import realize, envs, mani_skill, sapien, hydra, rerun, ray, optuna, hydra_plugins.hydra_optuna_sweeper' \
+say "installing realize (editable) with its test, ray and docs extras"
+$PIP install -q -e ".[test,ray,docs]" 2>&1 | grep -v -i "is ignored" || true
+"$VENV/bin/python" -c 'import realize, envs, mani_skill, sapien, hydra, rerun, ray, optuna, hydra_plugins.hydra_optuna_sweeper, mkdocs, mkdocstrings' \
   || { echo "[setup] error: the package install failed (see pip output above)" >&2; exit 1; }
 
 # 4. Vulkan for SAPIEN
