@@ -1,6 +1,6 @@
 """Fuzz every input realize takes: every case is refused in one line, or runs; nothing else.
 
-Usage: python scripts/fuzz_inputs.py [--cases N] [--seed S] [--simulate K] [--show M]
+Usage: python scripts/fuzz_inputs.py [--cases N] [--seed S] [--simulate K] [--show M] [--out FILE]
 
 What it does: Hypothesis (generation only, no shrinking, a fixed seed) draws N cases, each of one
 kind: command-line override sets (every group choice and leaf key of the composed config, values
@@ -14,7 +14,8 @@ disturbance reader for disturbance lists) and, where it is valid, the first ``--
 cases are also run (``realize.app.run.run``) at tiny N (2 plans, 1 iteration, a 2 s horizon). It
 prints the count of cases, of refusals (a ``ConfigError`` of one line: exit code 2 on the command
 line), of valid ones (and of those simulated), and of anything else: a traceback, a message over
-several lines, a hang (``--limit`` seconds). Exit code 1 if there is anything else.
+several lines, a hang (``--limit`` seconds). Exit code 1 if there is anything else. ``--out``
+writes every case and its outcome as JSON lines (to read the refusals).
 What it doesn't: fuzz the simulator's numerics, or shrink a failing case (the case is printed whole).
 """
 
@@ -319,8 +320,14 @@ def main() -> None:
     ap.add_argument("--simulate", type=int, default=5, help="valid cases also run at tiny N (default 5)")
     ap.add_argument("--limit", type=float, default=120.0, help="seconds a case may take (default 120)")
     ap.add_argument("--show", type=int, default=5, help="refusals to print, one per kind of message (default 5)")
+    ap.add_argument("--out", type=Path, default=None, help="every case and its outcome, as JSON lines")
     a = ap.parse_args()
     out = fuzz(a.cases, a.seed, a.simulate, a.limit)
+    if a.out is not None:
+        with a.out.open("w") as f:
+            for o in out:
+                f.write(json.dumps(dict(result=o.result, detail=o.detail, kind=o.case.kind, args=o.case.args,
+                                        files=o.case.files, data=o.case.data), default=repr) + "\n")
     counts = Counter(o.result for o in out)
     by_kind = Counter(o.case.kind for o in out)
     print(f"cases: {len(out)} ({', '.join(f'{k} {by_kind[k]}' for k in KINDS)})")
