@@ -182,6 +182,15 @@ def test_malformed_yaml_in_a_config_group(tmp_path: Path) -> None:
     assert str(bad) in str(ei.value) and "line 2" in str(ei.value) and "\n" not in str(ei.value)
 
 
+def test_a_group_outside_the_defaults_list_with_a_key_is_one_line() -> None:
+    """``ablation=modes2 ce.n_envs=3`` (found by scripts/fuzz_inputs.py): the key check composed
+    the group choices and let Hydra's composition error out as a traceback."""
+    with pytest.raises(ConfigError) as e:
+        preflight(["ablation=modes2", "ce.n_envs=3"])
+    assert "Could not override 'ablation'" in str(e.value) and "+ablation=modes2" in str(e.value)
+    assert "\n" not in str(e.value)
+
+
 def test_task_file_errors_name_the_file(tmp_path: Path, no_sim: None) -> None:
     task = yaml.safe_load((CONFIG_DIR / "task" / "pick_place.yaml").read_text())
     task["params"]["Cube_p"]["polar_max"] = 4.0

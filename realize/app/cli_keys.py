@@ -16,18 +16,19 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from realize.config import ConfigError, closest
-from realize.paths import CONFIG_DIR
 from realize.run_dir.upgrade import RETIRED
 
 __all__ = ["check_override_keys", "closest"]
 
 
 def _compose(group_choices: list[str]) -> Mapping[str, Any]:
-    from hydra import compose, initialize_config_dir
+    """The config of the group choices alone (a choice Hydra cannot make, e.g. a group outside
+    the defaults list without ``+``, is one ``ConfigError`` line)."""
     from omegaconf import OmegaConf
 
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="realize"):
-        cfg = compose(config_name="config", overrides=group_choices)
+    from realize.app.compose import compose_or_error
+
+    cfg = compose_or_error(group_choices)
     d = OmegaConf.to_container(cfg, resolve=False)
     assert isinstance(d, dict)
     return d
