@@ -87,3 +87,18 @@ def test_a_state_file_suggests_the_name(tmp_path: Path) -> None:
     path.write_text(json.dumps({"format": "realize.scene_state/2", "base": [0, 0, 0], "objects": {}, "objcts": {}}))
     with pytest.raises(ConfigError, match=r"'objcts' -> 'objects'"):
         load_state(path)
+
+
+def test_a_bad_state_file_is_named_by_its_path_not_its_free_text_source(tmp_path: Path) -> None:
+    """A state with a ``source`` description and a bad joint (found by scripts/fuzz_inputs.py):
+    the message named the description, not the file to fix."""
+    path = tmp_path / "state.json"
+    path.write_text(json.dumps({"format": "realize.scene_state/2", "base": [0, 0, 0], "objects": {},
+                                "joints": {"torso_lift_joint": {}}, "source": "a replay of some run"}))
+    with pytest.raises(ConfigError) as e:
+        load_state(path)
+    assert str(e.value).startswith(str(path)) and "torso_lift_joint" in str(e.value)
+    good = json.loads(path.read_text())
+    good["joints"] = {"torso_lift_joint": 0.1}
+    path.write_text(json.dumps(good))
+    assert load_state(path).source == "a replay of some run"  # its own text is kept

@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -178,9 +179,12 @@ class SceneState:
             objects = {"cube": _pose(d["cube"], f"{where}: cube")}
             held = "cube" if _flag(d.get("cube_held", False), f"{where}: cube_held") else None
         source = d.get("source", "")
-        return cls(base=_floats(d["base"], 3, f"{where}: base"), joints=d.get("joints", {}),
-                   gripper_closed=_flag(d.get("gripper_closed", False), f"{where}: gripper_closed"),
-                   objects=objects, held=held, source=str(source) if source else where)
+        # checked under the file's name (a message must say where to look), then given its own
+        # free-text source
+        state = cls(base=_floats(d["base"], 3, f"{where}: base"), joints=d.get("joints", {}),
+                    gripper_closed=_flag(d.get("gripper_closed", False), f"{where}: gripper_closed"),
+                    objects=objects, held=held, source=where)
+        return dataclasses.replace(state, source=str(source)) if source else state
 
 
 def save_state(state: SceneState, path: str | Path) -> Path:
