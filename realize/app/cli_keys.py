@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from realize.app.hydra_edge import compose_or_error, override_values
 from realize.config import ConfigError, closest
 from realize.run_dir.upgrade import RETIRED
 
@@ -25,8 +26,6 @@ def _compose(group_choices: list[str]) -> Mapping[str, Any]:
     """The config of the group choices alone (a choice Hydra cannot make, e.g. a group outside
     the defaults list without ``+``, is one ``ConfigError`` line)."""
     from omegaconf import OmegaConf
-
-    from realize.app.compose import compose_or_error
 
     cfg = compose_or_error(group_choices)
     d = OmegaConf.to_container(cfg, resolve=False)
@@ -66,8 +65,6 @@ def check_override_keys(overrides: Sequence[Any], groups: Sequence[str]) -> None
         if key.startswith("hydra") or o.is_add() or o.is_force_add() or o.package is not None:
             continue
         if key in groups:
-            from realize.app.compose import override_values
-
             values = override_values(o)
             value = values[0] if values else None
             if not o.is_delete() and value is not None:
