@@ -43,6 +43,7 @@ from realize.search.candidates import CandidateSpec, SuccessiveHalving
 from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.config import ConfigError
 from realize.app.loop import search_loop
+from realize.app.objective import record_objective
 from realize.app.replan import replan_config
 from realize.app.workers.pool import RolloutPool, open_pool
 from realize.app.run_config import RunSpec, build_run_spec
@@ -331,24 +332,13 @@ class _Assembly:
             self.validation_s = time.perf_counter() - t_validation
         outcome = RunOutcome(run_dir, status, feasible, report.state.best_cost if feasible else math.inf, n_done,
                              self.clock.wall(), exit_code)
-        if status == "done":
-            outcome.objective = self._objective()
+        if status == "done":  # what a sweep minimizes, into result.json too
+            outcome.objective = record_objective(self.rd, spec.rollout.max_time_s, spec.sim.control_freq,
+                                                 spec.task.final_cost)
         if complete:
             print(f"realize: {run_dir} was already complete; nothing changed", flush=True)
         self._print(outcome, report)
         return outcome
-
-    def _objective(self) -> float:
-        """``realize.app.objective`` of the finished run, also written into result.json."""
-        from realize.app.objective import run_objective
-
-        spec, d = self.spec, self.rd.result_json() or {}
-        if "objective" in d:  # a resumed complete run keeps its record
-            return float(d["objective"])
-        horizon = round(spec.rollout.max_time_s * spec.sim.control_freq) + float(spec.task.final_cost)
-        value = run_objective(d, horizon)
-        self.rd.add_to_result("objective", value)
-        return value
 
     def _validate(self) -> None:
         """``validation``: the run's candidates under the task's perturbations, into result.json

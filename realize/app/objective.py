@@ -17,7 +17,9 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["run_objective", "INFEASIBLE_FACTOR"]
+from realize.run_dir.directory import RunDir
+
+__all__ = ["run_objective", "record_objective", "INFEASIBLE_FACTOR"]
 
 INFEASIBLE_FACTOR = 2.0  # an infeasible run's objective: this times the horizon cost
 
@@ -34,3 +36,14 @@ def run_objective(result: Mapping[str, Any], horizon_cost: float) -> float:
         except (KeyError, IndexError, TypeError, ValueError):
             pass  # a malformed record: the search's best
     return float(best)
+
+
+def record_objective(run_dir: RunDir, max_time_s: float, control_freq: float, final_cost: float) -> float:
+    """The finished run's objective, written into its ``result.json`` (a run that has one, a
+    resumed complete run, keeps it); the horizon is ``max_time_s`` at ``control_freq``."""
+    d = run_dir.result_json() or {}
+    if "objective" in d:
+        return float(d["objective"])
+    value = run_objective(d, round(max_time_s * control_freq) + float(final_cost))
+    run_dir.add_to_result("objective", value)
+    return value

@@ -2,10 +2,9 @@
 
 What it does: for a sample matrix Z (M, D) (M <= the scene's N copies) ``PlanRealizer.rollout``
 resets the batched scene (to the realizer's ``start`` state, if it has one) and runs a per-plan
-action state machine (each plan is in one action of the task's plan at a time; a plan whose
-action fails or times out stops there and is held still),
-stepping physics for all plans together. One ``Rollout`` object holds the per-plan state and runs
-the phases of every control step: ``act`` (templates -> controllers -> commands), ``physics``,
+action state machine (one action of the task's plan at a time per plan; a plan whose action fails
+or times out stops there, held still), stepping physics for all plans together. One ``Rollout``
+object holds the per-plan state and runs the phases of every control step: ``act`` (templates -> controllers -> commands), ``physics``,
 ``check_faults`` (a plan that diverges, NaN or exploding joint speeds, fails alone),
 ``check_actions`` (success / failure of the current actions, begin the next), ``read_due_goals``,
 ``stop_hopeless`` (``ce.prune``: plans that can no longer be an elite stop, ``.pruning``);

@@ -11,11 +11,10 @@ resolves to (``realize.scene.backends``: N copies tiled in one PhysX CPU scene, 
   * writes: base velocity commands, upper-joint targets, the gripper opening; ``step``
     advances one control period, ``freeze`` stops finished copies, ``reset`` starts all over;
   * step hooks (``add_step_hook``: a video writer renders there), per-copy object friction and
-    mass, object pushes and teleports (``realize.scene.object_properties``), and the
-    ``EnvOptions`` the task is built with (render camera, reset noise, forced randomization),
-    for replay and validation; ``render`` gives copy 0's frame.
-What it doesn't: decide anything (controllers compute the targets, the rollout runs actions),
-or ask which backend runs (``backend``/``deterministic`` only report it).
+    mass, object pushes and teleports (``realize.scene.object_properties``), and the ``EnvOptions``
+    the task is built with (camera, reset noise, randomization), for replay and validation.
+What it doesn't: decide anything (controllers compute the targets, the rollout runs actions), or
+ask which backend runs (``backend``/``deterministic`` only report it).
 
 Whole-body joint vector ``q`` (n_dof): base x, base y, base yaw, then the robot's upper joints
 (``RobotSpec.whole_body_joints``: a lift or torso, then the arm).
