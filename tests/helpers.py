@@ -87,6 +87,7 @@ def load_script(name: str) -> Any:
     spec = importlib.util.spec_from_file_location(f"_script_{name}", REPO / "scripts" / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     assert spec.loader is not None
+    sys.modules[spec.name] = mod  # (a script's dataclasses look their module up there)
     spec.loader.exec_module(mod)
     return mod
 
