@@ -12,6 +12,7 @@ readers do); ``+key``/``++key`` additions, ``~key`` deletions and ``hydra.*`` ke
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -24,10 +25,17 @@ __all__ = ["check_override_keys", "closest"]
 
 def _compose(group_choices: list[str]) -> Mapping[str, Any]:
     """The config of the group choices alone (a choice Hydra cannot make, e.g. a group outside
-    the defaults list without ``+``, is one ``ConfigError`` line)."""
+    the defaults list without ``+``, is one ``ConfigError`` line), read only. Composed once per
+    process and set of choices (a Hydra compose costs about 0.35 s on 2 cores; the key check of
+    every command, sweep job and fuzzed case composes the same few sets)."""
+    return _compose_cached(tuple(group_choices))
+
+
+@functools.lru_cache(maxsize=32)
+def _compose_cached(group_choices: tuple[str, ...]) -> Mapping[str, Any]:
     from omegaconf import OmegaConf
 
-    cfg = compose_or_error(group_choices)
+    cfg = compose_or_error(list(group_choices))
     d = OmegaConf.to_container(cfg, resolve=False)
     assert isinstance(d, dict)
     return d
