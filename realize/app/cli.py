@@ -28,7 +28,6 @@ from realize.app.compose import CONFIG_GROUPS, check_group_choices, compose_or_e
 from realize.config import ConfigError
 from realize.app.guard import EXIT_CONFIG, EXIT_FAILED
 from realize.paths import CONFIG_DIR
-from realize.app.run import run
 from realize.app.sweep_check import check_sweep
 from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE
 from realize.app.workers.errors import WorkerFailed
@@ -109,6 +108,8 @@ def _hydra_task(cfg: DictConfig) -> Any:
     hc = HydraConfig.get()
     multirun = hc.mode == RunMode.MULTIRUN
     out_dir = Path(hc.runtime.output_dir)
+    from realize.app.run import run  # here, not at the top: a refused command never imports the simulator
+
     try:
         outcome = run(cfg, out_dir, cli_overrides=list(hc.overrides.task))
     except ConfigError as e:

@@ -16,6 +16,7 @@ starts), run a job, or replace the per-job checks in ``realize.app.assembly`` (w
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Sequence
 from typing import Any
@@ -44,18 +45,28 @@ def _values(o: Any) -> list[str]:
 
 
 def _sweeper_params(fixed: Sequence[str]) -> dict[str, str]:
-    """``hydra.sweeper.params`` of the config the fixed overrides compose ({} if none)."""
+    """``hydra.sweeper.params`` of the config the fixed overrides compose ({} if none). Only the
+    group choices and ``hydra`` overrides among them can set it, so it is composed once per
+    process and set of those (``realize.app.hydra_edge``)."""
+    from realize.app.hydra_edge import split_overrides
+
+    split = split_overrides(list(fixed))
+    return dict(_sweeper_params_of(tuple(split[0]) if split is not None else tuple(fixed)))
+
+
+@functools.lru_cache(maxsize=32)
+def _sweeper_params_of(overrides: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
     from realize.paths import CONFIG_DIR
 
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="realize"):
-        cfg = compose(config_name="config", overrides=list(fixed), return_hydra_config=True)
+        cfg = compose(config_name="config", overrides=list(overrides), return_hydra_config=True)
     params = OmegaConf.select(cfg, "hydra.sweeper.params", default=None)
     if params is None:
-        return {}
-    return {str(k): str(v) for k, v in OmegaConf.to_container(params, resolve=False).items()}
+        return ()
+    return tuple((str(k), str(v)) for k, v in OmegaConf.to_container(params, resolve=False).items())
 
 
 def sweep_jobs(args: Sequence[str], max_jobs: int = MAX_JOBS) -> tuple[list[str], list[list[str]]]:
