@@ -3,8 +3,8 @@
 with ``validation=off`` unless a test chooses a validation), the tiny
 run of the command tests, the seed task's known plans, the scripts as modules, the kinematics
 tests' joint vectors, the A* tests' path check, rollouts in a fresh scene with the simulator's
-state read back (the rollout and push tests), and the thread that kills a worker mid-rollout
-(the worker tests, processes and Ray actors)."""
+state read back (the rollout and push tests), the thread that kills a worker mid-rollout
+(the worker tests, processes and Ray actors), and the docs' fenced blocks with their markers."""
 
 from __future__ import annotations
 
@@ -12,11 +12,13 @@ import importlib.util
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -301,3 +303,51 @@ def kill_on_rollout(victim: Callable[[list[int]], int | None], times: int,
     t = threading.Thread(target=run, daemon=True)
     t.start()
     return t
+
+
+# ----------------------------------------------------------------------------- the docs' blocks
+DOC_PAGES = ("README.md", *sorted(f"docs/{p.name}" for p in (REPO / "docs").glob("*.md")))
+# the line before a fenced command block says what a test does with it (tests/test_doc_commands.py):
+#   <!-- runs in tests/test_x.py::test_y -->               that test executes the block
+#   <!-- arguments checked, not run: reason -->           each command's arguments are checked
+#   <!-- not run: reason -->                              nothing runs it
+MARKER = re.compile(r"<!-- (?:runs in (?P<test>tests/\w+\.py::\w+)|(?P<checked>arguments checked, )?not run: "
+                    r"(?P<reason>.+?)) -->")
+
+
+@dataclass(frozen=True)
+class DocBlock:
+    """One fenced block of a docs page: where it starts (1-based line of its opening fence), its
+    language tag (\"\" when untagged), the marker on the line before it (None: none), its text."""
+
+    page: str
+    line: int
+    lang: str
+    marker: re.Match | None
+    text: str
+
+    @property
+    def where(self) -> str:
+        return f"{self.page}:{self.line}"
+
+
+def doc_blocks(page: str) -> list[DocBlock]:
+    """The fenced blocks of ``page`` (a path relative to the repository, as in ``DOC_PAGES``)."""
+    lines = (REPO / page).read_text().splitlines()
+    blocks, i = [], 0
+    while i < len(lines):
+        if lines[i].startswith("```"):
+            j = next(k for k in range(i + 1, len(lines)) if lines[k].startswith("```"))
+            marker = MARKER.fullmatch(lines[i - 1].strip()) if i > 0 else None
+            blocks.append(DocBlock(page, i + 1, lines[i][3:].strip(), marker, "\n".join(lines[i + 1:j]) + "\n"))
+            i = j
+        i += 1
+    return blocks
+
+
+def doc_block(page: str, lang: str, index: int = 0) -> DocBlock:
+    """The ``index``-th ``lang`` block of ``page`` (a test that runs a block says which)."""
+    found = [b for b in doc_blocks(page) if b.lang == lang]
+    if len(found) <= index:
+        pytest.fail(f"{page} has {len(found)} ```{lang} blocks; the test runs block {index}")
+    return found[index]

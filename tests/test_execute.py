@@ -8,6 +8,8 @@ one world with small replans (8 copies, 2 elites, at most 2 iterations, one work
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -16,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import REPO
+from helpers import REPO, doc_block
 from realize.app.execute import WorldLog, execute, execute_world
 from realize.app.planner import Planner, ReplanBudget
 from realize.config import ConfigError
@@ -89,6 +91,21 @@ def test_summary_json_has_the_study_keys(table_study) -> None:
     assert all(isinstance(s, float) and s > 0 for s in doc["replan_s"]) and len(doc["replan_s"]) == doc["replans"][0]
     for f in ("world-0-open.json", "world-0-closed.json", "world-0-open.npz", "world-0-closed.npz"):
         assert (where / f).is_file(), f
+
+
+def test_the_docs_trajectory_example_runs(table_study) -> None:
+    """docs/execution_format.md's reading example, on the closed-loop world's trajectory: one line
+    per action segment, its text and its first and last times."""
+    _, where = table_study
+    path = where / "world-0-closed.npz"
+    code = doc_block("docs/execution_format.md", "python").text.replace('"trajectory.npz"', repr(str(path)))
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "docs/execution_format.md", "exec"), {})
+    t = read_trajectory(path)
+    lines = out.getvalue().splitlines()
+    assert len(lines) == len(t.action_text) >= 5
+    assert [ln.rsplit(" ", 2)[0] for ln in lines] == list(t.action_text)
 
 
 def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp_path: Path) -> None:

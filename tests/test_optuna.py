@@ -4,14 +4,16 @@ the objective its run wrote (``realize.app.objective``), and summary.csv lists e
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 from pathlib import Path
 
 import optuna
 import yaml
 
-from helpers import realize_cli
+from helpers import doc_block, realize_cli
 from realize.app.objective import INFEASIBLE_FACTOR, run_objective
 from realize.run_dir.names import RESULT_FILE
 
@@ -36,6 +38,12 @@ def test_three_trials_at_tiny_n(tmp_path: Path) -> None:
         assert res["iterations_done"] * 4 <= 8  # the sample budget: 8 copies, 4 per iteration
     best = yaml.safe_load((sweep / "optimization_results.yaml").read_text())
     assert best["best_value"] == min(t.value for t in trials)
+    # docs/optuna.md's example reads this study back
+    code = doc_block("docs/optuna.md", "python").text.replace("multirun/<date>/<time>", str(sweep))
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "docs/optuna.md", "exec"), {})
+    assert out.getvalue().split()[-1] == str(study.best_value)
 
 
 def test_the_objective_is_the_returned_plans_cost() -> None:

@@ -1,6 +1,7 @@
 """The planner you import (realize/app/planner.py, realize/app/compose.py): configs composed from
 Python with one-line errors, ``plan()`` twice through kept workers, ``replan`` from a state (its
-result block, refusals before anything runs, kept vs rebuilt scenes) and the README's example.
+result block, refusals before anything runs, kept vs rebuilt scenes). The README's example runs in
+tests/test_doc_commands.py.
 
 The plans are tiny (4 copies, one iteration) and start from a run directory written by hand
 (the seed task's known plan ``GOOD`` as its final distribution, as tests/test_replay.py writes
@@ -11,12 +12,11 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from pathlib import Path
 
 import pytest
 
-from helpers import GOOD, REPO, TINY, compose_config as helpers_compose
+from helpers import GOOD, TINY, compose_config as helpers_compose
 from realize.app.compose import compose_config
 from realize.app.planner import Planner, PlanResult, ReplanBudget
 from realize.app.run_config import build_run_spec
@@ -160,27 +160,3 @@ def test_replan_refusals_before_anything_runs(planned, tmp_path: Path, monkeypat
     if (tmp_path / "r" / RESULT_FILE).exists():  # a refused run says so in its result.json
         doc = json.loads((tmp_path / "r" / RESULT_FILE).read_text())
         assert doc["status"] == "failed" and doc["simulated"] is False and doc["error"] == msg
-
-
-# ------------------------------------------------------------------------------ the README example
-def _readme_example() -> str:
-    text = (REPO / "README.md").read_text()
-    lines = text.splitlines()
-    try:
-        at = lines.index("## Python API")
-    except ValueError:
-        pytest.fail("README.md has no '## Python API' heading")
-    rest = "\n".join(lines[at + 1:])
-    m = re.search(r"^```python\n(.*?)^```", rest, re.S | re.M)
-    if m is None:
-        pytest.fail("README.md has no ```python block after '## Python API'")
-    return m.group(1)
-
-
-def test_readme_python_example_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    code = _readme_example()
-    assert "Planner" in code
-    monkeypatch.chdir(tmp_path)
-    exec(compile(code, "README.md:Python API", "exec"), {"__name__": "__readme__"})
-    results = list(tmp_path.rglob(RESULT_FILE))
-    assert results, "the example wrote no run directory under its cwd"

@@ -7,6 +7,7 @@ import re
 
 import yaml
 
+from helpers import doc_block
 from realize.world.geometry import GeometryCfg, build_geometry
 from realize.tasks.goal_spec import GOAL_KEYS
 from realize.tasks.param_layout import REGION_TYPES
@@ -17,11 +18,9 @@ DOC = CONFIG_DIR.parent / "docs" / "task_files.md"
 
 
 def test_the_example_is_the_seed_task() -> None:
-    text = DOC.read_text()
-    block = re.search(r"```yaml\n(.*?)```", text, re.S)
-    assert block is not None
+    block = doc_block("docs/task_files.md", "yaml")
     geometry = build_geometry(GeometryCfg())
-    example = build_task(yaml.safe_load(block.group(1)), geometry, "docs/task_files.md")
+    example = build_task(yaml.safe_load(block.text), geometry, "docs/task_files.md")
     seed_d, src = load_task_file(str(CONFIG_DIR / "task" / "pick_place.yaml"))
     seed = build_task(seed_d, geometry, src)
     assert example.describe() == seed.describe() and example.goal == seed.goal
