@@ -30,7 +30,7 @@ bench: setup
 	$(PY) scripts/bench_sim.py --quick
 	$(PY) scripts/bench_controllers.py --quick
 
-# On a machine with a CUDA GPU: the torch controllers and CE on CUDA vs the CPU, one table (README "GPU").
+# On a machine with a CUDA GPU: the torch controllers and CE on CUDA vs the CPU, one table (docs/gpu.md, "GPU").
 # No setup and no network: the project's venv where there is one, else python3 with torch (offline
 # machines; --urdf FILE there). Where ManiSkill and SAPIEN are installed (`make setup`) it runs the
 # PhysX GPU parts too (ARGS=--no-physics: not these).

@@ -7,7 +7,7 @@ differently: the golden seed-task run (``tests/test_golden.py``) ended 1 ulp apa
 parameters on an AVX-512 Xeon against the fixture recorded on an AVX2 EPYC. ``pin_cpu_math``
 sets ``MKL_CBWR=AVX2`` and ``ATEN_CPU_CAPABILITY=avx2`` when the CPU has AVX2, so every such
 machine takes the same torch and MKL paths (the golden runs then match across those two CPUs;
-full seed-paper runs still differ a little between them, see the README's "Layout"); both
+full seed-paper runs still differ a little between them, see docs/architecture.md ("Layout"); both
 libraries read them once, at their first call, so this runs
 when ``realize`` is imported (before any torch op of the run, and inherited by worker
 processes). A value already set in the environment is kept (``ATEN_CPU_CAPABILITY=default``, say).

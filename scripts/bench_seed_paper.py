@@ -9,7 +9,7 @@ prints, for the seeds both files hold, the wall-time ratio and the fidelity chec
 throughput issue (feasible in every run, iteration-0 success 3-30 %, last-iteration success
 >= 85 % mean, mean best cost no more than 2 % above the reference's).
 
-The runs take today's defaults, speed levers included (README "Speed levers"); the reference
+The runs take today's defaults, speed levers included (docs/results.md, "Speed levers"); the reference
 rows predate them: pass ``levers=exact`` as an override to compare like with like.
 
 What it doesn't: run seeds in parallel (timings would interfere) or judge timing across

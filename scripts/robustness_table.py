@@ -1,5 +1,5 @@
-"""The README's robustness table: each preset's run with its default settings, then its plans under
-the task's perturbations.
+"""The robustness table of docs/validation.md ("Plans that survive perturbations"): each preset's
+run with its default settings, then its plans under the task's perturbations.
 
 Usage: python scripts/robustness_table.py [--presets seed_paper ramp wall move_and_push]
             [--seeds 0] [--replicas 64] [--out runs/robustness] [--reuse] [-- OVERRIDES...]

@@ -284,7 +284,7 @@ def _stop_cluster(temp_dir: str) -> None:
 
 @pytest.mark.slow  # starts a cluster with `ray start --head`: about 35 s
 def test_a_run_on_a_running_cluster_leaves_the_cluster_running(tmp_path: Path) -> None:
-    """``ray start --head`` (as the README says), then a run with ``workers.ray_address``: its
+    """``ray start --head`` (as docs/workers.md says), then a run with ``workers.ray_address``: its
     actors run on the cluster and are gone after the run; the cluster's own processes stay."""
     import tempfile
 

@@ -30,7 +30,7 @@ from realize.scene.settings import EnvOptions, SimSettings
 __all__ = ["resolve_backend", "open_backend", "shardable", "UnverifiedBackendWarning"]
 
 UNVERIFIED = ("the PhysX GPU backend (sim.backend=gpu, device=cuda) has not been verified on a GPU yet: "
-              "its physics and results are unchecked (the README's GPU section says what was checked)")
+              "its physics and results are unchecked (docs/gpu.md says what was checked)")
 _warned = False
 
 

@@ -65,7 +65,7 @@ class CEConfig(Settings):
     ``levers=exact``, or ``prune=False, patience=None``, is the paper's algorithm exactly):
     ``prune`` lets the rollout stop a row that can no longer be among the batch's ``n_elite``
     cheapest feasible rows (``realize.realization.pruning``; within a rollout every other row is
-    bit-identical, though a reused scene's later rollouts may drift a little: README "Speed
+    bit-identical, though a reused scene's later rollouts may drift a little: docs/results.md ("Speed
     levers"). ``patience`` makes ``iterations`` a maximum: the search stops once a
     feasible plan is in hand and the elites' mean cost fell by less than ``min_improvement``
     (relative) over the last ``patience`` iterations.
