@@ -14,6 +14,7 @@ What it doesn't: validate the config itself (``realize.app.run_config``) or run 
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from collections.abc import Sequence
@@ -108,7 +109,10 @@ def _hydra_task(cfg: DictConfig) -> Any:
     hc = HydraConfig.get()
     multirun = hc.mode == RunMode.MULTIRUN
     out_dir = Path(hc.runtime.output_dir)
-    from realize.app.run import run  # here, not at the top: a refused command never imports the simulator
+    # imported here, not at the top: a refused command never imports the simulator. Hydra's job
+    # logging is on by now, so matplotlib's one-time font-cache note would reach the console
+    logging.getLogger("matplotlib").setLevel(logging.WARNING)
+    from realize.app.run import run
 
     try:
         outcome = run(cfg, out_dir, cli_overrides=list(hc.overrides.task))
