@@ -36,11 +36,13 @@ def default_goal_regions() -> dict[str, Region]:
 
 
 def goal_info(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, Region], pos: torch.Tensor,
-              speed: torch.Tensor, base: torch.Tensor) -> dict[str, torch.Tensor]:
+              speed: torch.Tensor, base: torch.Tensor, frames: Mapping[str, str] | None = None
+              ) -> dict[str, torch.Tensor]:
     """(N,) bools: ``success`` and each predicate of ``goal``, from the objects' centres ``pos``
-    (N, m, 3), speeds (N, m) and the base's xy (N, 2), every copy in its local frame."""
+    (N, m, 3), speeds (N, m) and the base's xy (N, 2), every copy in its local frame; ``frames``:
+    the regions' frames (a spot framed by a movable object follows it, ``goal_reached``)."""
     g = geometry
-    ok, _ = goal_reached(goal, g, regions, pos, speed, base)
+    ok, _ = goal_reached(goal, g, regions, pos, speed, base, frames=frames)
     info = dict(success=ok)
     for name, table in goal.on.items():
         k = g.object_index(name)

@@ -27,7 +27,8 @@ another object stays above its top), and the robot's start xy by up to ``robot_x
 
 **Success conditions** (``evaluate``): the ``goal`` kwarg, a task config's goal
 (``realize.tasks.goal_spec``) whose ``base_in`` names one of the ``goal_regions`` (a task's
-regions; default: the default task's ``Exit``). By default every object that starts on a table
+regions; default: the default task's ``Exit``; ``goal_frames``, the regions' frames: a spot
+framed by a movable object is read where that object stands). By default every object that starts on a table
 rests on table 2 (within 2 cm of resting height above its top, nearly still) AND the base is in
 ``Exit``: the goal of ``configs/task/pick_place.yaml``, whose region is the one exit.
 """
@@ -115,6 +116,7 @@ class RealizePickPlaceEnv(BaseEnv):
         object_yaw_noise: float = math.pi / 4,
         goal: GoalSpec | Mapping[str, Any] | None = None,
         goal_regions: Mapping[str, Region] | None = None,
+        goal_frames: Mapping[str, str] | None = None,
         robot_xy_noise: float = 0.05,
         robot_uids: str = "fetch_omni",
         robot: RobotSpec | Mapping[str, Any] | None = None,
@@ -133,6 +135,7 @@ class RealizePickPlaceEnv(BaseEnv):
         self.object_xy_noise = object_xy_noise
         self.object_yaw_noise = object_yaw_noise
         self.goal_regions = dict(default_goal_regions() if goal_regions is None else goal_regions)
+        self.goal_frames = dict(goal_frames or {})  # region -> frame: a spot framed by an object follows it
         self.goal: GoalSpec = self.checked_goal(goal)
         self.robot_xy_noise = robot_xy_noise
         self._sim_settings = dict(
@@ -369,7 +372,7 @@ class RealizePickPlaceEnv(BaseEnv):
         names = list(self.agents[0].robot.active_joints_map.keys())
         xy = [names.index(j) for j in self.robot_spec.base.joints[:2]]
         base = torch.cat([a.robot.get_qpos()[:, xy] for a in self.agents]) + start
-        return goal_info(self.goal, g, self.goal_regions, pos, speed, base)
+        return goal_info(self.goal, g, self.goal_regions, pos, speed, base, self.goal_frames)
 
     def _get_obs_extra(self, info: dict):
         return dict()

@@ -188,6 +188,34 @@ def test_put_it_back_15cm_further_is_not_done_before_anything_moves() -> None:
     assert not bool(object_at(there[:, 0], torch.tensor([0.2]), Fixed(value=(0.15, 1.2, 0.7425)), 0.02)[0])
 
 
+def test_a_spot_framed_by_a_movable_object_is_where_that_object_stands() -> None:
+    """cube_b placed on cube_a (``rests_at`` a spot framed by cube_a, 4.5 cm above its centre),
+    with cube_a started 2 cm off its configured place: the goal holds on top of cube_a where it
+    stands, not at the configured spot (the goal without frames, as before, says the opposite)."""
+    a_cfg = ObjectCfg(size=(0.045, 0.045, 0.045), rests_on="table2", offset=(0.0, -0.1))
+    b_cfg = ObjectCfg(size=(0.045, 0.045, 0.045), rests_on="table1", offset=(0.0, 0.1))
+    g = build_geometry(GeometryCfg(objects={"cube_a": a_cfg, "cube_b": b_cfg}))
+    params = {"On_a": {"type": "fixed", "frame": "cube_a", "value": [0.0, 0.0, 0.045]},
+              "G": {"type": "hemisphere", "frame": "cube_b", "center": [0, 0, 0], "radius": 0.15},
+              "P": {"type": "hemisphere", "frame": "cube_a", "center": [0, 0, 0.045], "radius": 0.15}}
+    t = task_from_dict({"params": params, "plan": ["grasp(cube_b, G)", "place(cube_b, P)"],
+                        "goal": {"rests_at": {"cube_b": {"region": "On_a", "tol": 0.01}}}}, g, TEMPLATES,
+                       source="t.yaml")
+    a_there = torch.tensor(g.object("cube_a").position) + torch.tensor([0.02, 0.0, 0.0])
+    on_top = a_there + torch.tensor([0.0, 0.0, 0.045])
+    configured_spot = torch.tensor(g.object("cube_a").position) + torch.tensor([0.0, 0.0, 0.045])
+    order = [g.object_index("cube_a"), g.object_index("cube_b")]
+    objects = torch.zeros(2, 2, 3)
+    objects[:, order[0]] = a_there
+    objects[0, order[1]], objects[1, order[1]] = on_top, configured_spot  # copy 0: on cube_a; 1: in the air beside it
+    still, base = torch.zeros(2, 2), torch.zeros(2, 2)
+    ok, dist = goal_reached(t.goal, g, t.layout.regions, objects, still, base, frames=t.frames)
+    assert ok.tolist() == [True, False] and float(dist[0]) == 0.0
+    assert float(dist[1]) == pytest.approx(0.02 - 0.01, abs=1e-6)
+    unframed, _ = goal_reached(t.goal, g, t.layout.regions, objects, still, base)
+    assert unframed.tolist() == [False, True]  # the spot where cube_a was configured
+
+
 # ------------------------------------------------------------------------------- states
 
 

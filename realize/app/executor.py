@@ -221,7 +221,7 @@ class Executor:
         objects = scene.object_poses()[:, :, :3]
         speeds = scene.object_velocities()[:, :, :3].norm(dim=-1)
         ok, _ = goal_reached(seg.task.goal, self.world.geometry_now(), seg.task.layout.regions, objects, speeds,
-                             scene.base_pose()[:, :2], self.spec.rollout.rest_speed)
+                             scene.base_pose()[:, :2], self.spec.rollout.rest_speed, seg.task.frames)
         return bool(ok[0])
 
     def _repair(self, seg: _Segment, source: Any, obs: Observation, a: int, reasons: list[str]

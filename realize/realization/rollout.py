@@ -245,7 +245,7 @@ class Rollout:
     def _goal_now(self) -> tuple[Tensor, Tensor]:
         ctx = self.ctx
         return goal_reached(self.task.goal, self.realizer.geometry, self.realizer.layout.regions, ctx.objects[:, :, :3],
-                            ctx.object_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed)
+                            ctx.object_speed, ctx.base[:, BASE_XY], self.cfg.rest_speed, self.task.frames)
 
     def read_due_goals(self) -> bool:
         """Read psi_g of the plans whose settling time just ran out; whether there were any."""

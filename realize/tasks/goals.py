@@ -108,8 +108,19 @@ def base_rectangle_distance(xy: Tensor, low: Sequence[float], high: Sequence[flo
     return (torch.maximum(torch.minimum(xy, hi), lo) - xy).norm(dim=1)
 
 
+def _frame_shift(region: str, frames: Mapping[str, str] | None, geometry: SceneGeometry, objects: Tensor) -> Tensor:
+    """(N, 3) how far the movable object that frames parameter ``region`` stands from its
+    configured place (zeros: a world, table or container frame, or no frames given)."""
+    frame = (frames or {}).get(region)
+    if frame is None or frame not in geometry.object_names:
+        return torch.zeros(3, dtype=objects.dtype, device=objects.device)
+    configured = torch.tensor(geometry.object(frame).position, dtype=objects.dtype, device=objects.device)
+    return objects[:, geometry.object_index(frame)] - configured
+
+
 def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, Region], objects: Tensor,
-                 speeds: Tensor, base_xy: Tensor, rest_speed: float = REST_SPEED) -> tuple[Tensor, Tensor]:
+                 speeds: Tensor, base_xy: Tensor, rest_speed: float = REST_SPEED,
+                 frames: Mapping[str, str] | None = None) -> tuple[Tensor, Tensor]:
     """psi_g per copy (N,) bool, and how far (m) each copy is from it: the sum over the goal's
     conditions of each object's distance to its table top, container inside or spot, plus the
     base's distance to its goal rectangle (a 2-D box region of ``regions``). The distance is
@@ -117,7 +128,10 @@ def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, 
     did not hold.
 
     ``objects`` (N, m, 3) centres and ``speeds`` (N, m) of every object of ``geometry`` in its
-    order (float32 on the scene's device), ``base_xy`` (N, 2)."""
+    order (float32 on the scene's device), ``base_xy`` (N, 2). ``frames`` (a task's parameter ->
+    frame, ``TaskSpec.frames``): a ``rests_at`` spot framed by a movable object is where that
+    object stands now, not where the scene config put it (the spot moves with the object's
+    centre; its turn is not followed). Without ``frames`` every spot stays where it was built."""
     n, device = objects.shape[0], objects.device
     ok = torch.ones(n, dtype=torch.bool, device=device)
     dist = torch.zeros(n, device=device)
@@ -131,8 +145,9 @@ def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, 
         dist += object_in_container_distance(objects[:, k], geometry, box)
     for name, spot in goal.at.items():
         k = geometry.object_index(name)
-        ok &= object_at(objects[:, k], speeds[:, k], regions[spot.region], spot.tol, rest_speed)
-        dist += object_at_distance(objects[:, k], regions[spot.region], spot.tol)
+        p = objects[:, k] - _frame_shift(spot.region, frames, geometry, objects)
+        ok &= object_at(p, speeds[:, k], regions[spot.region], spot.tol, rest_speed)
+        dist += object_at_distance(p, regions[spot.region], spot.tol)
     if goal.base_in is not None:
         region = regions[goal.base_in]
         assert isinstance(region, Box)
