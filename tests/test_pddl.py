@@ -177,3 +177,33 @@ def test_case_only_param_clash_and_bad_top_k() -> None:
         plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, (*SEED_PARAMS, "exit"))
     with pytest.raises(PlanningError, match="top_k"):
         plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, SEED_PARAMS, top_k=0)
+
+
+# ------------------------------------------------------------------------------ the blocks domain
+BLOCKS_DOMAIN = PDDL_DIR / "blocks_domain.pddl"
+TOWER_PARAMS = ("CubeA_g", "CubeB_g", "CubeC_g", "CubeB_on_a", "CubeC_on_b")
+BLOCKS = ("cube_a", "cube_b", "cube_c")
+
+
+def test_tower3_plans_bottom_up_and_binds_to_grasp_and_place() -> None:
+    """Three blocks on the table: cube_b onto cube_a, then cube_c onto cube_b; the supports
+    (cube_a, the table) are bookkeeping, the handled block is the first block argument."""
+    plans = plan_from_pddl(BLOCKS_DOMAIN, PDDL_DIR / "tower3_problem.pddl", TEMPLATES, TOWER_PARAMS, objects=BLOCKS)
+    assert plans == [[A("grasp", "CubeB_g", obj="cube_b"), A("place", "CubeB_on_a", obj="cube_b"),
+                      A("grasp", "CubeC_g", obj="cube_c"), A("place", "CubeC_on_b", obj="cube_c")]]
+
+
+def test_blocks_unstack_to_the_table_before_restacking(tmp_path: Path) -> None:
+    """cube_b starts on cube_a; the goal is cube_a on cube_b: cube_b must come off (onto a table
+    spot) first, and a table stays clear for every block put on it (ontable holds after)."""
+    problem = tmp_path / "swap.pddl"
+    problem.write_text("""(define (problem swap) (:domain blocks)
+  (:objects CubeA_g CubeB_g - grasp_region CubeB_t CubeA_on_b - place_region cube_a cube_b - block table1 - table)
+  (:init (hand-empty) (on cube_a table1) (ontable cube_a) (on cube_b cube_a) (clear cube_b) (clear table1)
+         (is-block cube_a) (is-block cube_b) (is-table table1) (grasps CubeA_g cube_a) (grasps CubeB_g cube_b)
+         (place-on CubeB_t cube_b table1) (place-on CubeA_on_b cube_a cube_b))
+  (:goal (and (on cube_a cube_b) (ontable cube_b))))""")
+    plans = plan_from_pddl(BLOCKS_DOMAIN, problem, TEMPLATES, ("CubeA_g", "CubeB_g", "CubeB_t", "CubeA_on_b"),
+                           objects=BLOCKS[:2])
+    assert plans == [[A("grasp", "CubeB_g", obj="cube_b"), A("place", "CubeB_t", obj="cube_b"),
+                      A("grasp", "CubeA_g", obj="cube_a"), A("place", "CubeA_on_b", obj="cube_a")]]
