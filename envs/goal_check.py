@@ -18,7 +18,7 @@ import yaml
 
 from realize.paths import CONFIG_DIR
 from realize.tasks.goal_spec import GoalSpec
-from realize.tasks.goals import base_in_rectangle, goal_reached, object_in_container, object_on_table
+from realize.tasks.goals import base_in_rectangle, goal_reached, object_in_container, object_on_object, object_on_table
 from realize.tasks.param_layout import region_from_dict
 from realize.tasks.regions import Box, Region
 from realize.world.geometry import SceneGeometry
@@ -44,9 +44,14 @@ def goal_info(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, Reg
     g = geometry
     ok, _ = goal_reached(goal, g, regions, pos, speed, base, frames=frames)
     info = dict(success=ok)
-    for name, table in goal.on.items():
+    for name, support in goal.on.items():
         k = g.object_index(name)
-        info[f"{name}_on_{table}"] = object_on_table(pos[:, k], speed[:, k], g, name, table)
+        if support in g.object_names:
+            j = g.object_index(support)
+            info[f"{name}_on_{support}"] = object_on_object(pos[:, k], speed[:, k], pos[:, j], speed[:, j], g, name,
+                                                            support)
+        else:
+            info[f"{name}_on_{support}"] = object_on_table(pos[:, k], speed[:, k], g, name, support)
     for name, box in goal.inside.items():
         k = g.object_index(name)
         info[f"{name}_in_{box}"] = object_in_container(pos[:, k], speed[:, k], g, box)

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from envs.goal_check import goal_info
 from helpers import REPO, compose_config
 from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
@@ -188,13 +189,59 @@ def test_put_it_back_15cm_further_is_not_done_before_anything_moves() -> None:
     assert not bool(object_at(there[:, 0], torch.tensor([0.2]), Fixed(value=(0.15, 1.2, 0.7425)), 0.02)[0])
 
 
+def _cube_a_on_table2() -> object:
+    """cube_a (4.5 cm) on table 2, cube_b on table 1."""
+    a_cfg = ObjectCfg(size=(0.045, 0.045, 0.045), rests_on="table2", offset=(0.0, -0.1))
+    b_cfg = ObjectCfg(size=(0.045, 0.045, 0.045), rests_on="table1", offset=(0.0, 0.1))
+    return build_geometry(GeometryCfg(objects={"cube_a": a_cfg, "cube_b": b_cfg}))
+
+
+def test_rests_on_an_object_holds_on_its_top_where_it_stands() -> None:
+    """``rests_on: {cube_b: cube_a}``: on cube_a's top where cube_a stands (2 cm off its
+    configured place, turned), centred within its inscribed circle, both still; beside it, or
+    with cube_a still sliding, it does not hold. The env's predicate says the same."""
+    g = _cube_a_on_table2()
+    params = {"G": {"type": "hemisphere", "frame": "cube_b", "center": [0, 0, 0], "radius": 0.15},
+              "P": {"type": "hemisphere", "frame": "cube_a", "center": [0, 0, 0.05], "radius": 0.15}}
+    t = task_from_dict({"params": params, "plan": ["grasp(cube_b, G)", "place(cube_b, P)"],
+                        "goal": {"rests_on": {"cube_b": "cube_a"}}}, g, TEMPLATES, source="t.yaml")
+    ia, ib = g.object_index("cube_a"), g.object_index("cube_b")
+    a_there = torch.tensor(g.object("cube_a").position) + torch.tensor([0.02, 0.0, 0.0])
+    objects = torch.zeros(4, 2, 3)
+    objects[:, ia] = a_there
+    objects[0, ib] = a_there + torch.tensor([0.015, 0.0, 0.045])   # on top, 1.5 cm off centre (inside 2.25 cm)
+    objects[1, ib] = a_there + torch.tensor([0.035, 0.0, 0.045])   # hanging off: 1.25 cm past the circle
+    objects[2, ib] = a_there + torch.tensor([0.0, 0.0, 0.045 + 0.03])  # 3 cm above the top: not resting
+    objects[3, ib] = a_there + torch.tensor([0.0, 0.0, 0.045])
+    speeds = torch.zeros(4, 2)
+    speeds[3, ia] = 0.2  # cube_a still sliding
+    ok, dist = goal_reached(t.goal, g, t.layout.regions, objects, speeds, torch.zeros(4, 2))
+    assert ok.tolist() == [True, False, False, False]
+    assert float(dist[0]) == 0.0 and float(dist[1]) == pytest.approx(0.0125, abs=1e-6)
+    assert float(dist[2]) == pytest.approx(0.03 - 0.02, abs=1e-6) and float(dist[3]) == 0.0
+    info = goal_info(t.goal, g, t.layout.regions, objects, speeds, torch.zeros(4, 2))
+    assert info["cube_b_on_cube_a"].tolist() == [True, False, False, False]
+
+
+@pytest.mark.parametrize("goal, needles", [
+    ({"rests_on": {"cube_b": "cube_b"}}, ["rests_on.cube_b", "cannot rest on itself"]),
+    ({"rests_on": {"cube_b": "cube_a", "cube_a": "cube_b"}}, ["rests_on", "would rest on itself"]),
+    ({"rests_on": {"cube_b": "cube_aa"}}, ["names no table or object", "did you mean 'cube_a'"]),
+])
+def test_a_stack_goal_that_cannot_hold_is_refused(goal: dict, needles: list[str]) -> None:
+    params = {"G": {"type": "hemisphere", "frame": "cube_b", "center": [0, 0, 0], "radius": 0.15}}
+    with pytest.raises(ConfigError) as e:
+        task_from_dict({"params": params, "plan": ["grasp(cube_b, G)"], "goal": goal}, _cube_a_on_table2(),
+                       TEMPLATES, source="t.yaml")
+    for n in needles:
+        assert n in str(e.value), str(e.value)
+
+
 def test_a_spot_framed_by_a_movable_object_is_where_that_object_stands() -> None:
     """cube_b placed on cube_a (``rests_at`` a spot framed by cube_a, 4.5 cm above its centre),
     with cube_a started 2 cm off its configured place: the goal holds on top of cube_a where it
     stands, not at the configured spot (the goal without frames, as before, says the opposite)."""
-    a_cfg = ObjectCfg(size=(0.045, 0.045, 0.045), rests_on="table2", offset=(0.0, -0.1))
-    b_cfg = ObjectCfg(size=(0.045, 0.045, 0.045), rests_on="table1", offset=(0.0, 0.1))
-    g = build_geometry(GeometryCfg(objects={"cube_a": a_cfg, "cube_b": b_cfg}))
+    g = _cube_a_on_table2()
     params = {"On_a": {"type": "fixed", "frame": "cube_a", "value": [0.0, 0.0, 0.045]},
               "G": {"type": "hemisphere", "frame": "cube_b", "center": [0, 0, 0], "radius": 0.15},
               "P": {"type": "hemisphere", "frame": "cube_a", "center": [0, 0, 0.045], "radius": 0.15}}

@@ -3,6 +3,7 @@
 What it does: ``GoalSpec`` holds every condition a plan's end state must meet, each naming a
 movable object of the scene (``realize.world.objects``):
   * ``rests_on: {cube_a: table2, cube_b: table2}``: the object rests on that table's top;
+    ``rests_on: {cube_b: cube_a}``: on that object's top, where that object stands at the end;
   * ``rests_in: {cube: box}``: the object rests inside that open container;
   * ``rests_at: {cube: {region: Spot, tol: 0.02}}``: the object's centre rests within ``tol`` of the
     task parameter ``Spot`` (a fixed point, or inside a box region grown by ``tol``), e.g.
@@ -126,9 +127,11 @@ def goal_from_dict(d: Any, scene: SceneGeometry, regions: Mapping[str, Region], 
             if name not in objects:
                 raise ConfigError(f"{where}.{key}.{name}: unknown object {name!r}; the scene's objects: {objects}"
                                   f"{did_you_mean(name, objects)}")
-            if key == "rests_on" and target not in tables:
-                raise ConfigError(f"{where}.rests_on.{name} = {target!r} names no table; tables: {tables}"
-                                  f"{did_you_mean(str(target), list(tables))}")
+            if key == "rests_on" and target not in tables and target not in objects:
+                raise ConfigError(f"{where}.rests_on.{name} = {target!r} names no table or object; tables: {tables}, "
+                                  f"objects: {objects}{did_you_mean(str(target), list(tables) + objects)}")
+            if key == "rests_on" and target == name:
+                raise ConfigError(f"{where}.rests_on.{name} = {target!r} is invalid: an object cannot rest on itself")
             if key == "rests_in" and target not in containers:
                 raise ConfigError(f"{where}.rests_in.{name} = {target!r} names no container; containers: {containers}"
                                   f"{did_you_mean(str(target), list(containers))}")
@@ -140,6 +143,13 @@ def goal_from_dict(d: Any, scene: SceneGeometry, regions: Mapping[str, Region], 
                 if not (isinstance(r, (Box, Fixed)) and r.dim in (2, 3)):
                     raise ConfigError(f"{where}.rests_at.{name}.region: {target.region!r} must be a 2-D or 3-D fixed point "
                                       "or box region")
+    for name, target in on.items():  # cube_a on cube_b on cube_a: no end state has that
+        seen, below = {name}, target
+        while below in on:
+            if below in seen:
+                raise ConfigError(f"{where}.rests_on: {name!r} would rest on itself through {sorted(seen)}")
+            seen.add(below)
+            below = on[below]
     for name in set(on) & set(inside):
         raise ConfigError(f"{where}: {name!r} is both on a table and in a container")
     base_in = d.get("base_in")

@@ -4,6 +4,7 @@ What it does: batched predicates over N copies, each with the distance to it tha
 fallback ranks infeasible plans by (m, 0 where it holds geometrically):
   * ``object_on_table``: a named object's centre above the table top's footprint, within
     ``HEIGHT_TOL`` of its resting height (table top + the object's half height), nearly still;
+  * ``object_on_object``: the same on another object's top, where that object stands now;
   * ``object_in_container``: the centre inside an open box's inner footprint, below its wall
     tops, and nearly still;
   * ``object_at``: the centre within a tolerance of a point (or inside a grown box), nearly still;
@@ -48,6 +49,27 @@ def object_on_table(p: Tensor, speed: Tensor, geometry: SceneGeometry, obj: str,
     ok &= (p[:, 2] - top).abs() <= HEIGHT_TOL
     ok &= speed <= rest_speed
     return ok
+
+
+def object_on_object(p: Tensor, speed: Tensor, below: Tensor, below_speed: Tensor, geometry: SceneGeometry,
+                     obj: str, support: str, rest_speed: float = REST_SPEED) -> Tensor:
+    """(N,) bool: centres ``p`` (N, 3) of object ``obj`` rest on object ``support``'s top, where
+    that object stands now (its centres ``below``, (N, 3)): the centre over the support's
+    inscribed circle (whatever either's yaw), at resting height within ``HEIGHT_TOL``, both
+    nearly still (speeds (N,) each)."""
+    ok = object_on_object_distance(p, below, geometry, obj, support) <= 0.0
+    return ok & (speed <= rest_speed) & (below_speed <= rest_speed)
+
+
+def object_on_object_distance(p: Tensor, below: Tensor, geometry: SceneGeometry, obj: str, support: str) -> Tensor:
+    """(N,) how far (m) centres ``p`` of object ``obj`` are from resting on object ``support``
+    whose centres are ``below``."""
+    s = geometry.object(support)
+    r = min(s.half_size[0], s.half_size[1])
+    top = below[:, 2] + s.half_height + geometry.object(obj).half_height
+    dxy = ((p[:, :2] - below[:, :2]).norm(dim=1) - r).clamp(min=0.0)
+    dz = ((p[:, 2] - top).abs() - HEIGHT_TOL).clamp(min=0.0)
+    return torch.sqrt(dxy ** 2 + dz ** 2)
 
 
 def object_on_table_distance(p: Tensor, geometry: SceneGeometry, obj: str, table: str) -> Tensor:
@@ -135,10 +157,16 @@ def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, 
     n, device = objects.shape[0], objects.device
     ok = torch.ones(n, dtype=torch.bool, device=device)
     dist = torch.zeros(n, device=device)
-    for name, table in goal.on.items():
+    for name, support in goal.on.items():
         k = geometry.object_index(name)
-        ok &= object_on_table(objects[:, k], speeds[:, k], geometry, name, table, rest_speed)
-        dist += object_on_table_distance(objects[:, k], geometry, name, table)
+        if support in geometry.object_names:  # a stack: on that object, where it stands
+            j = geometry.object_index(support)
+            ok &= object_on_object(objects[:, k], speeds[:, k], objects[:, j], speeds[:, j], geometry, name, support,
+                                   rest_speed)
+            dist += object_on_object_distance(objects[:, k], objects[:, j], geometry, name, support)
+            continue
+        ok &= object_on_table(objects[:, k], speeds[:, k], geometry, name, support, rest_speed)
+        dist += object_on_table_distance(objects[:, k], geometry, name, support)
     for name, box in goal.inside.items():
         k = geometry.object_index(name)
         ok &= object_in_container(objects[:, k], speeds[:, k], geometry, box, rest_speed)
