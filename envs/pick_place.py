@@ -50,7 +50,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import SceneConfig, SimConfig
 
-from envs import robot_agent
+from envs import robot_agent, robot_base
 from envs.tiling import TILE_MARGIN, gpu_memory_config, tile_offsets, yaw_pitch_quat
 from envs.goal_check import EXIT, default_goal_regions, goal_info
 from realize.config import ConfigError
@@ -61,6 +61,8 @@ from realize.tasks.regions import Region
 from realize.robot.spec import RobotSpec
 
 ENV_ID = "RealizePickPlace-v1"
+
+
 @register_env(ENV_ID, max_episode_steps=2000)
 class RealizePickPlaceEnv(BaseEnv):
     SUPPORTED_ROBOTS: list = []  # any robot of configs/robot/ (or a RobotSpec): set per instance
@@ -204,8 +206,7 @@ class RealizePickPlaceEnv(BaseEnv):
 
     # ------------------------------------------------------------------ building
     def _load_agent(self, options: dict):
-        sx, sy, _ = self.geometry.robot_start
-        poses = [sapien.Pose(p=[sx + ox, sy + oy, 0.0]) for ox, oy in self.offsets]
+        poses = robot_base.load_poses(self.robot_spec, self.geometry.robot_start, self.offsets)
         self.scene.__dict__[robot_agent.ROBOT_COLLISIONS_KEY] = self.robot_collisions  # read where the robot is parsed
         super()._load_agent(options, poses if self.n_tiles > 1 else poses[0])
         # The robot's joint controllers compensate gravity; the objects keep it.
@@ -301,7 +302,6 @@ class RealizePickPlaceEnv(BaseEnv):
         offsets = options.get("offsets")
         names = list(self.agents[0].robot.active_joints_map.keys())
         rest = [self.robot_spec.rest_value(n) for n in names]
-        ix, iy, iyaw = (names.index(j) for j in self.robot_spec.base.joints)
         held = list(self.robot_spec.held)
         held_targets = torch.tensor([[float(v) for v in self.robot_spec.held.values()]])
         with torch.device(self.device):
@@ -326,13 +326,7 @@ class RealizePickPlaceEnv(BaseEnv):
                         xy = xy + (torch.rand(b, 2) * 2 - 1) * self.object_xy_noise
                         yaw = yaw + (torch.rand(b) * 2 - 1) * self.object_yaw_noise
                     poses[o.name] = (xy, yaw)
-                # The root sits at the copy's start xy with zero yaw; the planar joints hold
-                # the base pose relative to it, so joint velocities are world-frame velocities.
-                rel = start - torch.tensor(g.robot_start[:2])
-                qpos[:, ix], qpos[:, iy] = rel[:, 0], rel[:, 1]
-                qpos[:, iyaw] = g.robot_start[2]
-                root = torch.cat([torch.tensor(g.robot_start[:2]) + off, torch.zeros(1)]).repeat(b, 1)
-                agent.robot.set_pose(Pose.create_from_pq(root, torch.tensor([[1.0, 0, 0, 0]]).repeat(b, 1)))
+                robot_base.place(agent, self.robot_spec, qpos, names, start, g.robot_start, off)
                 agent.reset(qpos)
                 agent.robot.set_qvel(torch.zeros_like(qpos))
                 if held:  # held joints (a head) go to their held values, wherever the rest pose starts them
@@ -368,11 +362,13 @@ class RealizePickPlaceEnv(BaseEnv):
         or not), by ``realize.tasks.goals.goal_reached``, in the ``goal_regions``."""
         g = self.geometry
         pos, speed = self.object_states()
-        start = torch.tensor(g.robot_start[:2], dtype=torch.float32, device=self.device)
-        names = list(self.agents[0].robot.active_joints_map.keys())
-        xy = [names.index(j) for j in self.robot_spec.base.joints[:2]]
-        base = torch.cat([a.robot.get_qpos()[:, xy] for a in self.agents]) + start
+        base = self.base_poses()[:, :2]
         return goal_info(self.goal, g, self.goal_regions, pos, speed, base, self.goal_frames)
+
+    def base_poses(self) -> torch.Tensor:
+        """(N, 3) every copy's base x, y (its local frame) and yaw (``envs.robot_base``)."""
+        off = torch.as_tensor(self.offsets, dtype=torch.float32, device=self.device)
+        return robot_base.base_poses(self.agents, self.robot_spec, off, self.geometry.robot_start)
 
     def _get_obs_extra(self, info: dict):
         return dict()

@@ -7,7 +7,8 @@ spec (``realize.robot.spec``): a subclass of ``SpecAgent`` whose
     CPU scene are built from one parsed articulation builder (parsing was two thirds of building
     200 robots); the finger links get the spec's friction material;
   * only control mode, ``pd_joint_pos_base_vel``: base x, y, yaw joints velocity-driven in the
-    world frame (an omnidirectional base), the upper joints position-driven with absolute targets
+    world frame (an omnidirectional base; a fixed base has none: its root link is fixed where
+    the task puts it), the upper joints position-driven with absolute targets
     (per drive group), held joints (a head) held by their drive, the gripper fingers mimic
     position-driven; no cameras (rendering for videos uses a scene camera);
   * collision filtering: the spec's ``no_floor_links`` never touch the floor (``FLOOR_BIT``;
@@ -16,7 +17,8 @@ spec (``realize.robot.spec``): a subclass of ``SpecAgent`` whose
   * ``lean``: the robot without the spec's ``lean_drop_links`` (fixed-joint leaves nothing in
     these tasks touches or reads), so PhysX simulates fewer links; joints and their order unchanged.
 The robots of ``configs/robot/*.yaml`` are registered under their names when ``envs`` is imported
-(``gym.make(id, robot_uids=name)``); a spec changed by config overrides gets its own uid.
+(``gym.make(id, robot_uids=name)``; a name ManiSkill's own agents hold, ``panda``, is registered as
+``realize_panda``); a spec changed by config overrides gets its own uid.
 What it doesn't: decide targets. Controllers in ``realize/controllers`` compute them and the
 batched scene (``realize.scene``) writes them to the drives.
 """
@@ -111,8 +113,9 @@ class SpecAgent(BaseAgent):
             mode["held"] = PDJointPosControllerConfig(list(s.held), None, None, h.stiffness, h.damping, h.force,
                                                       normalize_action=False)
         b = s.base
-        mode["base"] = PDJointVelControllerConfig(list(b.joints), -b.speed_limit, b.speed_limit, b.damping, b.force,
-                                                  normalize_action=False)
+        if not b.fixed:  # a fixed base has no joints to drive
+            mode["base"] = PDJointVelControllerConfig(list(b.joints), -b.speed_limit, b.speed_limit, b.damping,
+                                                      b.force, normalize_action=False)
         return deepcopy(dict(pd_joint_pos_base_vel=mode))
 
     def _after_init(self):
@@ -141,6 +144,8 @@ def agent_uid(spec: RobotSpec, lean: bool = False) -> str:
     uid = spec.name if same else f"{spec.name}-{_spec_key(spec)}"
     if lean and spec.collision.lean_drop_links:
         uid = f"{uid}_lean"
+    if uid in REGISTERED_AGENTS and uid not in _SPECS:  # one of ManiSkill's own agents (its "panda")
+        uid = f"realize_{uid}"
     if uid not in REGISTERED_AGENTS:
         attrs = dict(
             uid=uid, spec=spec, urdf_path=resolve_urdf(spec.urdf, spec.visual_mesh_ext),
@@ -156,10 +161,11 @@ def robot_spec_for_uid(uid: str) -> RobotSpec:
     """The spec a registered uid was built from (a config file's robot by its name)."""
     if uid not in _SPECS:
         base = uid[:-len("_lean")] if uid.endswith("_lean") else uid
+        base = base[len("realize_"):] if base.startswith("realize_") and base not in known_robots() else base
         if base not in known_robots():
             raise ValueError(f"robot_uids = {uid!r} is unknown: known robots {known_robots()} "
                              "(add one: configs/robot/<name>.yaml)")
-        agent_uid(load_robot_spec(base), lean=uid.endswith("_lean"))
+        return _SPECS[agent_uid(load_robot_spec(base), lean=uid.endswith("_lean"))]
     return _SPECS[uid]
 
 

@@ -28,19 +28,24 @@ def test_every_task_with_every_robot(env_id: str, robot: str) -> None:
     try:
         u = env.unwrapped
         assert u.robot_spec.name == robot
+        spec = u.robot_spec
         names = list(u.agents[0].robot.active_joints_map)
-        assert set(u.robot_spec.whole_body_joints) <= set(names)
+        assert set(spec.state_joints) | set(spec.base.joints) == set(names)
         first, _ = env.reset(seed=0)
         second, _ = env.reset(seed=0)
         assert np.array_equal(_flat(first), _flat(second))
         qpos = u.agents[0].robot.get_qpos()[0]
-        rest = torch.tensor([u.robot_spec.rest_value(n) for n in names])
-        assert torch.allclose(qpos[3:], rest[3:], atol=1e-5)  # the arm (and torso) at the robot's rest pose
-        # the base at the task's start pose: planar joints at zero, the articulation's root there
-        assert torch.allclose(qpos[:3], torch.zeros(3), atol=1e-5)
+        nb = len(spec.base.joints)  # a fixed base has none
+        rest = torch.tensor([spec.rest_value(n) for n in names])
+        assert torch.allclose(qpos[nb:], rest[nb:], atol=1e-5)  # the arm (and torso) at the robot's rest pose
+        # the base at the task's start pose: planar joints at zero (the articulation's root there),
+        # or a fixed base's root there itself, its height up, turned by the start's yaw
+        assert torch.allclose(qpos[:nb], torch.zeros(nb), atol=1e-5)
         start = u.geometry.robot_start
-        root = u.agents[0].robot.pose.p[0]
-        assert torch.allclose(root[:2].cpu(), torch.tensor(start[:2], dtype=root.dtype), atol=1e-5)
+        root = u.agents[0].robot.pose.p[0].cpu()
+        assert torch.allclose(root, torch.tensor([*start[:2], spec.base.height], dtype=root.dtype), atol=1e-5)
+        base = u.base_poses()[0].cpu()
+        assert torch.allclose(base, torch.tensor(start, dtype=base.dtype), atol=1e-5)
         env.action_space.seed(0)
         for _ in range(5):
             obs, reward, terminated, truncated, info = env.step(env.action_space.sample())

@@ -46,6 +46,30 @@ def _with_efforts(urdf: bytes) -> bytes:
     return ET.tostring(root)
 
 
+def _with_planar_base(urdf: bytes, names: tuple[str, ...], height: float) -> bytes:
+    """A fixed-base robot's URDF with the planar base our model puts ahead of its root, written
+    as URDF joints (x, y prismatic, yaw continuous from a ``world`` link; the root ``height`` up),
+    so that pytorch_kinematics computes the base columns too."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(urdf)
+    children = {j.find("child").get("link") for j in root.iter("joint")}
+    (base,) = [lk.get("name") for lk in root.iter("link") if lk.get("name") not in children]
+    links = ["world", f"{names[0]}_link", f"{names[1]}_link", base]
+    for name, parent, child, kind, axis, z in zip(names, links, links[1:], ("prismatic", "prismatic", "continuous"),
+                                                  ("1 0 0", "0 1 0", "0 0 1"), (0.0, 0.0, height)):
+        if child != base:
+            ET.SubElement(root, "link", name=child)
+        j = ET.SubElement(root, "joint", name=name, type=kind)
+        ET.SubElement(j, "origin", xyz=f"0 0 {z!r}", rpy="0 0 0")
+        ET.SubElement(j, "parent", link=parent)
+        ET.SubElement(j, "child", link=child)
+        ET.SubElement(j, "axis", xyz=axis)
+        ET.SubElement(j, "limit", lower="-1000", upper="1000", effort="0", velocity="1")
+    ET.SubElement(root, "link", name="world")
+    return ET.tostring(root)
+
+
 def _point(t: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
     """(N, 3) the point ``offset`` of a link whose poses are ``t`` (N, 4, 4)."""
     return t[:, :3, :3] @ offset + t[:, :3, 3]
@@ -57,6 +81,8 @@ def test_tcp_spheres_and_jacobians_match_pytorch_kinematics(robot: str) -> None:
     kin = RobotKinematics(spec, dtype=F64)
     with open(kin.urdf_path, "rb") as f:
         urdf = _with_efforts(f.read())
+    if spec.base.fixed:
+        urdf = _with_planar_base(urdf, spec.whole_body_joints[:3], spec.base.height)
     q = random_q(kin, N, seed=7)
     chain = pk.build_chain_from_urdf(urdf).to(dtype=F64)
     ref = {k: v.get_matrix() for k, v in chain.forward_kinematics(full_qpos(kin, q, chain.get_joint_parameter_names())).items()}

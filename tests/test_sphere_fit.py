@@ -72,7 +72,7 @@ SHAPES_URDF = """<?xml version="1.0"?>
 # Fetch links that carry no spheres of their own (see the module docstring).
 BORROWED = {"fetch_omni": {"r_wheel_link", "l_wheel_link", "head_tilt_link", "bellows_link2", "estop_link",
                            "laser_link"},
-            "mobile_panda": set()}
+            "mobile_panda": set(), "panda": set()}
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ def test_script_writes_file_and_floor_rule(shapes_urdf: Path, tmp_path: Path, ca
     assert [s.check_floor for s in spheres] == [False] * 3 + [True]  # the top leaves the floor as the lift rises
 
 
-@pytest.mark.parametrize("robot", ["fetch_omni", "mobile_panda"])
+@pytest.mark.parametrize("robot", ["fetch_omni", "mobile_panda", "panda"])
 def test_sphere_file_covers_collision_geometry(robot: str, capsys: pytest.CaptureFixture) -> None:
     spec = load_robot_spec(robot)
     urdf = source_urdf(spec.urdf)

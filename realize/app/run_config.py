@@ -279,6 +279,13 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
                           f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
     task, candidates = build_task_candidates(task_d, geometry, source, planner)
+    if robot.base.fixed:
+        from realize.realization.actions import TEMPLATES
+        from realize.tasks.spec import check_fixed_base
+
+        for i, t in enumerate(candidates):
+            check_fixed_base(t.plan, TEMPLATES, robot.name, f"{source}:plan" if len(candidates) == 1 else
+                             f"{source}:planner[{i}]")
     from realize.app.replan import check_no_replan, read_replan
 
     replan = None

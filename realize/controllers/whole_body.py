@@ -28,7 +28,7 @@ import torch
 from torch import Tensor
 
 from realize.config import Settings, setting
-from realize.robot.layout import BASE_XY, YAW
+from realize.robot.layout import BASE, BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.world.geometry import SceneGeometry
@@ -83,6 +83,13 @@ class _PoseMap:
         ])
         self._mask = torch.cat([kin._ee_dof_mask.unsqueeze(0).expand(3, -1), kin.sphere_dof_mask], dim=0)
         self._ends = prefix_ends(self._mask)
+        # a fixed base: its columns of q place the robot and never move, so the fabric sees no
+        # base in the Jacobians (it then solves for the upper joints alone)
+        self._locked: Tensor | None = None
+        if kin.spec.base.fixed:
+            on = torch.ones(kin.n_dof, dtype=kin.dtype, device=kin.device)
+            on[BASE] = 0.0
+            self._locked = on
 
     def __call__(self, q: Tensor) -> tuple[Tensor, Tensor]:  # pragma: no cover - jets is used
         return self.jets(q, torch.zeros_like(q))[0][0], self.kin(q)[1]
@@ -94,6 +101,8 @@ class _PoseMap:
         ee_pts = matvec3(r.unsqueeze(-3), self._offsets) + p.unsqueeze(-2)  # (N, 3, 3)
         pts = torch.cat([ee_pts, k._sphere_centres(fk)], dim=-2)
         jac, vel, acc = point_jets(z, o, pts, self._mask, self._ends, qd, k._rev_mask)
+        if self._locked is not None:
+            jac = jac * self._locked  # qd's base part is zero, so vel and acc hold no base terms
         n = q.shape[0]
         ee = (pts[:, :3].reshape(n, 9), jac[:, :3].reshape(n, 9, -1), vel[:, :3].reshape(n, 9), acc[:, :3].reshape(n, 9))
         sph = (pts[:, 3:], jac[:, 3:], vel[:, 3:], acc[:, 3:])
@@ -143,6 +152,8 @@ class WholeBodyFabric:
         limit = torch.full((self.kin.n_dof,), self.cfg.max_joint_speed, dtype=dtype, device=device)
         limit[BASE_XY] = self.cfg.max_base_speed
         limit[YAW] = self.cfg.max_yaw_rate
+        if self.robot.base.fixed:
+            limit[BASE] = 0.0
         self.speed_limit = limit
 
     def goal_points(self, position: Tensor, approach: Tensor, closing: Tensor) -> Tensor:

@@ -44,7 +44,7 @@ from realize.world.geometry import SceneGeometry
 from realize.world.state import SceneState
 from realize.tasks.frames import position_columns
 from realize.tasks.regions import Region
-from realize.tasks.spec import TaskSpec
+from realize.tasks.spec import TaskSpec, check_fixed_base
 
 
 class RealizerSpec(Protocol):
@@ -340,12 +340,10 @@ class PlanRealizer:
                  fabric_dtype: torch.dtype = torch.float32, start: SceneState | None = None,
                  geometry: SceneGeometry | None = None, keep_best: int | None = None):
         self.task, self.scene = task, scene
-        # ce.prune: a plan stops once it cannot be among the batch's keep_best cheapest feasible
-        # ones (realize.realization.pruning); None: every plan runs to its end
+        # ce.prune: a plan stops once it cannot be among the keep_best cheapest feasible (None: never; .pruning)
         self.keep_best = keep_best
         self.start = start  # every rollout starts from this state (None: the task's initial state)
-        # called as hook(a, rows) when plans ``rows`` (copy indices) are about to begin action a
-        # (replay uses it to capture the state there); None in a search
+        # hook(a, rows) when plans ``rows`` (copies) are about to begin action a (replay captures states)
         self.action_hook: Callable[[int, Tensor], None] | None = None
         self.cfg = cfg or RolloutConfig()  # checked when it was built
         self.seed = seed
@@ -369,6 +367,8 @@ class PlanRealizer:
         self.fabric = WholeBodyFabric(g, self.cfg.fabric, dt=scene.control_dt, device=self.device,
                                       dtype=fabric_dtype, robot=scene.robot)
         self.templates: dict[str, Template] = {name: cls(scene.n_envs, self.device) for name, cls in TEMPLATES.items()}
+        if scene.robot.base.fixed:  # as the run config checks it, for every caller
+            check_fixed_base(task.plan, TEMPLATES, scene.robot.name, f"{task.source}:plan")
         self.last: RolloutResult | None = None
 
     @classmethod

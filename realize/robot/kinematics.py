@@ -44,7 +44,7 @@ from realize.robot.jacobians import jdot_qdot, point_jacobian, point_jets, prefi
 from realize.robot.chain import KinematicChain, homogeneous, matvec3
 from realize.robot.sphere_file import SphereSpec
 from realize.robot.spec import RobotSpec
-from realize.robot.urdf import parse_urdf_joints, resolve_urdf
+from realize.robot.urdf import fixed_base_joints, parse_urdf_joints, resolve_urdf
 
 __all__ = ["RobotKinematics"]
 
@@ -78,6 +78,8 @@ class RobotKinematics:
         self.dtype = dtype
         self.urdf_path = urdf_path or resolve_urdf(spec.urdf, spec.visual_mesh_ext)
         self.joints = parse_urdf_joints(self.urdf_path)
+        if spec.base.fixed:  # its base columns of q place the URDF's root (realize.robot.urdf.fixed_base_joints)
+            self.joints = fixed_base_joints(self.joints, spec.whole_body_joints[:3], spec.base.height)
         self.ee_link: str = spec.tcp.link
         self.joint_names: tuple[str, ...] = spec.whole_body_joints
         opening = spec.gripper.open if finger_opening is None else float(finger_opening)

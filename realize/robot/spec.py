@@ -4,7 +4,7 @@ What it does
 ------------
 * ``RobotSpec`` names everything realize needs to know about one mobile manipulator: its URDF
   (a file bundled with ManiSkill, ``mani_skill:robots/...``, or a file of this project), the
-  planar base (x, y, yaw joints, velocity-driven), the position-driven upper joints in ``q``
+  planar base (x, y, yaw joints, velocity-driven; or a fixed base), the position-driven upper joints in ``q``
   order (a lift or torso first if any, then the arm), the joints held still (a head), the
   gripper (finger joints, open and closed targets, the finger links whose contact forces mean
   "holding", pad sizes, friction material), the tool centre point (link, offset, approach and
@@ -33,10 +33,11 @@ from realize.config import ConfigError, Settings, setting
 from realize.paths import CONFIG_DIR
 
 __all__ = ["Drive", "BaseSpec", "UpperSpec", "GripperSpec", "TcpSpec", "CollisionSpec", "RobotSpec",
-           "ROBOT_CONFIG_DIR", "known_robots", "load_robot_spec", "DEFAULT_ROBOT"]
+           "ROBOT_CONFIG_DIR", "known_robots", "load_robot_spec", "DEFAULT_ROBOT", "FIXED_BASE_JOINTS"]
 
 ROBOT_CONFIG_DIR = CONFIG_DIR / "robot"
 DEFAULT_ROBOT = "fetch_omni"
+FIXED_BASE_JOINTS = ("fixed_base_x", "fixed_base_y", "fixed_base_yaw")  # q's base columns of a fixed base
 
 
 def _unit(v: tuple[float, ...]) -> str | None:
@@ -56,17 +57,34 @@ class Drive(Settings):
 
 @dataclass
 class BaseSpec(Settings):
-    """The planar base: three joints (x, y prismatic, yaw revolute) driven by velocity in the
-    world frame, so the base moves like an omnidirectional one."""
+    """The base: three joints (x, y prismatic, yaw revolute) driven by velocity in the world
+    frame, so the base moves like an omnidirectional one; or none (``joints: []``), a fixed
+    base: the URDF's root ``link`` bolted at the scene's ``robot_start`` (x, y, yaw), ``height``
+    above the floor. A fixed base still fills the three base columns of ``q`` (its pose, which
+    never changes); its plans have no ``move_to``."""
 
-    joints: tuple[str, str, str] = ("root_x_axis_joint", "root_y_axis_joint", "root_z_rotation_joint")
-    link: str = "base_link"  # the link the base joints carry
+    joints: tuple[str, ...] = ("root_x_axis_joint", "root_y_axis_joint", "root_z_rotation_joint")
+    link: str = "base_link"  # the link the base joints carry (a fixed base: the URDF's root link)
+    height: float = setting(0.0, ge=0)  # m: a fixed base's root above the floor (a mobile base: 0)
     damping: float = setting(1e4, gt=0)  # velocity drive
     force: float = setting(2e3, gt=0)
     speed_limit: float = setting(1.5, gt=0)  # |joint velocity target| bound of ManiSkill's controller
     # the base's footprint as a disc (m): A* pads obstacles by it (plus controller.astar.padding),
     # and the robot's start must keep it clear of every obstacle and inside the world's bounds
     footprint_radius: float = setting(0.32, gt=0)
+
+    def check(self, where: str) -> None:
+        if len(self.joints) not in (0, 3):
+            raise ConfigError(f"{where}.joints = {list(self.joints)} is invalid: name three joints (x, y prismatic, "
+                              "yaw revolute) for a mobile base, or none ([]) for a fixed base")
+        if self.joints and self.height != 0.0:
+            raise ConfigError(f"{where}.height = {self.height} is invalid: only a fixed base (joints: []) "
+                              "stands above the floor")
+
+    @property
+    def fixed(self) -> bool:
+        """No base joints: the robot's root stays where the scene put it."""
+        return not self.joints
 
 
 @dataclass
@@ -191,8 +209,10 @@ class RobotSpec(Settings):
     # ------------------------------------------------------------------ derived names
     @property
     def whole_body_joints(self) -> tuple[str, ...]:
-        """The joints of ``q``, in order: base x, y, yaw, then the upper joints."""
-        return (*self.base.joints, *self.upper.joints)
+        """The joints of ``q``, in order: base x, y, yaw, then the upper joints. A fixed base's
+        three are ``FIXED_BASE_JOINTS``, joints of the kinematic model only (``realize.robot.kinematics``
+        puts them ahead of the URDF's root), not of the simulated robot."""
+        return (*(FIXED_BASE_JOINTS if self.base.fixed else self.base.joints), *self.upper.joints)
 
     @property
     def n_dof(self) -> int:

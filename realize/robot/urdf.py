@@ -31,7 +31,7 @@ from torch import Tensor
 from realize.config import ConfigError
 from realize.paths import REPO_ROOT
 
-__all__ = ["JointSpec", "resolve_urdf", "source_urdf", "parse_urdf_joints", "urdf_floats", "element_origin", "mesh_path",
+__all__ = ["fixed_base_joints", "JointSpec", "resolve_urdf", "source_urdf", "parse_urdf_joints", "urdf_floats", "element_origin", "mesh_path",
            "rpy_matrix", "skew", "axis_rotation"]
 
 MANI_SKILL_PREFIX = "mani_skill:"
@@ -163,6 +163,27 @@ def parse_urdf_joints(path: str) -> dict[str, JointSpec]:
         )
         joints[spec.child] = spec
     return joints
+
+
+def fixed_base_joints(joints: dict[str, JointSpec], names: Sequence[str], height: float) -> dict[str, JointSpec]:
+    """A fixed-base robot's kinematic model: ``joints`` (a URDF's, keyed by child link) with a
+    planar base ahead of its root link: ``names`` (x and y prismatic, yaw continuous; no limits)
+    from a ``world`` frame, the root ``height`` above it. These joints place the robot where the
+    scene bolted it; they are the base columns of ``q`` and are not in the simulated robot."""
+    children = {j.child for j in joints.values()}
+    roots = sorted({j.parent for j in joints.values()} - children)
+    if len(roots) != 1:
+        raise ValueError(f"a URDF with one root link is needed for a fixed base, found roots {roots}")
+    x, y, yaw = names
+    links = (f"{x}_link", f"{y}_link", roots[0])
+    inf = math.inf
+    virtual = [
+        JointSpec(x, "prismatic", "world", links[0], (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), -inf, inf, inf),
+        JointSpec(y, "prismatic", links[0], links[1], (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), -inf, inf, inf),
+        JointSpec(yaw, "continuous", links[1], links[2], (0.0, 0.0, float(height)), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0),
+                  -inf, inf, inf),
+    ]
+    return {**{j.child: j for j in virtual}, **joints}
 
 
 def rpy_matrix(rpy: Sequence[float]) -> Tensor:

@@ -15,7 +15,8 @@ What it doesn't: decide anything (controllers and the rollout do), or hold world
 (``realize.world.geometry``) or the ManiSkill tasks (``envs``).
 """
 
-from realize.scene.batched import BatchedScene, SceneSpec, StepHook, quat_to_matrix
+from realize.scene.batched import BatchedScene, SceneSpec, StepHook
+from realize.scene.quaternion import quat_to_matrix
 from realize.scene.settings import Camera, EnvOptions, SimSettings
 
 __all__ = [

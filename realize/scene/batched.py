@@ -38,7 +38,7 @@ from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
 from realize.world.state import ObjectPose, SceneState
 
-__all__ = ["BatchedScene", "SceneSpec", "StepHook", "quat_to_matrix"]
+__all__ = ["BatchedScene", "SceneSpec", "StepHook"]
 
 StepHook = Callable[[int], None]
 RESTORE_SETTLE_STEPS = 1  # control periods a restored held object is simulated before the first read
@@ -50,19 +50,6 @@ class SceneSpec(Protocol):
     geometry_cfg: GeometryCfg
     sim: SimSettings
     robot: RobotSpec
-
-
-def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
-    """(..., 4) wxyz unit quaternions -> (..., 3, 3) rotation matrices."""
-    w, x, y, z = q.unbind(-1)
-    return torch.stack(
-        [
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-        ],
-        dim=-1,
-    ).reshape(q.shape[:-1] + (3, 3))
 
 
 class BatchedScene(ObjectProperties):
@@ -109,7 +96,10 @@ class BatchedScene(ObjectProperties):
             raise ConfigError(f"robot {self.robot.name!r}: its upper, held and gripper joints "
                               f"{sorted(self.robot.state_joints)} are not the simulated robot's other active joints "
                               f"{sorted(self.state_joints)}")
-        self._wb_idx = torch.tensor([names.index(j) for j in self.robot.whole_body_joints], device=self.device)
+        self._fixed_base = self.robot.base.fixed
+        wb = self.robot.upper.joints if self._fixed_base else self.robot.whole_body_joints
+        self._wb_idx = torch.tensor([names.index(j) for j in wb], device=self.device)
+        self._base_fixed_pose = torch.zeros(n_envs, 3, device=self.device)  # a fixed base's, read at each reset
         self._finger_idx = torch.tensor([names.index(j) for j in self.robot.gripper.joints], device=self.device)
         self._grip_open, self._grip_closed = self.robot.gripper.open, self.robot.gripper.closed
         self._base_cmd = torch.zeros(n_envs, 3, device=self.device)
@@ -152,6 +142,8 @@ class BatchedScene(ObjectProperties):
             options["offsets"] = self._reset_offsets
         self.env.reset(seed=seed, options=options)
         self._impl.after_reset()
+        if self._fixed_base:  # where this reset bolted every copy's base
+            self._base_fixed_pose = self.u.base_poses().to(self.device, torch.float32)
         if state is not None:
             self._restore(state)
         self.state_changed()
@@ -175,7 +167,7 @@ class BatchedScene(ObjectProperties):
         row = torch.zeros(len(self.joint_names))
         base = torch.tensor(state.base, dtype=torch.float32)
         base[:2] -= self._start_xy.cpu()  # the base joints are relative to the task's robot start
-        for name, v in zip(self.robot.base.joints, base.tolist()):
+        for name, v in zip(self.robot.base.joints, base.tolist()):  # a fixed base has none: it stays where it is
             row[self.joint_names.index(name)] = v
         self.robot.check_state_joints(state.joints, state.source or "state")
         for name in self.state_joints:  # joints a state leaves out take the robot's rest pose
@@ -230,14 +222,20 @@ class BatchedScene(ObjectProperties):
 
     def _whole_body_q(self) -> torch.Tensor:
         q = self._read("qpos", self._impl.qpos)[:, self._wb_idx]
+        if self._fixed_base:
+            return torch.cat([self._base_fixed_pose, q], dim=1)
         return torch.cat([q[:, BASE_XY] + self._start_xy, q[:, YAW:]], dim=1)
+
+    def _whole_body_qd(self) -> torch.Tensor:
+        qd = self._read("qvel", self._impl.qvel)[:, self._wb_idx]
+        return torch.cat([torch.zeros_like(self._base_fixed_pose), qd], dim=1) if self._fixed_base else qd
 
     def whole_body_q(self) -> torch.Tensor:
         """(N, n_dof) base x, y (local frame), yaw, then the upper joints (lift/torso, arm)."""
         return self._read("whole_body_q", self._whole_body_q).clone()
 
     def whole_body_qd(self) -> torch.Tensor:
-        return self._read("whole_body_qd", lambda: self._read("qvel", self._impl.qvel)[:, self._wb_idx]).clone()
+        return self._read("whole_body_qd", self._whole_body_qd).clone()
 
     def base_pose(self) -> torch.Tensor:
         """(N, 3) base x, y (local frame) and yaw."""

@@ -207,7 +207,7 @@ class CpuTiledBackend(PhysicsBackend):
         n = self.n_envs
         c_base, c_arm, c_arm_vel, c_grip = self._cols
         new = np.empty((n, self._n_targets), dtype=np.float64)
-        new[:, c_base] = base_vel.numpy()
+        new[:, c_base] = base_vel[:, :c_base.stop].numpy()  # a fixed base: no columns
         new[:, c_arm] = arm.numpy()
         new[:, c_arm_vel] = arm_vel.numpy()
         new[:, c_grip] = grip.numpy()[:, None]

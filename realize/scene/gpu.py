@@ -84,7 +84,8 @@ class GpuBackend(PhysicsBackend):  # pragma: no cover - exercised on CUDA machin
     def apply_targets(self, base_vel: torch.Tensor, arm: torch.Tensor, arm_vel: torch.Tensor,
                       grip: torch.Tensor, frozen: torch.Tensor) -> None:
         r = self._robot
-        r.set_joint_drive_velocity_targets(base_vel, self._base_j)
+        if self._base_j:  # a fixed base has no joints
+            r.set_joint_drive_velocity_targets(base_vel, self._base_j)
         r.set_joint_drive_targets(arm, self._arm_j)
         r.set_joint_drive_velocity_targets(arm_vel, self._arm_j)
         r.set_joint_drive_targets(grip[:, None].repeat(1, len(self._finger_j)), self._finger_j)

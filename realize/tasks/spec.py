@@ -163,6 +163,15 @@ def check_plan(plan: Sequence[ActionSpec], layout: ParamLayout, templates: Mappi
     check_hand(plan, where, held)
 
 
+def check_fixed_base(plan: Sequence[ActionSpec], templates: Mapping[str, Any], robot_name: str, where: str) -> None:
+    """A fixed-base robot's plan drives no base: its first ``move_to`` (any template that
+    ``moves_base``) is one ``ConfigError`` naming the action."""
+    for i, a in enumerate(plan):
+        if getattr(templates.get(a.template), "moves_base", False):
+            raise ConfigError(f"{where}[{i}]: {a} drives the base, but robot {robot_name!r} has a fixed base "
+                              "(robot.base.joints = []): its plans have no move_to")
+
+
 def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mapping[str, Any],
                    source: str = "task") -> TaskSpec:
     """Build and check a TaskSpec. ``source`` names the file for error messages."""

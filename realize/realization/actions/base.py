@@ -40,6 +40,7 @@ class Template:
     name: ClassVar[str] = "template"
     n_params: ClassVar[int] = 1
     param_doc: ClassVar[str] = ""
+    moves_base: ClassVar[bool] = False  # drives the base (a fixed-base robot's plans cannot hold it)
     takes_object: ClassVar[bool] = False  # the plan names the object it handles first: grasp(cube, Cube_g)
 
     def __init__(self, n_envs: int, device: torch.device):

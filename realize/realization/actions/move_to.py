@@ -48,6 +48,7 @@ class MoveTo(Template):
     """
 
     name = "move_to"
+    moves_base = True
     param_doc = "a 2-D base location (annulus, box or fixed point in R^2)"
 
     def __init__(self, n_envs: int, device: torch.device):
