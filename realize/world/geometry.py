@@ -267,8 +267,8 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
     where the parts do not fit together (single values are already checked by the fields)."""
     push = cfg.variant == "push"
     names = [t.name for t in cfg.tables]
-    if len(cfg.tables) < 2 and not push:
-        raise _err(where, "tables", names, "need at least two tables (pick and place)")
+    if not cfg.tables and not push:
+        raise _err(where, "tables", names, "need at least one table (objects rest on tables)")
     if len(set(names)) != len(names):
         raise _err(where, "tables", names, "table names must be unique")
     if push and not cfg.containers:
