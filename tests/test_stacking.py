@@ -62,12 +62,14 @@ def test_cube_b_ends_square_on_cube_a(a_shift: tuple[float, float]) -> None:
     assert math.dist(a[:2].tolist(), (configured[0] + a_shift[0], configured[1] + a_shift[1])) <= 0.005  # not pushed
 
 
-def test_three_blocks_end_in_a_tower() -> None:
-    """``experiment=tower3`` (the robot at table 1, the plan from the blocks domain), hand-chosen
-    top-down grasps and places: cube C ends on cube B on cube A, each centred within 1 cm and
-    upright within 5 degrees, all settled. Cube C's place region is framed by cube B, so it is
-    read where cube B stands once stacked, not where cube B started."""
-    spec = build_run_spec(compose_config("experiment=tower3"))
+@pytest.mark.parametrize("experiment", ["tower3", "tower3_tabletop"])
+def test_three_blocks_end_in_a_tower(experiment: str) -> None:
+    """``experiment=tower3`` (the mobile robot at table 1) and ``tower3_tabletop`` (the fixed-base
+    Panda at the tabletop), the plan from the blocks domain, hand-chosen top-down grasps and
+    places: cube C ends on cube B on cube A, each centred within 1 cm and upright within 5
+    degrees, all settled. Cube C's place region is framed by cube B, so it is read where cube B
+    stands once stacked, not where cube B started. A fixed base ends where it started."""
+    spec = build_run_spec(compose_config(f"experiment={experiment}"))
     g = spec.geometry
     assert spec.task.describe() == ("grasp(cube_b, CubeB_g), place(cube_b, CubeB_on_a), grasp(cube_c, CubeC_g), "
                                     "place(cube_c, CubeC_on_b)")
@@ -77,9 +79,13 @@ def test_three_blocks_end_in_a_tower() -> None:
          "CubeC_g": (pos["cube_c"][0], pos["cube_c"][1], pos["cube_c"][2] + UP),
          "CubeC_on_b": (pos["cube_b"][0], pos["cube_b"][1], pos["cube_b"][2] + 0.05 + UP)}  # cube B's config frame
     Z = torch.tensor([[v for name in spec.task.layout.names for v in z[name]]])
-    with BatchedScene(1, spec.geometry_cfg, spec.sim) as scene:
+    with BatchedScene(1, spec.geometry_cfg, spec.sim, robot=spec.robot) as scene:
         res = PlanRealizer(spec.task, scene, spec.rollout, seed=spec.seed).rollout(Z)
         poses, speeds = scene.object_poses()[0], scene.object_velocities()[0, :, :3].norm(dim=1)
+        base, root = scene.base_pose()[0], scene.u.agents[0].robot.pose.p[0]
+    if spec.robot.base.fixed:
+        assert torch.allclose(base, torch.tensor(g.robot_start, dtype=base.dtype), atol=1e-6)
+        assert torch.allclose(root, torch.tensor([*g.robot_start[:2], spec.robot.base.height]), atol=1e-6)
     a, b, c = (poses[g.object_index(n)] for n in ("cube_a", "cube_b", "cube_c"))
     assert bool(res.feasible[0]) and bool(res.goal[0]), res.failure
     for lower, upper in ((a, b), (b, c)):
