@@ -47,6 +47,7 @@ class RolloutConfig(Settings):
     axis_tolerance: float = setting(0.1, gt=0)  # rad, approach axis alignment at the pre-pose
     grasp_offset: float = setting(0.0, ge=0)  # m, extra back-off of the TCP target along the approach
     grasp_clearance: float = setting(0.006, ge=0)  # m, fingertips stay this far above the supporting surface
+    preshape_margin: float | None = setting(None, ge=0)  # m, grasp: fingers pre-shaped to the object's width across the closing axis plus this before the approach; null: fully open
     place_drop: float = setting(0.004, ge=0)  # m, the held object is released this high above its place point
     place_pre_height: float = setting(0.12, gt=0)  # m, pre-place above a release point (place with a 3-D box region)
     retreat_share: float = setting(0.6, gt=0)  # retreat done once the TCP is this share of the way back out

@@ -38,6 +38,8 @@ class StepContext:
     ``holds(rows, obj)`` reads finger contacts on demand (once per step).
     Commands, reset by ``begin_step()``: ``base_cmd`` (N, 3) world-frame base velocity,
     ``arm_cmd`` / ``arm_vel_cmd`` (N, n_upper) lift/torso + arm targets, ``grip_cmd`` (N,) closed;
+    ``grip_open`` (N,) the finger joint target of an open gripper (``robot.gripper.open``, or a
+    grasp's pre-shape; kept until a template changes it);
     ``arm_hold`` (N, n_upper) is where an arm not driven by the fabric stays.
     """
 
@@ -62,6 +64,7 @@ class StepContext:
     arm_cmd: Tensor
     arm_vel_cmd: Tensor
     grip_cmd: Tensor
+    grip_open: Tensor
     arm_hold: Tensor
     fab_state: FabricState  # the fabric's reference state of every copy
     fab_invalid: Tensor  # (N,) the fabric flagged the copy's step invalid
@@ -80,6 +83,7 @@ class StepContext:
         self.arm_cmd = torch.zeros(n, n_upper, device=dev)
         self.arm_vel_cmd = torch.zeros(n, n_upper, device=dev)
         self.grip_cmd = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.grip_open = torch.full((n,), float(scene.robot.gripper.open), device=dev)
         self.arm_hold = torch.zeros(n, n_upper, device=dev)
         fab = dict(dtype=fabric.dtype, device=fabric.device)
         self.fab_state = FabricState(torch.zeros(n, n_dof, **fab), torch.zeros(n, n_dof, **fab))

@@ -176,7 +176,7 @@ class Rollout:
         scene, ctx = self.scene, self.ctx
         scene.set_base_velocity(ctx.base_cmd)
         scene.set_arm_targets(ctx.arm_cmd, ctx.arm_vel_cmd)
-        scene.set_gripper(ctx.grip_cmd)
+        scene.set_gripper(ctx.grip_cmd, ctx.grip_open)
         if self.cfg.freeze_finished:
             scene.freeze(asleep)
 

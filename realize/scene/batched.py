@@ -336,11 +336,13 @@ class BatchedScene(ObjectProperties):
         self._arm_vel_target = (torch.zeros_like(self._arm_target) if qd_target is None
                                 else qd_target.detach().to(self.device, torch.float32))
 
-    def set_gripper(self, closed: torch.Tensor) -> None:
-        """(N,) bool: close (True) or open (False) the gripper."""
+    def set_gripper(self, closed: torch.Tensor, opening: torch.Tensor | None = None) -> None:
+        """(N,) bool: close (True) or open (False) the gripper; ``opening`` (N,): the finger joint
+        target of the open ones (a grasp's pre-shape; default ``robot.gripper.open``)."""
         c = closed.to(self.device, torch.bool)
-        self._grip_target = torch.where(c, torch.tensor(self._grip_closed, device=self.device),
-                                        torch.tensor(self._grip_open, device=self.device))
+        open_ = (torch.tensor(self._grip_open, device=self.device) if opening is None
+                 else opening.to(self.device, torch.float32))
+        self._grip_target = torch.where(c, torch.tensor(self._grip_closed, device=self.device), open_)
 
     def hold_still(self, mask: torch.Tensor | None = None) -> None:
         """Zero base velocity and freeze the upper joints at their current positions for masked copies."""

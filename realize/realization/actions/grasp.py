@@ -1,7 +1,11 @@
 """The ``grasp`` action template: pick an object from a pre-grasp pose on a hemisphere around it.
 
 What it does: ``Grasp`` runs the shared manipulation phases (``manipulate``) closing the gripper,
-and decides success from the fingers' contact forces on the object the plan names.
+and decides success from the fingers' contact forces on the object the plan names. With
+``controller.preshape_margin`` it pre-shapes the open fingers to the object's width across the
+goal closing axis plus that margin for the approach and the move in (null: fully open), so a
+closing axis tilted out of the horizontal (a turned box grasped off vertical) does not put an
+open finger on the table.
 What it doesn't: carry the object anywhere (``move_to`` and ``place`` do).
 """
 
@@ -11,9 +15,10 @@ import torch
 from torch import Tensor
 
 from realize.realization.actions.base import Outcome
-from realize.realization.actions.manipulate import RETREAT, Manipulate
+from realize.realization.actions.manipulate import GRIP, RETREAT, Manipulate
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
+from realize.tasks.regions import Region
 
 
 class Grasp(Manipulate):
@@ -26,6 +31,27 @@ class Grasp(Manipulate):
 
     name = "grasp"
     closes_gripper = True
+
+    def __init__(self, n_envs: int, device: torch.device):
+        super().__init__(n_envs, device)
+        self.opening = torch.zeros(n_envs, device=device)  # finger joint target before GRIP (pre-shape)
+
+    def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
+              shift: Tensor | None = None) -> Tensor:
+        code = super().begin(ctx, rows, params, region, obj, shift)
+        margin = ctx.cfg.preshape_margin
+        if margin is not None:
+            hand = ctx.scene.robot.gripper
+            gap = self._width_across(ctx, rows, obj) + margin  # between the pads: the finger joints' sum
+            self.opening[rows] = (gap / len(hand.joints)).clamp(min=0.0, max=hand.open)
+        return code
+
+    def act(self, ctx: StepContext, rows: Tensor) -> None:
+        super().act(ctx, rows)
+        if ctx.cfg.preshape_margin is not None:
+            hand = ctx.scene.robot.gripper
+            ctx.grip_open[rows] = torch.where(self.phase[rows] < GRIP, self.opening[rows],
+                                              torch.full_like(self.opening[rows], hand.open))
 
     def check(self, ctx: StepContext, rows: Tensor) -> Outcome:
         cfg = ctx.cfg

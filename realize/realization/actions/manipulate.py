@@ -108,6 +108,18 @@ class Manipulate(Template):
         best = score.argmax(dim=1)
         return cand[torch.arange(len(rows), device=self.device), best]
 
+    def _width_across(self, ctx: StepContext, rows: Tensor, obj: int) -> Tensor:
+        """(len(rows),) m: the object's extent along the goal closing axis (``self.closing``), from
+        its shape, size and the pose seen now: a box's projection ``2 sum_i |c_i| h_i`` on its own
+        axes, a cylinder's ``2 (r sqrt(1 - c_z^2) + h |c_z|)``. The gap the fingers must clear."""
+        o = ctx.scene.geometry.objects[obj]
+        frame = quat_to_matrix(ctx.objects[rows, obj, 3:7])  # (n, 3, 3), columns = object axes
+        c = (frame.transpose(1, 2) @ self.closing[rows][:, :, None]).squeeze(2).abs()  # in the object's frame
+        hx, hy, hz = (float(h) for h in o.half_size)
+        if o.shape == "cylinder":
+            return 2.0 * (hx * torch.sqrt((1.0 - c[:, 2] ** 2).clamp(min=0.0)) + hz * c[:, 2])
+        return 2.0 * (c[:, 0] * hx + c[:, 1] * hy + c[:, 2] * hz)
+
     def _goal(self, rows: Tensor, ctx: StepContext | None = None) -> Tensor:
         """Goal of the current phase. The straight moves in and out (DESCEND, RETREAT) follow a
         goal that slides along the approach line at ``approach_speed``, so the gripper moves
