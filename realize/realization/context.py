@@ -83,7 +83,7 @@ class StepContext:
         self.arm_cmd = torch.zeros(n, n_upper, device=dev)
         self.arm_vel_cmd = torch.zeros(n, n_upper, device=dev)
         self.grip_cmd = torch.zeros(n, dtype=torch.bool, device=dev)
-        self.grip_open = torch.full((n,), float(scene.robot.gripper.open), device=dev)
+        self.grip_open = torch.full((n,), float(fabric.robot.gripper.open), device=dev)
         self.arm_hold = torch.zeros(n, n_upper, device=dev)
         fab = dict(dtype=fabric.dtype, device=fabric.device)
         self.fab_state = FabricState(torch.zeros(n, n_dof, **fab), torch.zeros(n, n_dof, **fab))
