@@ -53,3 +53,21 @@ def test_a_fixed_base_fills_q_with_its_pose() -> None:
     turned = torch.tensor([-p0[1], p0[0], p0[2]], dtype=torch.float64)  # p0 turned by 90 degrees about z
     assert torch.allclose(p1, turned + torch.tensor([0.3, -0.2, 0.0], dtype=torch.float64), atol=1e-12)
     assert float(p0[2]) > spec.base.height  # the rest pose holds the hand above the stand
+
+
+def test_a_fixed_base_stands_at_the_scenes_fixed_base_start() -> None:
+    """scene=tower3 parks a mobile robot 0.55 m from the table (robot_start) and bolts an arm at
+    its edge (fixed_base_start): each robot gets its own, and the run's config says which. A
+    stand that overlaps the table is refused naming the key it came from."""
+    arm = build_run_spec(compose_config("robot=panda", "experiment=tower3"))
+    mobile = build_run_spec(compose_config("experiment=tower3"))
+    mount = tuple(arm.geometry_cfg.fixed_base_start)
+    assert arm.geometry.robot_start == mount and mobile.geometry.robot_start == tuple(mobile.geometry_cfg.robot_start)
+    assert mount != mobile.geometry.robot_start
+    assert tuple(arm.config["scene"]["robot_start"]) == mount
+    with pytest.raises(ConfigError) as err:
+        build_run_spec(compose_config("robot=panda", "experiment=tower3", "scene.fixed_base_start=[-0.35,1.2,0.0]"))
+    assert str(err.value).startswith("scene.fixed_base_start = (-0.35, 1.2, 0.0) is invalid: the robot's footprint")
+    with pytest.raises(ConfigError) as err:  # checked for any robot: it names where an arm would stand
+        build_run_spec(compose_config("experiment=tower3", "scene.fixed_base_start=[0.0,1.2,0.0]"))
+    assert "scene.fixed_base_start" in str(err.value) and "inside table1" in str(err.value)

@@ -253,13 +253,16 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     ce = read_ce(d.get("ce"), keys.seed)
     sim = read_sim(d.get("sim"))
     placement = resolve_placement(keys.device, sim, ce)
-    geometry_cfg, geometry = _read_geometry(d.get("scene"))
     robot = read_robot(d.get("robot"))
-    from realize.world.geometry import check_robot_start
+    from realize.world.geometry import check_robot_start, with_fixed_base_start
 
-    check_robot_start(geometry, robot.base.footprint_radius)
+    scene_d = with_fixed_base_start(as_mapping(d.get("scene"), "scene"), robot.base.fixed)
+    geometry_cfg, geometry = _read_geometry(scene_d)
+    mounted = robot.base.fixed and scene_d.get("fixed_base_start") is not None
+    check_robot_start(geometry, robot.base.footprint_radius, key="fixed_base_start" if mounted else "robot_start")
 
     config = dict(d)
+    config["scene"] = scene_d  # the run's files say where the robot stood
     origin = TaskOrigin.from_json(d.get("task_origin"))
     if keys.task_file is not None:  # the run keeps the file's content: its config is the task it ran
         task_d, source = load_task_file(keys.task_file)

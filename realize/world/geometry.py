@@ -27,7 +27,7 @@ from realize.config import ConfigError, Settings, setting
 from realize.world.objects import FLOOR, ObjectCfg, SceneObject, place_objects
 
 __all__ = ["VARIANTS", "Box", "SceneGeometry", "TableCfg", "WallCfg", "RampCfg", "ContainerCfg", "GeometryCfg",
-           "build_geometry", "check_robot_start"]
+           "build_geometry", "check_robot_start", "with_fixed_base_start"]
 
 VARIANTS = ("plain", "wall", "ramp", "push")
 
@@ -230,6 +230,10 @@ class GeometryCfg(Settings):
     ramps: list[RampCfg] = setting(default_factory=list)
     containers: list[ContainerCfg] = setting(default_factory=list)
     robot_start: tuple[float, float, float] = setting((-2.0, 0.0, 0.0))
+    # where a fixed-base robot (robot.base.joints = []) is bolted (x, y, yaw) in a scene whose
+    # robot_start parks a mobile robot out of an arm's reach; null: robot_start for every robot
+    # (``with_fixed_base_start``)
+    fixed_base_start: tuple[float, float, float] | None = setting(None)
     bounds_low: tuple[float, float] = setting((-3.0, -2.5))
     bounds_high: tuple[float, float] = setting((3.0, 2.5))
 
@@ -241,20 +245,33 @@ def _err(where: str, key: str, value: Any, allowed: str) -> ConfigError:
     return ConfigError(f"{where}.{key} = {value!r} is invalid: {allowed}")
 
 
-def check_robot_start(g: SceneGeometry, footprint_radius: float, where: str = "scene") -> None:
+def check_robot_start(g: SceneGeometry, footprint_radius: float, where: str = "scene",
+                      key: str = "robot_start") -> None:
     """The robot's start keeps its footprint (the robot spec's ``base.footprint_radius``) off
     every obstacle the base avoids and inside the world's bounds (``ConfigError`` naming
-    ``scene.robot_start``). The world alone cannot say: the footprint is the robot's."""
+    ``scene.<key>``: the key the start came from). The world alone cannot say: the footprint is
+    the robot's."""
     sx, sy, _ = g.robot_start
     r = float(footprint_radius)
     for b in g.obstacles:
         if b.contains_xy(sx, sy, margin=r):
-            raise _err(where, "robot_start", g.robot_start,
+            raise _err(where, key, g.robot_start,
                        f"the robot's footprint (robot.base.footprint_radius = {r}) overlaps {b.name}")
     (x0, y0), (x1, y1) = g.bounds_low, g.bounds_high
     if not (x0 + r <= sx <= x1 - r and y0 + r <= sy <= y1 - r):
-        raise _err(where, "robot_start", g.robot_start, f"must keep the robot's footprint (robot.base.footprint_radius "
+        raise _err(where, key, g.robot_start, f"must keep the robot's footprint (robot.base.footprint_radius "
                    f"= {r}) inside the bounds {g.bounds_low}..{g.bounds_high}")
+
+
+def with_fixed_base_start(scene: dict[str, Any], fixed_base: bool) -> dict[str, Any]:
+    """The scene config (plain data) a robot meets: for a fixed-base robot, ``robot_start``
+    replaced by the scene's ``fixed_base_start`` where it has one (the arm's stand at the table
+    edge, where a mobile robot would park farther back); otherwise unchanged. Idempotent, so a
+    saved run's config (already replaced) reads the same again."""
+    mount = scene.get("fixed_base_start")
+    if not fixed_base or mount is None:
+        return scene
+    return {**scene, "robot_start": list(mount)}
 
 
 def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
@@ -315,15 +332,19 @@ def _assemble(cfg: GeometryCfg, where: str) -> SceneGeometry:
                 yaw=-math.pi / 2 * (1 if t_high.center[1] > t_low.center[1] else -1), pitch=pitch,
                 color=(0.55, 0.55, 0.6, 1.0), friction=r.friction)
         )
-    sx, sy, syaw = cfg.robot_start
-    for b in tables + extras:
-        if b.contains_xy(sx, sy):
-            raise _err(where, "robot_start", cfg.robot_start, f"the robot's base stands inside {b.name}")
     bl, bh = cfg.bounds_low, cfg.bounds_high
     if not (bl[0] < bh[0] and bl[1] < bh[1]):
         raise _err(where, "bounds_low", (bl, bh), "bounds_low must be < bounds_high in x and y")
-    if not (bl[0] <= sx <= bh[0] and bl[1] <= sy <= bh[1]):
-        raise _err(where, "robot_start", cfg.robot_start, f"must lie inside the bounds {bl}..{bh}")
+    for key in ("robot_start", "fixed_base_start"):
+        start = getattr(cfg, key)
+        if start is None:
+            continue
+        for b in tables + extras:
+            if b.contains_xy(start[0], start[1]):
+                raise _err(where, key, start, f"the robot's base stands inside {b.name}")
+        if not (bl[0] <= start[0] <= bh[0] and bl[1] <= start[1] <= bh[1]):
+            raise _err(where, key, start, f"must lie inside the bounds {bl}..{bh}")
+    sx, sy, syaw = cfg.robot_start
     return SceneGeometry(
         variant=cfg.variant,
         tables=tuple(tables),
