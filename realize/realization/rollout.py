@@ -145,7 +145,9 @@ class Rollout:
         obj = -1 if spec.obj is None else self.scene.object_index(spec.obj)
         region = self.realizer.layout.regions[name]
         params, shift = self._tracked(name, region, self._padded(name, rows), rows)
-        code = self._template(a).begin(self.ctx, rows, params, region, obj, shift)
+        frame = self.task.frame_of(name)
+        support = self.scene.geometry.object_index(frame) if frame in self.scene.geometry.object_names else -1
+        code = self._template(a).begin(self.ctx, rows, params, region, obj, shift, support)
         bad = code > 0
         if bad.any():
             r = rows[bad]

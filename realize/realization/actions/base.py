@@ -53,13 +53,14 @@ class Template:
         raise NotImplementedError
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
-              shift: Tensor | None = None) -> Tensor:
+              shift: Tensor | None = None, support: int = -1) -> Tensor:
         """Start the action for plans ``rows`` with parameters (len(rows), d) drawn from
         ``region`` on object ``obj`` (its index on the scene's m axis; -1 for templates that
         handle none); returns a (len,) failure code (0 = fine) for plans that fail immediately.
         ``shift`` (len, 3): how far the object the region is framed by lies from its config
         pose (the rollout already moved ``params`` by it; a template that reads a fixed point of
-        the region itself, a hemisphere's centre, moves it too), None: not tracked."""
+        the region itself, a hemisphere's centre, moves it too), None: not tracked. ``support``:
+        the index of the movable object the region is framed by (-1: a table, or no frame)."""
         raise NotImplementedError
 
     def act(self, ctx: StepContext, rows: Tensor) -> None:

@@ -37,8 +37,8 @@ class Grasp(Manipulate):
         self.opening = torch.zeros(n_envs, device=device)  # finger joint target before GRIP (pre-shape)
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
-              shift: Tensor | None = None) -> Tensor:
-        code = super().begin(ctx, rows, params, region, obj, shift)
+              shift: Tensor | None = None, support: int = -1) -> Tensor:
+        code = super().begin(ctx, rows, params, region, obj, shift, support)
         margin = ctx.cfg.preshape_margin
         if margin is not None:
             hand = ctx.scene.robot.gripper

@@ -63,7 +63,7 @@ class Manipulate(Template):
         return p, p + up
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
-              shift: Tensor | None = None) -> Tensor:
+              shift: Tensor | None = None, support: int = -1) -> Tensor:
         centre, pre = self._centre_and_pre(ctx, params, region, shift)
         d = centre - pre
         approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
@@ -99,14 +99,19 @@ class Manipulate(Template):
         frame = quat_to_matrix(ctx.objects[rows, obj, 3:7])  # (n, 3, 3), columns = object axes
         if ctx.scene.geometry.objects[obj].shape == "cylinder":
             frame = frame[:, :, :2]
-        cand = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 6, 3)
+        return self._face_axis(frame, approach, ctx.closing[rows])
+
+    def _face_axis(self, frame: Tensor, approach: Tensor, near: Tensor) -> Tensor:
+        """(n, 3): of the axes ``frame`` (n, 3, k) and their opposites, projected perpendicular
+        to ``approach`` and normalised, the most perpendicular to it first (a true face
+        normal), then the nearest to ``near``."""
+        cand = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 2k, 3)
         cand = cand - (cand * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
         norm = cand.norm(dim=-1)
         cand = cand / norm.clamp(min=1e-6)[..., None]
-        # most perpendicular to the approach first (a true face normal), then nearest the current axis
-        score = 2.0 * norm + 0.5 * (cand * ctx.closing[rows][:, None, :]).sum(-1)
+        score = 2.0 * norm + 0.5 * (cand * near[:, None, :]).sum(-1)
         best = score.argmax(dim=1)
-        return cand[torch.arange(len(rows), device=self.device), best]
+        return cand[torch.arange(len(frame), device=frame.device), best]
 
     def _width_across(self, ctx: StepContext, rows: Tensor, obj: int) -> Tensor:
         """(len(rows),) m: the object's extent along the goal closing axis (``self.closing``), from

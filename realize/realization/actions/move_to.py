@@ -117,7 +117,7 @@ class MoveTo(Template):
         return pts, lens, found
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
-              shift: Tensor | None = None) -> Tensor:
+              shift: Tensor | None = None, support: int = -1) -> Tensor:
         start = ctx.base[rows, BASE_XY]
         goal = params[:, :2].to(start)
         extra = self._carry_grids(ctx, rows)

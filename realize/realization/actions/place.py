@@ -3,6 +3,8 @@
 What it does: ``Place`` runs the shared manipulation phases (``manipulate``) opening the
 gripper, aims the TCP so that the held object's centre lands on the place point, and decides
 success from the fingers letting go and the object coming to rest.
+With ``controller.place_align_yaw`` it turns a held box about the approach so that it lands
+square on its support (the region's frame), modulo 90 degrees.
 What it doesn't: check where the object came to rest (the plan's goal does, ``goals``).
 """
 
@@ -17,6 +19,7 @@ from realize.realization.actions.manipulate import GRIP, RETREAT, Manipulate
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
 from realize.tasks.regions import Box, Region
+from realize.scene import quat_to_matrix
 
 
 class Place(Manipulate):
@@ -43,10 +46,33 @@ class Place(Manipulate):
         return isinstance(region, Hemisphere) or (isinstance(region, Box) and region.dim == 3)
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
-              shift: Tensor | None = None) -> Tensor:
-        code = super().begin(ctx, rows, params, region, obj, shift)
+              shift: Tensor | None = None, support: int = -1) -> Tensor:
+        code = super().begin(ctx, rows, params, region, obj, shift, support)
+        if ctx.cfg.place_align_yaw and ctx.scene.geometry.objects[obj].shape == "box":
+            self.closing[rows] = self._square_on(ctx, rows, obj, support)
         held = ctx.holds(rows, obj)
         return torch.where(held, code, Failure.NOT_HOLDING)
+
+    def _square_on(self, ctx: StepContext, rows: Tensor, obj: int, support: int) -> Tensor:
+        """(len(rows), 3): the goal closing axis that sets the held box down square on its
+        support (``controller.place_align_yaw``). The held box turns with the hand, so the hand's
+        closing axis is turned about the approach by the angle from the held box's face normal
+        (the goal closing axis ``Manipulate.begin`` chose) to the support's face normal nearest
+        it: at most 45 degrees. The support is a movable box seen where it stands now, or (-1,
+        and a cylinder, whose top is round) the world's axes: tables stand square to them."""
+        a = self.approach[rows]
+        held = self.closing[rows]
+        if support >= 0 and ctx.scene.geometry.objects[support].shape == "box":
+            frame = quat_to_matrix(ctx.objects[rows, support, 3:7])
+        else:
+            frame = torch.eye(3, device=a.device).expand(len(rows), 3, 3)
+        want = self._face_axis(frame, a, held)
+        angle = torch.atan2((torch.cross(held, want, dim=1) * a).sum(1), (held * want).sum(1))
+        hand = ctx.closing[rows]  # where the hand's closing axis is now (the box rigid in it)
+        c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
+        turned = hand * c + torch.cross(a, hand, dim=1) * s + a * (a * hand).sum(1, keepdim=True) * (1 - c)
+        turned = turned - (turned * a).sum(1, keepdim=True) * a  # the fabric's closing goal lies across the approach
+        return turned / turned.norm(dim=1, keepdim=True).clamp(min=1e-6)
 
     def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor, obj: int) -> Tensor:
         """TCP goal that puts the held object's centre at the region centre (plus a small drop

@@ -65,7 +65,7 @@ class Push(Template):
         return region.dim == 3 and isinstance(region, (Box, Fixed))
 
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
-              shift: Tensor | None = None) -> Tensor:
+              shift: Tensor | None = None, support: int = -1) -> Tensor:
         cfg = ctx.cfg
         point = params[:, :3].to(torch.float32)
         d = point[:, :2] - ctx.base[rows, BASE_XY]
