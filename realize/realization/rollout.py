@@ -39,10 +39,10 @@ from realize.realization.failures import Failure
 from realize.realization.pruning import EliteBound
 from realize.tasks.goals import goal_reached
 from realize.realization.result import RolloutResult, TrajectoryRecorder
+from realize.realization.tracking import track_region
 from realize.scene import BatchedScene
 from realize.world.geometry import SceneGeometry
 from realize.world.state import SceneState
-from realize.tasks.frames import position_columns
 from realize.tasks.regions import Region
 from realize.tasks.spec import TaskSpec, check_fixed_base
 
@@ -156,23 +156,14 @@ class Rollout:
 
     def _tracked(self, name: str, region: Region, params: Tensor, rows: Tensor) -> tuple[Tensor, Tensor | None]:
         """Parameters of ``rows`` resolved against where the object their region is framed by
-        is seen now (``controller.track_objects``), and that shift (len, 3), or None: untracked.
-        A region framed by a movable object is written relative to its config pose; the object
-        seen more than ``track_min_shift`` from there moves the region's points (and a
-        hemisphere's centre, ``Template.begin``) by the difference, as a robot with perception
-        would aim at the object where it lies."""
+        is seen now (``controller.track_objects``; ``realize.realization.tracking``), and that
+        object's shift (len, 3), or None: untracked."""
         frame = self.task.frame_of(name)
         g = self.scene.geometry
         if not self.cfg.track_objects or frame not in g.object_names:
             return params, None
-        obj = g.object(frame)
-        seen = self.ctx.objects[rows, g.object_index(frame), :3]
-        shift = seen - torch.tensor(obj.position, dtype=seen.dtype, device=seen.device)
-        shift = torch.where((shift.norm(dim=1) > self.cfg.track_min_shift)[:, None], shift, torch.zeros_like(shift))
-        k = position_columns(region)
-        params = params.clone()
-        params[:, :k] += shift[:, :k].to(params.dtype)
-        return params, shift
+        return track_region(region, params, g.object(frame), self.ctx.objects[rows, g.object_index(frame), :3],
+                            self.cfg.track_min_shift)
 
     def _write_commands(self, asleep: Tensor) -> None:
         scene, ctx = self.scene, self.ctx
