@@ -208,7 +208,20 @@ class _Assembly:
             return SuccessiveHalving(plans, spec.ce, spec.budget, device=spec.placement.device,
                                      top_k=spec.planner.top_k)
         return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device,
-                                     warm=None if self.warm is None else self.warm.distribution)
+                                     warm=None if self.warm is None else self.warm.distribution,
+                                     screen=self._screen())
+
+    def _screen(self):  # -> HandDepthScreen | None
+        """``ce.screen``: the plan's kinematic screen (``realize.realization.screening``), None
+        when it is off or the plan has no grasp to screen. A top-k search screens nothing."""
+        spec = self.spec
+        if not spec.ce.screen:
+            return None
+        from realize.realization.screening import HandDepthScreen
+
+        screen = HandDepthScreen(spec.task, spec.geometry, spec.robot, spec.rollout, spec.ce.screen_depth,
+                                 spec.ce.torch_dtype)
+        return screen if screen.active else None
 
     def _warm_record(self, ckpt: Checkpoint | None) -> dict[str, Any] | None:
         """What result.json says of the warm start (a resumed run keeps its earlier record)."""

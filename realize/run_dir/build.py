@@ -127,6 +127,8 @@ def result_doc(
         n_feasible_per_iter=[r.n_feasible for r in summaries],
         n_stopped_per_iter=(None if all(r.n_stopped is None for r in summaries)
                             else [r.n_stopped or 0 for r in summaries]),
+        n_screened_per_iter=(None if all(r.n_screened is None for r in summaries)
+                             else [r.n_screened or 0 for r in summaries]),
         elite_per_iter=[EliteStats(r.n_elite, r.refit, r.elite_cost_min, r.elite_cost_mean, r.elite_cost_max)
                         for r in summaries],
         iteration_time_s=[r.wall_time for r in summaries],

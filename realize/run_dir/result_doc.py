@@ -22,7 +22,8 @@ source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments
 ``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``,
 ``warm_start`` (null, or the earlier run it started from: ``realize.search.warm_start``),
 ``n_stopped_per_iter`` (only with ``ce.prune``: rows stopped as they could not be an elite, which
-``success_per_iter`` counts as not succeeded); top-k runs add ``top_k``, ``n_candidates``,
+``success_per_iter`` counts as not succeeded), ``n_screened_per_iter`` (only with ``ce.screen``: draws
+rejected before simulation and drawn again, spent but not simulated); top-k runs add ``top_k``, ``n_candidates``,
 ``leader``, ``winner``, ``budget``, ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
 (``realize.run_dir.directory``).
@@ -171,6 +172,7 @@ class ResultDoc:
     n_feasible_per_iter: list[int] = field(default_factory=list)
     # ce.prune: rows per iteration stopped as they could not be an elite (None: pruning off)
     n_stopped_per_iter: list[int] | None = None
+    n_screened_per_iter: list[int] | None = None
     elite_per_iter: list[EliteStats] = field(default_factory=list)
     iteration_time_s: list[float] = field(default_factory=list)
     final_mean: list[Any] | None = None
@@ -221,6 +223,7 @@ class ResultDoc:
             "n_envs_per_iter": list(self.n_envs_per_iter),
             "n_feasible_per_iter": list(self.n_feasible_per_iter),
             **({} if self.n_stopped_per_iter is None else {"n_stopped_per_iter": list(self.n_stopped_per_iter)}),
+            **({} if self.n_screened_per_iter is None else {"n_screened_per_iter": list(self.n_screened_per_iter)}),
             "elite_per_iter": [e.to_json() for e in self.elite_per_iter],
             "iteration_time_s": encode_floats(self.iteration_time_s),
             "final_mean": encode_floats(self.final_mean),
@@ -275,6 +278,8 @@ class ResultDoc:
             n_envs_per_iter=[int(v) for v in d.get("n_envs_per_iter") or []],
             n_feasible_per_iter=[int(v) for v in d.get("n_feasible_per_iter") or []],
             n_stopped_per_iter=None if d.get("n_stopped_per_iter") is None else [int(v) for v in d["n_stopped_per_iter"]],
+            n_screened_per_iter=(None if d.get("n_screened_per_iter") is None
+                                 else [int(v) for v in d["n_screened_per_iter"]]),
             elite_per_iter=[EliteStats.from_json(e) for e in d.get("elite_per_iter") or []],
             iteration_time_s=_floats(d.get("iteration_time_s")),
             final_mean=decode_floats(d.get("final_mean")),

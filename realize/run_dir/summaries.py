@@ -86,6 +86,7 @@ class IterationSummary:
     weights: list[float] | None = None
     candidate: int | None = None
     n_stopped: int | None = None  # ce.prune: rows stopped because they could not be an elite (None: off)
+    n_screened: int | None = None  # ce.screen: draws rejected before simulation (None: off)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -113,6 +114,8 @@ class IterationSummary:
             out["candidate"] = self.candidate
         if self.n_stopped is not None:
             out["n_stopped"] = self.n_stopped
+        if self.n_screened is not None:
+            out["n_screened"] = self.n_screened
         return out
 
     @classmethod
@@ -141,6 +144,7 @@ class IterationSummary:
             weights=decode_floats(d.get("weights")),
             candidate=_opt_int(d.get("candidate")),
             n_stopped=_opt_int(d.get("n_stopped")),
+            n_screened=_opt_int(d.get("n_screened")),
         )
 
 

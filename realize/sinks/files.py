@@ -78,6 +78,7 @@ class CheckpointSink:
                 "goal": res.goal,
                 "steps": res.steps,
                 "share": rec.share,  # robust search only (None values are not stored)
+                "screened_Z": rec.screened_Z,  # ce.screen only: draws rejected before simulation
                 "world_cost": res.world_cost,
                 "world_feasible": res.world_feasible,
             },

@@ -41,7 +41,8 @@ class ProgressSink:
         where = "" if it.batch.candidate is None else f"candidate {it.batch.candidate} (round {it.report.round}), "
         cost = f"{rec.best_cost:.0f}" if math.isfinite(rec.best_cost) else "-"
         stopped = f" ({rec.n_stopped} stopped: could not be an elite)" if rec.n_stopped else ""
-        self.bar.set_postfix_str(f"{where}success {rec.success_share:.0%}{stopped}, best cost {cost}")
+        screened = f", {rec.n_screened} screened out" if rec.n_screened else ""
+        self.bar.set_postfix_str(f"{where}success {rec.success_share:.0%}{stopped}{screened}, best cost {cost}")
         self.bar.update(1)
 
     def close(self, status: str | None, error: str | None) -> None:

@@ -21,10 +21,25 @@ from realize.realization.actions.base import Template
 from realize.realization.context import StepContext
 from realize.tasks.regions import Region
 from realize.scene import quat_to_matrix
+from realize.robot.spec import GripperSpec
 
 
 # phases of grasp / place
 APPROACH, DESCEND, GRIP, RETREAT = 0, 1, 2, 3
+
+
+def tcp_target(centre: Tensor, approach: Tensor, support_z: Tensor, hand: GripperSpec, clearance: float,
+               offset: float) -> Tensor:
+    """(n, 3) TCP goal at an object's centre (n, 3) for unit approaches (n, 3): backed off
+    along the approach just enough that the fingertips (``hand``'s reach and pad width) stay
+    ``clearance`` above the surface at height ``support_z`` (n,) the object rests on, plus
+    ``offset``. (``realize.realization.screening`` reads the same pose before simulating.)"""
+    a_z = approach[:, 2].clamp(max=-0.2)  # approaches from below the horizon are not useful
+    tilt = torch.sqrt((1.0 - approach[:, 2] ** 2).clamp(min=0.0))
+    lowest = hand.fingertip_reach * a_z - hand.pad_half_width * tilt  # fingertip height below the TCP
+    back = (support_z + clearance - centre[:, 2] - lowest) / (-a_z)
+    back = back.clamp(min=0.0) + offset
+    return centre - approach * back[:, None]
 
 
 class Manipulate(Template):
@@ -82,15 +97,9 @@ class Manipulate(Template):
         """TCP goal of the plans ``rows`` that begin the action now: the region centre (the
         object's centre), backed off along the approach just enough that the fingertips stay
         ``grasp_clearance`` above the surface the object rests on."""
-        cfg, g = ctx.cfg, ctx.scene.geometry
-        support = centre[:, 2] - g.objects[obj].half_height
-        a_z = approach[:, 2].clamp(max=-0.2)  # approaches from below the horizon are not useful
-        tilt = torch.sqrt((1.0 - approach[:, 2] ** 2).clamp(min=0.0))
-        hand = ctx.scene.robot.gripper
-        lowest = hand.fingertip_reach * a_z - hand.pad_half_width * tilt  # fingertip height below the TCP
-        back = (support + cfg.grasp_clearance - centre[:, 2] - lowest) / (-a_z)
-        back = back.clamp(min=0.0) + cfg.grasp_offset
-        return centre - approach * back[:, None]
+        support = centre[:, 2] - ctx.scene.geometry.objects[obj].half_height
+        return tcp_target(centre, approach, support, ctx.scene.robot.gripper, ctx.cfg.grasp_clearance,
+                          ctx.cfg.grasp_offset)
 
     def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor, obj: int) -> Tensor:
         """Closing axis of the goal pose: the object's face normal (perpendicular to the

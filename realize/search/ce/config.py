@@ -103,6 +103,9 @@ class CEConfig(Settings):
     prune: bool = setting(True, help="stop a row once it can no longer be among the batch's best feasible rows")
     patience: int | None = setting(2, ge=1, help="stopping rule: iterations looked back over (null = off)")
     min_improvement: float = setting(0.03, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
+    screen: bool = setting(False, help="draw again the samples a grasp would fail for certain (hand under the table)")
+    screen_depth: float = setting(0.025, ge=0, help="screen: m the hand's spheres may reach below the support's top")
+    screen_tries: int = setting(10, ge=1, help="screen: redraws of a rejected sample at most")
     # a fixed budget (experiment=tune_ce): the search stops before an iteration whose copies would
     # take the copies simulated past it; null: ce.iterations alone bounds the run
     sample_budget: int | None = setting(None, ge=1, help="copies simulated at most (null = no budget)")

@@ -77,6 +77,7 @@ class CrossEntropyOptimizer:
         device: torch.device | str | None = None,
         state: CEState | None = None,
         warm: WarmDistribution | None = None,
+        screen: Callable[[Tensor], Tensor] | None = None,
     ) -> None:
         if not isinstance(layout, ParamLayout):
             raise TypeError(f"layout must be a ParamLayout, got {type(layout).__name__}")
@@ -97,6 +98,10 @@ class CrossEntropyOptimizer:
             self._state = self._check_state(state.copy())
             self._gen.set_state(self._state.rng_state)
         self._pending: tuple[Batch, float] | None = None
+        # ce.screen: (N, D) -> (N,) bool, the samples physics would fail for certain; they are
+        # drawn again (at most ce.screen_tries times) and kept apart, not simulated
+        self._screen = screen if config.screen else None
+        self._screened: Tensor | None = None
         # normalised space for clustering and kNN: each column over its region's bounding box
         low, high = layout.bounds()
         width = high - low
@@ -159,6 +164,8 @@ class CrossEntropyOptimizer:
             t0 = time.perf_counter()
             s = self._state
             Z = self._sample(self.config.samples_at(s.iteration))
+            if self._screen is not None:
+                Z = self._screened_draw(Z)
             drawn = Batch(Z, None, _clone(s.mean), _clone(s.std), _clone(s.weights))
             self._pending = (drawn, t0)
         b = self._pending[0]
@@ -225,7 +232,10 @@ class CrossEntropyOptimizer:
             robust_cost=robust,
             share=None if r.share is None else r.share.clone(),
             n_stopped=None if r.stopped is None else int(r.stopped.sum()),
+            n_screened=None if self._screened is None else int(self._screened.shape[0]),
+            screened_Z=self._screened if cfg.keep_samples else None,
         )
+        self._screened = None
         s.iteration += 1
         s.rng_state = self._gen.get_state()
         self._pending = None
@@ -289,20 +299,61 @@ class CrossEntropyOptimizer:
         return self._warm_share is not None and self._state.iteration == 0
 
     def _sample(self, n: int) -> Tensor:
-        s, g = self._state, self._gen
+        return self._draw(self._sources(n))
+
+    def _sources(self, n: int) -> Tensor:
+        """(n,) where each row of a batch of ``n`` is drawn from: -1 uniform over the regions,
+        else the Gaussian (mixture mode) index; Gaussian rows first, mode by mode."""
+        s = self._state
         if s.mean is None or s.std is None:
-            return self.layout.sample_uniform(n, g, self.dtype)
+            return torch.full((n,), -1, dtype=torch.long)
         share = self._warm_share if self._warm_first else self.config.uniform_share
         n_u = int(round(share * n))
         n_g = n - n_u
-        eps = torch.randn(n_g, self.layout.dim, generator=g, dtype=self.dtype)
         if s.weights is None:
-            Z = self.layout.project(s.mean + s.std * eps)
+            mode = torch.zeros(n_g, dtype=torch.long)
         else:  # mixture: rows of mode 0 first, then mode 1, ...
             mode = torch.repeat_interleave(torch.arange(s.weights.numel()), mode_counts(s.weights, n_g))
-            Z = self.layout.project(s.mean[mode] + s.std[mode] * eps)
+        return torch.cat([mode, torch.full((n_u,), -1, dtype=torch.long)])
+
+    def _draw(self, source: Tensor) -> Tensor:
+        """One row from each row's ``source`` (``_sources``): the Gaussian rows' noise first, then
+        the uniform rows, from the search's generator."""
+        s, g = self._state, self._gen
+        gauss = source >= 0
+        n_g, n_u = int(gauss.sum()), int((~gauss).sum())
+        parts = []
+        if n_g:
+            eps = torch.randn(n_g, self.layout.dim, generator=g, dtype=self.dtype)
+            mode = source[gauss]
+            if s.weights is None:
+                parts.append(self.layout.project(s.mean + s.std * eps))
+            else:
+                parts.append(self.layout.project(s.mean[mode] + s.std[mode] * eps))
         if n_u:
-            Z = torch.cat([Z, self.layout.sample_uniform(n_u, g, self.dtype)], dim=0)
+            parts.append(self.layout.sample_uniform(n_u, g, self.dtype))
+        Z = torch.cat(parts, dim=0)
+        order = torch.cat([torch.nonzero(gauss).flatten(), torch.nonzero(~gauss).flatten()])
+        out = torch.empty_like(Z)
+        out[order] = Z
+        return out
+
+    def _screened_draw(self, Z: Tensor) -> Tensor:
+        """``ce.screen``: rows the screen rejects are drawn again from their own source, up to
+        ``ce.screen_tries`` times (a row still rejected then is simulated as it is); the
+        rejected draws are kept for the iteration's record (``screened_Z``), not simulated."""
+        assert self._screen is not None
+        source = self._sources(Z.shape[0])
+        rejected = []
+        bad = self._screen(Z)
+        for _ in range(self.config.screen_tries):
+            if not bool(bad.any()):
+                break
+            rejected.append(Z[bad].clone())
+            Z = Z.clone()
+            Z[bad] = self._draw(source[bad])
+            bad = bad & self._screen(Z)
+        self._screened = torch.cat(rejected) if rejected else Z[:0].clone()
         return Z
 
     def _refit(self, Ze: Tensor) -> None:

@@ -203,6 +203,8 @@ class IterationRecord:
     robust_cost: Tensor | None = None
     share: Tensor | None = None  # robust search: each sample's success share over its worlds
     n_stopped: int | None = None  # ce.prune: rows stopped as they could not be an elite (None: off)
+    n_screened: int | None = None  # ce.screen: draws rejected before simulation (None: off)
+    screened_Z: Tensor | None = None  # ce.screen: those draws (k, D), not simulated
 
     def summary(self, candidate: int | None = None) -> IterationSummary:
         """This iteration's numbers without the per-sample tensors (``result.json``'s series and
@@ -228,6 +230,7 @@ class IterationRecord:
             weights=_t2l(self.weights),
             candidate=candidate,
             n_stopped=self.n_stopped,
+            n_screened=self.n_screened,
         )
 
 
