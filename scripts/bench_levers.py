@@ -14,6 +14,8 @@ Per run it appends a CSV row to ``--out`` as soon as the run ends:
   it stopped); ``batch_steps``: the sum over iterations of the batch's longest plan, which an
   iteration's physics time follows (every copy is stepped until the batch ends);
 * ``stopped``: plans stopped because they could no longer be an elite (``ce.prune``);
+* ``screened``: draws rejected by the kinematic screen before simulation and drawn again
+  (``ce.screen``): spent, not simulated, so not in ``samples``;
 * ``best_cost``, ``feasible``, ``validated`` (the returned plan's success share in the perturbed
   worlds).
 
@@ -48,7 +50,7 @@ sys.path.insert(0, str(REPO / "scripts"))
 from bench_seed_paper import commit_of, parse_seeds  # noqa: E402  (the same seed list and commit stamp)
 
 FIELDS = ["experiment", "seed", "variant", "overrides", "search_s", "wall_s", "iterations", "samples",
-          "row_steps", "batch_steps", "stopped", "best_cost", "feasible", "validated", "commit"]
+          "row_steps", "batch_steps", "stopped", "best_cost", "feasible", "validated", "commit", "screened"]
 RATIO_BOUND = {"seed_paper": 0.5, "wall": 0.6, "ramp": 0.6}
 
 
@@ -72,6 +74,7 @@ def run_one(experiment: str, seed: int, overrides: list[str], run_dir: Path) -> 
         "row_steps": int(sum(int(s.sum()) for s in steps)),
         "batch_steps": int(sum(int(s.max()) for s in steps)),
         "stopped": int(sum(doc.get("n_stopped_per_iter") or [0])),
+        "screened": int(sum(doc.get("n_screened_per_iter") or [0])),
         "best_cost": doc["best_cost"], "feasible": int(bool(doc["feasible"])),
         "validated": val.get("success_share", ""),
     }
@@ -105,7 +108,7 @@ def report(rows: list[dict[str, str]]) -> bool:
                   f"{ref['best_cost']} ({cost:.4f}) [{mark(checks[1])}], validated {val:.3f} "
                   f"[{mark(checks[2])}], iterations {r['iterations']}/{ref['iterations']}, batch steps "
                   f"{r['batch_steps']}/{ref['batch_steps']}, row steps {r['row_steps']}/{ref['row_steps']}, "
-                  f"stopped {r['stopped']}")
+                  f"stopped {r['stopped']}, screened {r.get('screened') or 0}")
     return ok_all
 
 
