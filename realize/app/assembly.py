@@ -41,6 +41,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from realize.search.candidates import CandidateSpec, SuccessiveHalving
 from realize.search.ce.optimizer import CrossEntropyOptimizer
+from realize.realization.screening import plan_screen
 from realize.config import ConfigError
 from realize.app.loop import search_loop
 from realize.app.objective import record_objective
@@ -209,19 +210,8 @@ class _Assembly:
                                      top_k=spec.planner.top_k)
         return CrossEntropyOptimizer(spec.task.layout, spec.ce, device=spec.placement.device,
                                      warm=None if self.warm is None else self.warm.distribution,
-                                     screen=self._screen())
-
-    def _screen(self):  # -> HandDepthScreen | None
-        """``ce.screen``: the plan's kinematic screen (``realize.realization.screening``), None
-        when it is off or the plan has no grasp to screen. A top-k search screens nothing."""
-        spec = self.spec
-        if not spec.ce.screen:
-            return None
-        from realize.realization.screening import HandDepthScreen
-
-        screen = HandDepthScreen(spec.task, spec.geometry, spec.robot, spec.rollout, spec.ce.screen_depth,
-                                 spec.ce.torch_dtype)
-        return screen if screen.active else None
+                                     screen=plan_screen(spec.task, spec.geometry, spec.robot, spec.rollout,
+                                                        spec.ce) if spec.ce.screen else None)
 
     def _warm_record(self, ckpt: Checkpoint | None) -> dict[str, Any] | None:
         """What result.json says of the warm start (a resumed run keeps its earlier record)."""

@@ -26,11 +26,12 @@ from realize.realization.config import RolloutConfig
 from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import RobotSpec
 from realize.scene import quat_to_matrix
+from realize.search.ce.config import CEConfig
 from realize.tasks.hemisphere import Hemisphere
 from realize.tasks.spec import TaskSpec
 from realize.world.geometry import SceneGeometry
 
-__all__ = ["HandDepthScreen", "hand_spheres_in_tcp"]
+__all__ = ["HandDepthScreen", "hand_spheres_in_tcp", "plan_screen"]
 
 SCORE_SPAN = 0.5  # Manipulate's closing-axis score: 2 |projection| + 0.5 cos(to the current axis)
 
@@ -111,3 +112,11 @@ class HandDepthScreen:
         deepest = below.max(dim=2).values
         deepest = torch.where(plausible & (norm > 1e-6), deepest, torch.full_like(deepest, float("inf")))
         return deepest.min(dim=1).values > self.depth
+
+
+def plan_screen(task: TaskSpec, geometry: SceneGeometry, robot: RobotSpec, rollout: RolloutConfig,
+                ce: CEConfig) -> HandDepthScreen | None:
+    """The plan's screen at ``ce.screen_depth``, or None where the plan has nothing to screen
+    (the search then draws as without one). A top-k search screens nothing (one plan's screen)."""
+    screen = HandDepthScreen(task, geometry, robot, rollout, ce.screen_depth, ce.torch_dtype)
+    return screen if screen.active else None

@@ -41,7 +41,8 @@ import torch
 from torch import Tensor
 
 from realize.search.ce.config import CEConfig
-from realize.search.ce.mixture import Mixture, fit_mixture, mode_counts
+from realize.search.ce.mixture import Mixture, fit_mixture
+from realize.search.ce.sampling import draw_rows, row_sources, screened_draw
 from realize.search.ce.ranking import (
     choose_elites,
     elite_weights,
@@ -302,58 +303,18 @@ class CrossEntropyOptimizer:
         return self._draw(self._sources(n))
 
     def _sources(self, n: int) -> Tensor:
-        """(n,) where each row of a batch of ``n`` is drawn from: -1 uniform over the regions,
-        else the Gaussian (mixture mode) index; Gaussian rows first, mode by mode."""
-        s = self._state
-        if s.mean is None or s.std is None:
-            return torch.full((n,), -1, dtype=torch.long)
         share = self._warm_share if self._warm_first else self.config.uniform_share
-        n_u = int(round(share * n))
-        n_g = n - n_u
-        if s.weights is None:
-            mode = torch.zeros(n_g, dtype=torch.long)
-        else:  # mixture: rows of mode 0 first, then mode 1, ...
-            mode = torch.repeat_interleave(torch.arange(s.weights.numel()), mode_counts(s.weights, n_g))
-        return torch.cat([mode, torch.full((n_u,), -1, dtype=torch.long)])
+        return row_sources(self._state, n, share)
 
     def _draw(self, source: Tensor) -> Tensor:
-        """One row from each row's ``source`` (``_sources``): the Gaussian rows' noise first, then
-        the uniform rows, from the search's generator."""
-        s, g = self._state, self._gen
-        gauss = source >= 0
-        n_g, n_u = int(gauss.sum()), int((~gauss).sum())
-        parts = []
-        if n_g:
-            eps = torch.randn(n_g, self.layout.dim, generator=g, dtype=self.dtype)
-            mode = source[gauss]
-            if s.weights is None:
-                parts.append(self.layout.project(s.mean + s.std * eps))
-            else:
-                parts.append(self.layout.project(s.mean[mode] + s.std[mode] * eps))
-        if n_u:
-            parts.append(self.layout.sample_uniform(n_u, g, self.dtype))
-        Z = torch.cat(parts, dim=0)
-        order = torch.cat([torch.nonzero(gauss).flatten(), torch.nonzero(~gauss).flatten()])
-        out = torch.empty_like(Z)
-        out[order] = Z
-        return out
+        return draw_rows(self.layout, self._state, source, self._gen, self.dtype)
 
     def _screened_draw(self, Z: Tensor) -> Tensor:
-        """``ce.screen``: rows the screen rejects are drawn again from their own source, up to
-        ``ce.screen_tries`` times (a row still rejected then is simulated as it is); the
-        rejected draws are kept for the iteration's record (``screened_Z``), not simulated."""
+        """``ce.screen``: the rejected rows drawn again (``screened_draw``); the rejected draws
+        are kept for the iteration's record (``screened_Z``), not simulated."""
         assert self._screen is not None
-        source = self._sources(Z.shape[0])
-        rejected = []
-        bad = self._screen(Z)
-        for _ in range(self.config.screen_tries):
-            if not bool(bad.any()):
-                break
-            rejected.append(Z[bad].clone())
-            Z = Z.clone()
-            Z[bad] = self._draw(source[bad])
-            bad = bad & self._screen(Z)
-        self._screened = torch.cat(rejected) if rejected else Z[:0].clone()
+        Z, self._screened = screened_draw(Z, self._sources(Z.shape[0]), self._screen, self.config.screen_tries,
+                                          self._draw)
         return Z
 
     def _refit(self, Ze: Tensor) -> None:
