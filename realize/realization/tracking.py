@@ -12,8 +12,8 @@ saved in validation (docs/objects.md, "Grasps that survive a turned object").
 
 from __future__ import annotations
 
-from torch import Tensor
 import torch
+from torch import Tensor
 
 from realize.tasks.frames import position_columns
 from realize.tasks.regions import Region
