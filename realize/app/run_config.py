@@ -256,10 +256,9 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     robot = read_robot(d.get("robot"))
     from realize.world.geometry import check_robot_start, with_fixed_base_start
 
-    scene_d = with_fixed_base_start(as_mapping(d.get("scene"), "scene"), robot.base.fixed)
+    scene_d, start_key = with_fixed_base_start(as_mapping(d.get("scene"), "scene"), robot.base.fixed)
     geometry_cfg, geometry = _read_geometry(scene_d)
-    mounted = robot.base.fixed and scene_d.get("fixed_base_start") is not None
-    check_robot_start(geometry, robot.base.footprint_radius, key="fixed_base_start" if mounted else "robot_start")
+    check_robot_start(geometry, robot.base.footprint_radius, key=start_key)
 
     config = dict(d)
     config["scene"] = scene_d  # the run's files say where the robot stood

@@ -144,9 +144,9 @@ class Rollout:
             self.realizer.action_hook(a, rows)
         obj = -1 if spec.obj is None else self.scene.object_index(spec.obj)
         region = self.realizer.layout.regions[name]
-        params, shift = self._tracked(name, region, self._padded(name, rows), rows)
-        frame = self.task.frame_of(name)
-        support = self.scene.geometry.object_index(frame) if frame in self.scene.geometry.object_names else -1
+        frame, g = self.task.frame_of(name), self.scene.geometry
+        support = g.object_index(frame) if frame in g.object_names else -1  # a movable object, or -1
+        params, shift = self._tracked(region, self._padded(name, rows), rows, support)
         code = self._template(a).begin(self.ctx, rows, params, region, obj, shift, support)
         bad = code > 0
         if bad.any():
@@ -154,15 +154,14 @@ class Rollout:
             self._fail(r, code[bad], a)
             self.ctx.hold_arm(r)
 
-    def _tracked(self, name: str, region: Region, params: Tensor, rows: Tensor) -> tuple[Tensor, Tensor | None]:
-        """Parameters of ``rows`` resolved against where the object their region is framed by
-        is seen now (``controller.track_objects``; ``realize.realization.tracking``), and that
-        object's shift (len, 3), or None: untracked."""
-        frame = self.task.frame_of(name)
-        g = self.scene.geometry
-        if not self.cfg.track_objects or frame not in g.object_names:
+    def _tracked(self, region: Region, params: Tensor, rows: Tensor, frame: int) -> tuple[Tensor, Tensor | None]:
+        """Parameters of ``rows`` resolved against where the movable object ``frame`` (its index;
+        -1: the region is not framed by one) their region is framed by is seen now
+        (``controller.track_objects``; ``realize.realization.tracking``), and that object's shift
+        (len, 3), or None: untracked."""
+        if not self.cfg.track_objects or frame < 0:
             return params, None
-        return track_region(region, params, g.object(frame), self.ctx.objects[rows, g.object_index(frame), :3],
+        return track_region(region, params, self.scene.geometry.objects[frame], self.ctx.objects[rows, frame, :3],
                             self.cfg.track_min_shift)
 
     def _write_commands(self, asleep: Tensor) -> None:

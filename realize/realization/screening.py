@@ -9,7 +9,7 @@ for every closing axis the grasp could pick (the box's face normals across the a
 can win ``Manipulate``'s choice, each way round), and rejects a sample when, for all of them,
 the hand would reach more than ``depth`` below the top of the surface the box stands on. The
 hand cannot be there: the table holds it off, and the grasp times out. The spheres hold the
-links with a margin, so ``depth`` (2 cm) is what makes the check conservative; measured in
+links with a margin, so ``depth`` (``ce.screen_depth``, 2.5 cm) is what makes the check conservative; measured in
 ``scripts/screen_check.py``: of 1,000 uniform seed-task samples, the rejected ones simulated.
 What it doesn't: check places, pushes, reach from the base (the whole-body fabric moves the
 base during a grasp), or cylinders (any axis across one can close on it); draw the samples

@@ -263,15 +263,16 @@ def check_robot_start(g: SceneGeometry, footprint_radius: float, where: str = "s
                    f"= {r}) inside the bounds {g.bounds_low}..{g.bounds_high}")
 
 
-def with_fixed_base_start(scene: dict[str, Any], fixed_base: bool) -> dict[str, Any]:
-    """The scene config (plain data) a robot meets: for a fixed-base robot, ``robot_start``
-    replaced by the scene's ``fixed_base_start`` where it has one (the arm's stand at the table
-    edge, where a mobile robot would park farther back); otherwise unchanged. Idempotent, so a
-    saved run's config (already replaced) reads the same again."""
+def with_fixed_base_start(scene: dict[str, Any], fixed_base: bool) -> tuple[dict[str, Any], str]:
+    """The scene config (plain data) a robot meets, and the key its start came from: for a
+    fixed-base robot, ``robot_start`` replaced by the scene's ``fixed_base_start`` where it has
+    one (the arm's stand at the table edge, where a mobile robot would park farther back);
+    otherwise unchanged. Idempotent, so a saved run's config (already replaced) reads the same
+    again."""
     mount = scene.get("fixed_base_start")
     if not fixed_base or mount is None:
-        return scene
-    return {**scene, "robot_start": list(mount)}
+        return scene, "robot_start"
+    return {**scene, "robot_start": list(mount)}, "fixed_base_start"
 
 
 def build_geometry(cfg: GeometryCfg) -> SceneGeometry:
