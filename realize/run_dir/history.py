@@ -9,7 +9,8 @@ File layout. Per iteration ``i`` (3-digit zero padded): ``Z_i`` (N, D), ``cost_i
 ``feasible_i``, ``progress_i``, ``distance_i`` (N,), ``elite_idx_i`` (K,), and where the rollout
 gave them ``action_success_i`` (N, A), ``goal_i``, ``steps_i`` (N,); a robust search
 (``ce.replicas`` = R > 1) adds ``share_i`` (N,), each sample's success share over its worlds,
-and ``world_cost_i`` / ``world_feasible_i`` (N, R). Stacked over iterations:
+and ``world_cost_i`` / ``world_feasible_i`` (N, R). A search with ``ce.screen`` adds ``screened_Z_i``
+(k, D), the draws its kinematic screen rejected and drew again (not simulated). Stacked over iterations:
 ``iteration``, ``n_samples`` (the plans of each iteration, ``n_envs``; the file keeps its
 original key), ``success_share``, ``best_cost`` (inf if none), ``mean``/``std`` (I, D; NaN while
 the distribution is still uniform). ``column_names`` (D,) names Z's columns. A mixture
