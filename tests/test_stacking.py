@@ -62,11 +62,11 @@ def test_cube_b_ends_square_on_cube_a(a_shift: tuple[float, float]) -> None:
     assert math.dist(a[:2].tolist(), (configured[0] + a_shift[0], configured[1] + a_shift[1])) <= 0.005  # not pushed
 
 
-@pytest.mark.parametrize("overrides", ["experiment=tower3", "robot=panda experiment=tower3"])
+@pytest.mark.parametrize("overrides", ["experiment=tower3", "robot=panda experiment=tower3", "experiment=tower3_tabletop"])
 def test_three_blocks_end_in_a_tower(overrides: str) -> None:
     """``experiment=tower3`` for the mobile robot parked at table 1, and for the fixed-base Panda
-    bolted at the table's edge (the scene's ``fixed_base_start``; ``experiment=tower3_tabletop``
-    is the same arm and cubes on ``scene=tabletop``), the plan from the blocks domain,
+    bolted at the table's edge (the scene's ``fixed_base_start``), and for the Panda at
+    ``scene=tabletop`` (``experiment=tower3_tabletop``), the plan from the blocks domain,
     hand-chosen top-down grasps and places: cube C ends on cube B on cube A, each centred within
     1 cm and upright within 5 degrees, all settled. Cube C's place region is framed by cube B, so
     it is read where cube B stands once stacked, not where cube B started. A fixed base ends
