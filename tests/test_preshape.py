@@ -34,7 +34,8 @@ TILTS = [TILT, TILT, 0.0]
 def _rollout(margin: str) -> tuple[list[str], list[int], list[float], float]:
     """(failures, actions completed, finger width 1.5 s into the grasp, width_open) of the rows."""
     spec = build_run_spec(compose_config("experiment=two_cubes", "controller.max_time_s=14",
-                                         f"controller.preshape_margin={margin}"))
+                                         f"controller.preshape_margin={margin}",
+                                         "controller.grasp_square_turn=null"))  # the pre-shape alone
     base = {"Table1": [-0.85, 1.2], "CubeB_g": [0.0, 1.3, 0.8925], "Table2": [-0.85, -1.2],
             "CubeA_p": [0.0, -1.3, 0.8975], "CubeB_p": [0.0, -1.1, 0.8975], "Exit": [2.2, 0.0]}
     rows = []

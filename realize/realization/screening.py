@@ -6,7 +6,8 @@ hemisphere pre-pose, the pose the grasp will drive the TCP to (the object's cent
 along the approach, ``tcp_target``, as the rollout computes it), turns the hand's collision
 spheres (the robot spec's spheres on the links rigid with the TCP, fingers open) into that pose
 for every closing axis the grasp could pick (the box's face normals across the approach that
-can win ``Manipulate``'s choice, each way round), and rejects a sample when, for all of them,
+can win ``Manipulate``'s choice, each way round; with ``controller.grasp_square_turn``, each with
+the approach turned toward its face as the grasp turns it), and rejects a sample when, for all of them,
 the hand would reach more than ``depth`` below the top of the surface the box stands on. The
 hand cannot be there: the table holds it off, and the grasp times out. The spheres hold the
 links with a margin, so ``depth`` (``ce.screen_depth``, 2.5 cm) is what makes the check conservative; measured in
@@ -21,7 +22,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from realize.realization.actions.manipulate import tcp_target
+from realize.realization.actions.manipulate import square_approach, tcp_target
 from realize.realization.config import RolloutConfig
 from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import RobotSpec
@@ -64,6 +65,7 @@ class HandDepthScreen:
         self.approach_local = torch.tensor(robot.tcp.approach_axis, dtype=dtype)
         self.closing_local = torch.tensor(robot.tcp.closing_axis, dtype=dtype)
         self.hand, self.clearance, self.offset = robot.gripper, rollout.grasp_clearance, rollout.grasp_offset
+        self.turn = rollout.grasp_square_turn  # the grasp turns its approach toward the closing face
         self.grasps: list[tuple[slice, Tensor, Tensor, float]] = []  # columns, centre, box axes, support top
         for action in task.plan:
             region = task.layout.regions[action.params[0]]
@@ -94,20 +96,23 @@ class HandDepthScreen:
         n = pre.shape[0]
         a = centre - pre
         a = a / a.norm(dim=1, keepdim=True).clamp(min=1e-9)
-        c = centre.expand(n, 3)
-        tcp = tcp_target(c, a, torch.full((n,), top, dtype=self.dtype), self.hand, self.clearance, self.offset)
         cand = torch.cat([axes, -axes], dim=1).T  # (6, 3) face normals
         proj = cand[None] - (a @ cand.T)[..., None] * a[:, None, :]  # (n, 6, 3)
         norm = proj.norm(dim=-1)
         plausible = norm >= norm.max(dim=1, keepdim=True).values - SCORE_SPAN  # could win for some current axis
-        closing = proj / norm.clamp(min=1e-9)[..., None]
-        approach = a[:, None, :].expand_as(closing)
+        approach = a[:, None, :].expand(n, 6, 3)
+        if self.turn is not None:  # each candidate face turns the approach toward its own plane
+            approach = square_approach(approach, cand[None].expand(n, 6, 3), self.turn)
+            proj = cand[None] - (approach * cand[None]).sum(-1, keepdim=True) * approach
+        closing = proj / proj.norm(dim=-1).clamp(min=1e-9)[..., None]
+        tcp = tcp_target(centre.expand(n * 6, 3), approach.reshape(n * 6, 3), torch.full((n * 6,), top, dtype=self.dtype),
+                         self.hand, self.clearance, self.offset).reshape(n, 6, 3)
         # the hand's rotation: its approach and closing axes onto a and the closing candidate
         local = torch.stack([self.approach_local, self.closing_local,
                              torch.linalg.cross(self.approach_local, self.closing_local)], dim=1)  # (3, 3) columns
         world = torch.stack([approach, closing, torch.linalg.cross(approach, closing, dim=-1)], dim=-1)
         rot = world @ local.T  # (n, 6, 3, 3): local axes -> world axes
-        spheres = tcp[:, None, None, :] + torch.einsum("ncij,kj->ncki", rot, self.offsets)
+        spheres = tcp[:, :, None, :] + torch.einsum("ncij,kj->ncki", rot, self.offsets)
         below = top - (spheres[..., 2] - self.radii)  # (n, 6, k): how far each sphere reaches under the top
         deepest = below.max(dim=2).values
         deepest = torch.where(plausible & (norm > 1e-6), deepest, torch.full_like(deepest, float("inf")))

@@ -5,7 +5,9 @@ and decides success from the fingers' contact forces on the object the plan name
 ``controller.preshape_margin`` it pre-shapes the open fingers to the object's width across the
 goal closing axis plus that margin for the approach and the move in (null: fully open), so a
 closing axis tilted out of the horizontal (a turned box grasped off vertical) does not put an
-open finger on the table.
+open finger on the table. With ``controller.grasp_square_turn`` it turns a box's sampled approach,
+by at most that angle, toward the plane of the face the fingers close on, so the closing axis
+stays that face's normal (horizontal on an upright box, however the box is turned).
 What it doesn't: carry the object anywhere (``move_to`` and ``place`` do).
 """
 
@@ -45,6 +47,10 @@ class Grasp(Manipulate):
             gap = self._width_across(ctx, rows, obj) + margin  # between the pads: the finger joints' sum
             self.opening[rows] = (gap / len(hand.joints)).clamp(min=0.0, max=hand.open)
         return code
+
+    def _approach_turn(self, ctx: StepContext, obj: int) -> float | None:
+        turn = ctx.cfg.grasp_square_turn
+        return turn if turn is not None and ctx.scene.geometry.objects[obj].shape == "box" else None
 
     def act(self, ctx: StepContext, rows: Tensor) -> None:
         super().act(ctx, rows)

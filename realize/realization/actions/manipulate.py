@@ -42,6 +42,19 @@ def tcp_target(centre: Tensor, approach: Tensor, support_z: Tensor, hand: Grippe
     return centre - approach * back[:, None]
 
 
+def square_approach(approach: Tensor, face: Tensor, max_turn: float) -> Tensor:
+    """(n, 3) unit approaches turned, by at most ``max_turn`` rad each, toward the plane
+    perpendicular to the unit face normals ``face`` (n, 3) (turned all the way, the face normal
+    is itself a closing axis across the approach: no tilt of the closing axis out of the face).
+    An approach already in that plane is returned as it is."""
+    dot = (approach * face).sum(-1, keepdim=True)
+    angle = torch.asin(dot.abs().clamp(max=1.0))
+    toward = -dot * (face - dot * approach)  # in the plane of approach and face, perpendicular to the approach
+    toward = toward / toward.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+    turn = angle.clamp(max=max_turn)
+    return approach * torch.cos(turn) + toward * torch.sin(turn)
+
+
 class Manipulate(Template):
     """Common phase machine of grasp and place (whole-body fabric to a hemisphere pre-pose)."""
 
@@ -82,6 +95,10 @@ class Manipulate(Template):
         centre, pre = self._centre_and_pre(ctx, params, region, shift)
         d = centre - pre
         approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
+        turn = self._approach_turn(ctx, obj)
+        if turn is not None:  # the approach turned toward the plane of the face the fingers will close on
+            approach = square_approach(approach, self._closing_axis(ctx, rows, approach, obj, raw=True), turn)
+            pre = centre - approach * d.norm(dim=1, keepdim=True)
         self.obj[rows] = obj
         self.pre[rows] = pre
         self.approach[rows] = approach
@@ -93,6 +110,10 @@ class Manipulate(Template):
         ctx.start_fabric(rows)
         return torch.zeros(len(rows), dtype=torch.long, device=self.device)
 
+    def _approach_turn(self, ctx: StepContext, obj: int) -> float | None:
+        """rad the approach may turn toward its closing face (``square_approach``); None: as sampled."""
+        return None
+
     def _target(self, ctx: StepContext, rows: Tensor, centre: Tensor, approach: Tensor, obj: int) -> Tensor:
         """TCP goal of the plans ``rows`` that begin the action now: the region centre (the
         object's centre), backed off along the approach just enough that the fingertips stay
@@ -101,26 +122,27 @@ class Manipulate(Template):
         return tcp_target(centre, approach, support, ctx.scene.robot.gripper, ctx.cfg.grasp_clearance,
                           ctx.cfg.grasp_offset)
 
-    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor, obj: int) -> Tensor:
+    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor, obj: int, raw: bool = False) -> Tensor:
         """Closing axis of the goal pose: the object's face normal (perpendicular to the
         approach) nearest to the gripper's current closing axis, so the fingers close on two
-        faces; a cylinder offers only the axes across its own (it is never squeezed end to end)."""
+        faces; a cylinder offers only the axes across its own (it is never squeezed end to end).
+        ``raw``: the chosen face normal itself, before its projection across the approach."""
         frame = quat_to_matrix(ctx.objects[rows, obj, 3:7])  # (n, 3, 3), columns = object axes
         if ctx.scene.geometry.objects[obj].shape == "cylinder":
             frame = frame[:, :, :2]
-        return self._face_axis(frame, approach, ctx.closing[rows])
+        return self._face_axis(frame, approach, ctx.closing[rows], raw)
 
-    def _face_axis(self, frame: Tensor, approach: Tensor, near: Tensor) -> Tensor:
+    def _face_axis(self, frame: Tensor, approach: Tensor, near: Tensor, raw: bool = False) -> Tensor:
         """(n, 3): of the axes ``frame`` (n, 3, k) and their opposites, projected perpendicular
         to ``approach`` and normalised, the most perpendicular to it first (a true face
-        normal), then the nearest to ``near``."""
-        cand = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 2k, 3)
-        cand = cand - (cand * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
+        normal), then the nearest to ``near`` (``raw``: that axis unprojected)."""
+        axes = torch.cat([frame, -frame], dim=2).transpose(1, 2)  # (n, 2k, 3)
+        cand = axes - (axes * approach[:, None, :]).sum(-1, keepdim=True) * approach[:, None, :]
         norm = cand.norm(dim=-1)
         cand = cand / norm.clamp(min=1e-6)[..., None]
         score = 2.0 * norm + 0.5 * (cand * near[:, None, :]).sum(-1)
         best = score.argmax(dim=1)
-        return cand[torch.arange(len(frame), device=frame.device), best]
+        return (axes if raw else cand)[torch.arange(len(frame), device=frame.device), best]
 
     def _width_across(self, ctx: StepContext, rows: Tensor, obj: int) -> Tensor:
         """(len(rows),) m: the object's extent along the goal closing axis (``self.closing``), from
