@@ -351,3 +351,16 @@ def doc_block(page: str, lang: str, index: int = 0) -> DocBlock:
     if len(found) <= index:
         pytest.fail(f"{page} has {len(found)} ```{lang} blocks; the test runs block {index}")
     return found[index]
+
+
+def turned_worlds(names: tuple[str, ...], turned: str, yaws: list[float]) -> Any:
+    """Worlds (``realize.tasks.worlds.Worlds``), one per yaw: object ``turned`` turned by it (rad),
+    nothing else moved, friction and mass as configured."""
+    import numpy as np
+
+    from realize.tasks.worlds import Worlds
+
+    n, m = len(yaws), len(names)
+    yaw = np.zeros((n, m))
+    yaw[:, names.index(turned)] = yaws
+    return Worlds(names, np.zeros((n, 2)), np.zeros((n, m, 2)), yaw, np.ones((n, m)), np.ones((n, m)))

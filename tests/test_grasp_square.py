@@ -13,17 +13,15 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 import torch
 
-from helpers import compose_config
+from helpers import compose_config, turned_worlds
 from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
 from realize.realization.actions.manipulate import square_approach
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene
-from realize.tasks.worlds import Worlds
 
 pytestmark = pytest.mark.usefixtures("torch_single_thread")
 
@@ -63,13 +61,9 @@ def _grasped(turn: str) -> tuple[list[int], list[str]]:
             "CubeB_g": [0.0, 1.3, 0.8925], "Table2": [-0.85, -1.2], "CubeA_p": [0.0, -1.3, 0.8975],
             "CubeB_p": [0.0, -1.1, 0.8975], "Exit": [2.2, 0.0]}
     row = sum((vals[k] for k in spec.task.layout.names), [])
-    names = tuple(spec.geometry.object_names)
-    n, m = len(YAWS), len(names)
-    yaw = np.zeros((n, m))
-    yaw[:, names.index("cube_a")] = YAWS
-    worlds = Worlds(names, np.zeros((n, 2)), np.zeros((n, m, 2)), yaw, np.ones((n, m)), np.ones((n, m)))
+    n = len(YAWS)
     with BatchedScene(n, spec.geometry_cfg, spec.sim) as scene:
-        scene.set_worlds(worlds)
+        scene.set_worlds(turned_worlds(tuple(spec.geometry.object_names), "cube_a", YAWS))
         res = PlanRealizer.from_spec(spec, None, scene).rollout(torch.tensor([row] * n, dtype=torch.float64))
     return [int(p) for p in res.progress.tolist()], list(res.failure)
 

@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 import torch
 
-from helpers import compose_config
+from helpers import compose_config, turned_worlds
 from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene
-from realize.tasks.worlds import Worlds
 
 pytestmark = pytest.mark.usefixtures("torch_single_thread")
 
@@ -43,13 +41,9 @@ def _rollout(margin: str) -> tuple[list[str], list[int], list[float], float]:
         x, y, z = CUBE_A
         vals = {**base, "CubeA_g": [x - 0.15 * math.sin(t), y, z + 0.15 * math.cos(t)]}
         rows.append(sum((vals[k] for k in spec.task.layout.names), []))
-    names = tuple(spec.geometry.object_names)
-    n, m = len(rows), len(names)
-    yaw = np.zeros((n, m))
-    yaw[:, names.index("cube_a")] = YAWS
-    worlds = Worlds(names, np.zeros((n, 2)), np.zeros((n, m, 2)), yaw, np.ones((n, m)), np.ones((n, m)))
+    n = len(rows)
     with BatchedScene(n, spec.geometry_cfg, spec.sim) as scene:
-        scene.set_worlds(worlds)
+        scene.set_worlds(turned_worlds(tuple(spec.geometry.object_names), "cube_a", YAWS))
         realizer = PlanRealizer.from_spec(spec, None, scene)
         seen = {"a": -1, "t": 0, "w": None}
 
