@@ -19,6 +19,8 @@ again (``realize.search.ce.optimizer``).
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
@@ -26,7 +28,6 @@ from realize.realization.actions.manipulate import square_approach, tcp_target
 from realize.realization.config import RolloutConfig
 from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import RobotSpec
-from realize.scene import quat_to_matrix
 from realize.search.ce.config import CEConfig
 from realize.tasks.hemisphere import Hemisphere
 from realize.tasks.spec import TaskSpec
@@ -74,12 +75,12 @@ class HandDepthScreen:
             obj = geometry.object(action.obj)
             if obj.shape != "box":
                 continue
-            half = torch.tensor(obj.yaw / 2, dtype=dtype)
-            quat = torch.stack([half.cos(), torch.zeros((), dtype=dtype), torch.zeros((), dtype=dtype), half.sin()])
-            axes = quat_to_matrix(quat[None])[0]  # columns: the box's axes at its config pose
+            c, s = math.cos(obj.yaw), math.sin(obj.yaw)
+            # columns: the box's axes at its config pose (turned by its yaw about the vertical)
+            axes = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=dtype)
             centre = torch.tensor(region.center, dtype=dtype)
-            self.grasps.append((task.layout.slices[action.params[0]], centre, axes, float(region.center[2]
-                                                                                           - obj.half_height)))
+            top = float(region.center[2] - obj.half_height)
+            self.grasps.append((task.layout.slices[action.params[0]], centre, axes, top))
 
     @property
     def active(self) -> bool:
@@ -105,8 +106,9 @@ class HandDepthScreen:
             approach = square_approach(approach, cand[None].expand(n, 6, 3), self.turn)
             proj = cand[None] - (approach * cand[None]).sum(-1, keepdim=True) * approach
         closing = proj / proj.norm(dim=-1).clamp(min=1e-9)[..., None]
-        tcp = tcp_target(centre.expand(n * 6, 3), approach.reshape(n * 6, 3), torch.full((n * 6,), top, dtype=self.dtype),
-                         self.hand, self.clearance, self.offset).reshape(n, 6, 3)
+        tops = torch.full((n * 6,), top, dtype=self.dtype)
+        tcp = tcp_target(centre.expand(n * 6, 3), approach.reshape(n * 6, 3), tops, self.hand, self.clearance,
+                         self.offset).reshape(n, 6, 3)
         # the hand's rotation: its approach and closing axes onto a and the closing candidate
         local = torch.stack([self.approach_local, self.closing_local,
                              torch.linalg.cross(self.approach_local, self.closing_local)], dim=1)  # (3, 3) columns
