@@ -43,6 +43,7 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 
 from realize.config import ConfigError  # noqa: E402
 from realize.paths import CONFIG_DIR  # noqa: E402
+from realize.app.assembly import plain_config  # noqa: E402
 from realize.app.realizers import open_realization  # noqa: E402
 from realize.app.run_config import RunSpec, build_run_spec  # noqa: E402
 
@@ -50,13 +51,11 @@ from realize.app.run_config import RunSpec, build_run_spec  # noqa: E402
 def load_spec(task_file: str, seed: int, device: str, overrides: Sequence[str] = ()) -> RunSpec:
     """The run spec the ``realize`` app would build for these overrides (Hydra compose API)."""
     from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
 
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="uniform_success"):
         cfg = compose(config_name="config",
                       overrides=[f"task_file={task_file}", f"seed={seed}", f"device={device}", *overrides])
-    plain = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(plain, dict)
+    plain = plain_config(cfg)
     plain.pop("hydra", None)
     return build_run_spec(plain)
 

@@ -51,8 +51,10 @@ def compose_config(*overrides: str, cpu: bool = True, plain: bool = True, hydra_
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
+    from realize.app.hydra_edge import register_resolvers
     from realize.paths import CONFIG_DIR
 
+    register_resolvers()  # ${realize_scaled:...} in the presets
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name=job_name):
         cfg = compose(config_name="config", overrides=[*(["device=cpu"] if cpu else []), *quiet_validation(overrides),
                                                        *overrides],

@@ -43,6 +43,7 @@ from realize.search.candidates import CandidateSpec, SuccessiveHalving
 from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.realization.screening import plan_screen
 from realize.config import ConfigError
+from realize.app.hydra_edge import register_resolvers, resolution_error
 from realize.app.loop import search_loop
 from realize.app.objective import record_objective
 from realize.app.replan import replan_config
@@ -96,11 +97,12 @@ class RunOutcome:
 
 def plain_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     """Resolved plain data of the run config (no ``hydra`` node)."""
+    register_resolvers()  # a config composed outside realize's own compose (a notebook's Hydra)
     if isinstance(cfg, DictConfig):
         try:
             d = OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
         except Exception as e:  # interpolation / missing-value errors from OmegaConf
-            raise ConfigError(" ".join(str(e).split())) from None
+            raise resolution_error(e) from None
     else:
         d = OmegaConf.to_container(OmegaConf.create(dict(cfg)), resolve=True)
     assert isinstance(d, dict)

@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from realize.app.cli_keys import check_override_keys
-from realize.app.hydra_edge import compose_or_error, override_values, parse_overrides, register_resolvers
+from realize.app.hydra_edge import compose_or_error, override_values, parse_overrides, register_resolvers, resolution_error
 from realize.config import ConfigError, did_you_mean
 from realize.paths import CONFIG_DIR
 
@@ -67,7 +67,7 @@ def compose_config(overrides: Sequence[str] = ()) -> dict[str, Any]:
     try:
         d = OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
     except Exception as e:
-        raise ConfigError(" ".join(str(e).split())) from None
+        raise resolution_error(e) from None
     assert isinstance(d, dict)
     d.pop("hydra", None)
     return d

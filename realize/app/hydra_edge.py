@@ -3,8 +3,8 @@
 What it does: ``parse_overrides`` (Hydra ``Override`` objects; one ``ConfigError`` line for one
 that does not parse), ``override_values`` (the values an override gives, a sweep's listed ones),
 ``compose_or_error`` (Hydra's compose of ``configs/config.yaml``; a composition error becomes one
-``ConfigError`` line; see "Composing once per set of group choices" below) and ``register_resolvers`` (``${realize_sqlite:DIR,NAME}``, registered on
-import). ``realize.app.compose`` and ``realize.app.cli_keys`` build on these; neither imports the other.
+``ConfigError`` line; see "Composing once per set of group choices" below) and ``register_resolvers``
+(``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import). ``realize.app.compose`` and ``realize.app.cli_keys`` build on these; neither imports the other.
 What it doesn't: check keys or group choices (``realize.app.cli_keys``, ``realize.app.compose``)
 or validate values (``realize.app.run_config``).
 
@@ -24,13 +24,15 @@ from __future__ import annotations
 
 import copy
 import functools
+import math
 from collections.abc import Sequence
 from typing import Any
 
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 
-__all__ = ["parse_overrides", "override_values", "compose_or_error", "split_overrides", "register_resolvers"]
+__all__ = ["parse_overrides", "override_values", "compose_or_error", "split_overrides", "register_resolvers",
+           "scaled_count", "resolution_error"]
 
 
 def parse_overrides(overrides: Sequence[str]) -> list[Any]:
@@ -137,12 +139,44 @@ def _sqlite_in(directory: str, name: str) -> str:
     return f"sqlite:///{d / str(name)}"
 
 
+def scaled_count(n: Any, scale: Any) -> int:
+    """``${realize_scaled:N,SCALE}``: the count ``N`` times ``SCALE``, rounded half up, at least 1.
+
+    A preset writes its batch this way (``ce.n_envs: ${realize_scaled:200,${ce.batch_scale}}``) so
+    that the levers group's ``ce.batch_scale`` scales the preset's own number; ``levers=exact``
+    (scale 1) gives the number itself, and a count given on the command line replaces the
+    interpolation, so it is never scaled."""
+    try:
+        n_, s_ = int(n), float(scale)
+    except (TypeError, ValueError):
+        raise ConfigError(f"ce.batch_scale = {scale!r} (scaling {n!r}): must be a number > 0") from None
+    if not (s_ > 0 and math.isfinite(s_)):
+        raise ConfigError(f"ce.batch_scale = {scale!r} is invalid: must be a number > 0 (1: the preset's batch)")
+    return max(1, math.floor(n_ * s_ + 0.5))
+
+
+def resolution_error(e: Exception) -> ConfigError:
+    """One ``ConfigError`` line for an error OmegaConf raised while resolving a config: a
+    resolver's own ``ConfigError`` as it is (without OmegaConf's frame around it), any other
+    error's text on one line."""
+    seen: Exception | None = e
+    for _ in range(8):  # OmegaConf re-raises the resolver's error as the context of its own
+        if seen is None:
+            break
+        if isinstance(seen, ConfigError):
+            return ConfigError(str(seen))
+        seen = seen.__cause__ or seen.__context__  # type: ignore[assignment]
+    return ConfigError(" ".join(str(e).split()))
+
+
 def register_resolvers() -> None:
-    """The config's own resolvers (``realize_sqlite``); idempotent."""
+    """The config's own resolvers (``realize_sqlite``, ``realize_scaled``); idempotent."""
     from omegaconf import OmegaConf
 
     if not OmegaConf.has_resolver("realize_sqlite"):
         OmegaConf.register_new_resolver("realize_sqlite", _sqlite_in)
+    if not OmegaConf.has_resolver("realize_scaled"):
+        OmegaConf.register_new_resolver("realize_scaled", scaled_count)
 
 
 register_resolvers()

@@ -68,7 +68,10 @@ class CEConfig(Settings):
     bit-identical, though a reused scene's later rollouts may drift a little: docs/results.md ("Speed
     levers"). ``patience`` makes ``iterations`` a maximum: the search stops once a
     feasible plan is in hand and the elites' mean cost fell by less than ``min_improvement``
-    (relative) over the last ``patience`` iterations.
+    (relative) over the last ``patience`` iterations. Measured, off by default: ``keep_elites`` ranks
+    each batch together with the last refit's feasible elites (``realize.search.ce.elite_memory``);
+    ``batch_scale`` is a record of the share of a preset's batch the config was composed with (a
+    preset opts in with ``${realize_scaled:N,${ce.batch_scale}}``, ``realize.app.hydra_edge``).
 
     ``dtype``: the search's bookkeeping dtype (sampling, ranking, refits). ``keep_samples``:
     keep each iteration's ``Z`` in its record.
@@ -103,6 +106,8 @@ class CEConfig(Settings):
     prune: bool = setting(True, help="stop a row once it can no longer be among the batch's best feasible rows")
     patience: int | None = setting(2, ge=1, help="stopping rule: iterations looked back over (null = off)")
     min_improvement: float = setting(0.03, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
+    keep_elites: bool = setting(False, help="rank each batch together with the last refit's feasible elites (elite memory)")
+    batch_scale: float = setting(1.0, gt=0, help="the preset's batch times this (applied where the config is composed)")
     screen: bool = setting(False, help="draw again the samples a grasp would fail for certain (hand under the table)")
     screen_depth: float = setting(0.025, ge=0, help="screen: m the hand's spheres may reach below the support's top")
     screen_tries: int = setting(10, ge=1, help="screen: redraws of a rejected sample at most")

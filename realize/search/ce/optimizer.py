@@ -13,6 +13,8 @@ row), so it runs and is tested without a simulator; it implements ``realize.sear
 * Elites are the ``n_elite`` best rows (``realize.search.ce.ranking``); the refit is the (optionally
   rank-weighted) elite mean and population std, floored at ``min_std`` and optionally smoothed
   with ``alpha`` (1 = paper, no smoothing).
+* With ``keep_elites`` the last refit's feasible elites are ranked with the batch
+  (``realize.search.ce.elite_memory``).
 * It stops after ``iterations`` or, if ``converge_std`` is set, once every std is below it, or,
   with ``patience``, once the elites have stopped improving and a feasible best is in hand.
 
@@ -20,11 +22,9 @@ The defaults of the multimodal/robust options take exactly the code paths and ra
 the single-Gaussian search, bit for bit. Bookkeeping (sampling, ranking, refits) runs on the
 CPU in ``CEConfig.dtype`` with one ``torch.Generator`` seeded from the config, so the same seed
 gives bit-identical samples on any machine; only the Z handed out by ``ask`` is moved to the
-caller's device. The whole state round-trips through plain JSON (``state_dict`` /
-``load_state_dict``) for resuming.
-
-Angles (a hemisphere yaw column) are treated as plain reals: the Gaussian does not wrap, and
-``project`` wraps/clamps its draws; keep yaw ranges away from the +-pi seam if that matters.
+caller's device. The state round-trips through plain JSON (``state_dict``) for resuming.
+Angles (a hemisphere yaw column) are plain reals: the Gaussian does not wrap, ``project``
+wraps/clamps its draws; keep yaw ranges away from the +-pi seam if that matters.
 
 What it doesn't: simulate, know plans, log or write files; full-covariance normals; mixtures
 whose number of modes changes during a run.
@@ -41,17 +41,11 @@ import torch
 from torch import Tensor
 
 from realize.search.ce.config import CEConfig
+from realize.search.ce.elite_memory import pooled, remembered
 from realize.search.ce.mixture import Mixture, fit_mixture
 from realize.search.ce.sampling import draw_rows, row_sources, screened_draw
-from realize.search.ce.ranking import (
-    choose_elites,
-    elite_weights,
-    fit_normal,
-    rank_samples,
-    robust_cost,
-    robust_order,
-    sort_key,
-)
+from realize.search.ce.ranking import (choose_elites, elite_weights, fit_normal, rank_samples, robust_cost,
+                                       robust_order, sort_key)
 from realize.search.ce.state import CEResult, CEState, IterationRecord, WarmDistribution
 from realize.tasks.param_layout import ParamLayout
 from realize.search.protocol import Batch, EvalResult, SearchReport
@@ -102,6 +96,8 @@ class CrossEntropyOptimizer:
         # ce.screen: (N, D) -> (N,) bool, the samples physics would fail for certain; they are
         # drawn again (at most ce.screen_tries times) and kept apart, not simulated
         self._screen = screen if config.screen else None
+        # ce.keep_elites, where a sample's score is its own (not a robust or kNN-ranked search)
+        self._keeps = config.keep_elites and config.replicas == 1 and config.knn_robust == 0
         self._screened: Tensor | None = None
         # normalised space for clustering and kNN: each column over its region's bounding box
         low, high = layout.bounds()
@@ -184,24 +180,27 @@ class CrossEntropyOptimizer:
         cfg, s = self.config, self._state
         n = Z.shape[0]
         r = result.to_cpu(n, self.dtype)
-        order = rank_samples(r.cost, r.feasible, r.progress, r.distance, r.share)
-        best_order = order  # the true best single sample comes first here
+        best_order = rank_samples(r.cost, r.feasible, r.progress, r.distance, r.share)  # the batch's best first
         n_feas = int(r.feasible.sum())
+        Zr, rr = pooled(Z, r, s.memory_z, s.memory_cost) if self._keeps else (Z, r)  # + remembered elites
+        order = best_order if rr is r else rank_samples(rr.cost, rr.feasible, rr.progress, rr.distance)
         robust = None
         if cfg.knn_robust > 0:
             robust = robust_cost(self.normalize(Z), r, cfg)
             order = robust_order(order, robust, r.feasible)
 
-        elite, refit = choose_elites(order, n_feas, cfg)
+        elite, refit = choose_elites(order, int(rr.feasible.sum()), cfg)
         if source == "uniform":
             s.init_mean = Z.mean(0)
             s.init_std = Z.std(0, correction=0)
         if refit != "kept":
-            self._refit(Z[elite])
+            self._refit(Zr[elite])
+        if self._keeps:
+            s.memory_z, s.memory_cost = remembered(Zr, rr, elite)
 
         self._update_best(Z, r, int(best_order[0]))
         feas_cost = r.cost[r.feasible]
-        elite_feas = r.cost[elite][r.feasible[elite]]
+        elite_feas = rr.cost[elite][rr.feasible[elite]]
         s.elite_costs.append(float(elite_feas.mean()) if refit == "elite" else math.nan)
         if cfg.patience is not None and self._settled():
             s.converged = True
@@ -213,7 +212,7 @@ class CrossEntropyOptimizer:
             feasible=r.feasible,
             progress=r.progress,
             distance=r.distance,
-            elite_idx=elite.clone(),
+            elite_idx=elite[elite < n].clone(),
             sampled_from=source,
             refit=refit,
             mean=_clone(s.mean),
@@ -235,6 +234,7 @@ class CrossEntropyOptimizer:
             n_stopped=None if r.stopped is None else int(r.stopped.sum()),
             n_screened=None if self._screened is None else int(self._screened.shape[0]),
             screened_Z=self._screened if cfg.keep_samples else None,
+            n_remembered=int((elite >= n).sum()) if self._keeps else None,
         )
         self._screened = None
         s.iteration += 1

@@ -71,6 +71,10 @@ class CEState:
     # the elites' mean cost of every iteration so far (NaN where they were not all feasible): the
     # stopping rule's memory (``CEConfig.patience``)
     elite_costs: list[float] = field(default_factory=list)
+    # ce.keep_elites: the last refit's feasible elites and the costs they were simulated with
+    # (``realize.search.ce.elite_memory``); None without the memory (and then not in ``to_dict``)
+    memory_z: Tensor | None = None
+    memory_cost: Tensor | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (lists, numbers, strings for inf/nan; the RNG state as a byte list)."""
@@ -93,6 +97,8 @@ class CEState:
         }
         if self.weights is not None:
             d["weights"] = _t2l(self.weights)
+        if self.memory_cost is not None:
+            d["memory_z"], d["memory_cost"] = _t2l(self.memory_z), [_f2j(c) for c in self.memory_cost.tolist()]
         return d
 
     @classmethod
@@ -117,6 +123,9 @@ class CEState:
             converged=bool(d.get("converged", False)),
             weights=t(d.get("weights")),
             elite_costs=[float(c) for c in d.get("elite_costs", [])],
+            memory_z=t(d.get("memory_z")),
+            memory_cost=None if d.get("memory_cost") is None else torch.tensor([float(c) for c in d["memory_cost"]],
+                                                                                  dtype=dtype),
         )
 
     def copy(self) -> CEState:
@@ -137,6 +146,8 @@ class CEState:
             converged=self.converged,
             weights=_clone(self.weights),
             elite_costs=list(self.elite_costs),
+            memory_z=_clone(self.memory_z),
+            memory_cost=_clone(self.memory_cost),
         )
 
 
@@ -205,6 +216,9 @@ class IterationRecord:
     n_stopped: int | None = None  # ce.prune: rows stopped as they could not be an elite (None: off)
     n_screened: int | None = None  # ce.screen: draws rejected before simulation (None: off)
     screened_Z: Tensor | None = None  # ce.screen: those draws (k, D), not simulated
+    # ce.keep_elites: elites of the refit that came from the memory (elite_idx lists the batch's;
+    # the elite cost stats cover both). None: no memory
+    n_remembered: int | None = None
 
     def summary(self, candidate: int | None = None) -> IterationSummary:
         """This iteration's numbers without the per-sample tensors (``result.json``'s series and
@@ -221,7 +235,7 @@ class IterationRecord:
             elite_cost_min=self.elite_cost_min,
             elite_cost_mean=self.elite_cost_mean,
             elite_cost_max=self.elite_cost_max,
-            n_elite=int(self.elite_idx.numel()),
+            n_elite=int(self.elite_idx.numel()) + (self.n_remembered or 0),
             mean=_t2l(self.mean),
             std=_t2l(self.std),
             eval_time=self.eval_time,
