@@ -33,8 +33,8 @@ def test_levers_exact_runs_the_papers_batch_and_a_half_scale_half_of_it_on_as_ma
     assert (n, rows, scale) == (100, 50, 0.5)
     # the shards (what keeps both cores of a laptop busy) are as many as the paper's batch has
     assert len(shard_rows(n, rows)) == len(shard_rows(200, 100)) == 2
-    spec = build_run_spec(compose_config("experiment=seed_paper", "ce.batch_scale=0.5"))
-    assert (spec.ce.n_envs, spec.sim.shard_rows) == (100, 50)
+    spec = build_run_spec(compose_config("experiment=seed_paper", "levers=fast"))  # the named set of both
+    assert (spec.ce.n_envs, spec.sim.shard_rows, spec.ce.keep_elites, spec.ce.prune) == (100, 50, True, True)
 
 
 def test_a_batch_given_on_the_command_line_is_not_scaled() -> None:

@@ -37,7 +37,7 @@ class TrajectorySink:
         rec, res = it.record, it.rollout
         if res.traj_base is None:
             return
-        top = int(rec.best_idx) if rec.elite_idx.numel() else -1
+        top = int(rec.best_idx) if rec.elite_idx.numel() or rec.n_remembered else -1  # (ce.keep_elites: maybe none)
         best = top if top >= 0 and bool(rec.feasible[top]) else -1
         self.rd.write_trajectories(rec.iteration, res.traj_base, res.traj_ee, res.feasible, best,
                                    Z=rec.Z, cost=res.cost, progress=res.progress, traj_t=res.traj_t)
