@@ -68,8 +68,10 @@ class CEConfig(Settings):
     bit-identical, though a reused scene's later rollouts may drift a little: docs/results.md ("Speed
     levers"). ``patience`` makes ``iterations`` a maximum: the search stops once a
     feasible plan is in hand and the elites' mean cost fell by less than ``min_improvement``
-    (relative) over the last ``patience`` iterations. Measured, off by default: ``keep_elites`` ranks
-    each batch together with the last refit's feasible elites (``realize.search.ce.elite_memory``);
+    (relative) over the last ``patience`` iterations. On in ``levers=fast`` (``experiment=seed_paper``'s
+    choice), off in ``levers=all``: ``keep_elites`` ranks each batch together with the last refit's
+    feasible elites (``realize.search.ce.elite_memory``; pruning stays exact, as a row that cannot
+    be among the batch's ``n_elite`` best cannot be among the pooled ones either);
     ``batch_scale`` is a record of the share of a preset's batch the config was composed with (a
     preset opts in with ``${realize_scaled:N,${ce.batch_scale}}``, ``realize.app.hydra_edge``).
 
