@@ -18,7 +18,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from realize.app.cli_keys import check_override_keys
-from realize.app.hydra_edge import compose_or_error, override_values, parse_overrides, register_resolvers, resolution_error
+from realize.app.hydra_edge import (compose_or_error, override_values, parse_overrides, register_resolvers,
+                                    resolution_error)
 from realize.config import ConfigError, did_you_mean
 from realize.paths import CONFIG_DIR
 

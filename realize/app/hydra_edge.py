@@ -3,8 +3,10 @@
 What it does: ``parse_overrides`` (Hydra ``Override`` objects; one ``ConfigError`` line for one
 that does not parse), ``override_values`` (the values an override gives, a sweep's listed ones),
 ``compose_or_error`` (Hydra's compose of ``configs/config.yaml``; a composition error becomes one
-``ConfigError`` line; see "Composing once per set of group choices" below) and ``register_resolvers``
-(``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import). ``realize.app.compose`` and ``realize.app.cli_keys`` build on these; neither imports the other.
+``ConfigError`` line; see "Composing once per set of group choices" below), ``register_resolvers``
+(``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import) and
+``resolution_error`` (a resolver's ``ConfigError`` as one line). ``realize.app.compose`` and
+``realize.app.cli_keys`` build on these; neither imports the other.
 What it doesn't: check keys or group choices (``realize.app.cli_keys``, ``realize.app.compose``)
 or validate values (``realize.app.run_config``).
 

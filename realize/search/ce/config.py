@@ -108,7 +108,7 @@ class CEConfig(Settings):
     prune: bool = setting(True, help="stop a row once it can no longer be among the batch's best feasible rows")
     patience: int | None = setting(2, ge=1, help="stopping rule: iterations looked back over (null = off)")
     min_improvement: float = setting(0.03, ge=0, help="stopping rule: least relative fall of the elites' mean cost")
-    keep_elites: bool = setting(False, help="rank each batch together with the last refit's feasible elites (elite memory)")
+    keep_elites: bool = setting(False, help="rank each batch with the last refit's feasible elites (elite memory)")
     batch_scale: float = setting(1.0, gt=0, help="the preset's batch times this (applied where the config is composed)")
     screen: bool = setting(False, help="draw again the samples a grasp would fail for certain (hand under the table)")
     screen_depth: float = setting(0.025, ge=0, help="screen: m the hand's spheres may reach below the support's top")
