@@ -4,8 +4,8 @@
   the ``keep``-th smallest of their step counts, and it only falls as more finish;
 * the same eight seed-task plans realized with and without the bound, each in a fresh scene:
   every row that was not stopped has bit-identical cost, flags and failure; every stopped row
-  costs more unpruned than the ``keep``-th cheapest feasible plan (so it could not have been one
-  of them); the ``keep`` cheapest feasible rows are the same rows at the same costs; and the
+  (running ones, and done ones still settling when the bound appeared) costs more unpruned than
+  the ``keep``-th cheapest feasible plan (so it could not have been one of them); the ``keep`` cheapest feasible rows are the same rows at the same costs; and the
   pruned batch simulates fewer steps.
 
 * end to end: the seed-task golden run (``tests/golden_runs.py``) with ``ce.prune`` on has the
@@ -90,6 +90,10 @@ def test_pruned_rows_could_not_win_and_the_rest_are_unchanged(both: tuple[Rollou
     assert bool(((full.cost[stopped] > keep_cost) | ~full.feasible[stopped]).all())
     assert not pruned.feasible[stopped].any()
     assert all(pruned.failure[i].endswith(":stopped") for i in torch.nonzero(stopped).flatten().tolist())
+    # plans done but still settling when the bound appeared stop too, their goal never read
+    late = stopped & pruned.action_success.all(dim=1)
+    assert late.any(), "no plan was stopped while settling: the probe lost that point"
+    assert all(pruned.failure[i].endswith(":goal:stopped") for i in torch.nonzero(late).flatten().tolist())
     live = ~stopped
     assert torch.equal(pruned.cost[live], full.cost[live])
     assert torch.equal(pruned.feasible[live], full.feasible[live])

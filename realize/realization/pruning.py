@@ -11,8 +11,10 @@ row, ``realize.search.ce.ranking``). ``EliteBound.update`` keeps that bound as p
 validation candidates are those of the unpruned rollout. More feasible plans can only lower the
 bound, so it is safe to use before the batch ends. As every plan starts at step 0 and a running
 plan is counted every step, the plans still running when the bound first exists are all past it:
-in effect a shard's rollout ends (but for settling) once ``keep`` of its plans are confirmed
-feasible, and the bound can only move when a goal was read, the one time the rollout asks.
+in effect a shard's rollout ends once ``keep`` of its plans are confirmed feasible: the plans
+still settling then (done, goal not read yet) finished after those ``keep`` did, past the bound,
+so they stop too, unread, instead of settling for nothing. The bound can only move when a goal
+was read, the one time the rollout asks.
 Each shard of a batch keeps its own bound (its ``keep`` best contain the batch's ``keep`` best
 among its rows), so a run's numbers still do not depend on how shards are dealt to workers.
 What it doesn't: stop anything itself, or apply to a robust or kNN-ranked search, where a row's

@@ -103,7 +103,7 @@ class Rollout:
             self.check_actions()
             if self.read_due_goals():
                 self.stop_hopeless()  # the bound can only move when a goal was read
-        # the last finished plans settle with every robot asleep (physics only, no cost)
+        self.stop_hopeless()  # the last finished plans settle (physics only, no cost) unless hopeless
         while bool((self.settle_left > 0).any()):
             self.settle()
         self.cut_at_horizon()
@@ -250,8 +250,9 @@ class Rollout:
         return True
 
     def stop_hopeless(self) -> None:
-        """``ce.prune``: running plans whose cost can no longer be among the ``keep_best``
-        cheapest feasible ones stop (``realize.realization.pruning``), held as failed plans are."""
+        """``ce.prune``: plans that can no longer be among the ``keep_best`` cheapest feasible
+        stop (``realize.realization.pruning``): running ones at or past the bound, held as failed
+        plans are, and finished ones still settling past it (their goal is never read)."""
         if self.elite_bound is None:
             return
         bound = self.elite_bound.update(self.goal_read & self.goal & self.success.all(dim=1), self.steps)
@@ -262,6 +263,12 @@ class Rollout:
             self.stopped |= cut
             self._stop_where(cut, Failure.STOPPED)
             self.ctx.hold_arm(torch.nonzero(cut).flatten())
+        late = (self.settle_left > 0) & (self.steps > bound)  # a tie (== bound) may still win by row
+        if late.any():
+            self.stopped |= late
+            self.settle_left[late] = -1
+            self.goal_read[late] = True  # never read: goal False, the failure says stopped
+            self.fail_code[late], self.fail_action[late] = Failure.STOPPED, self.n_actions
 
     def settle(self) -> None:
         """A physics-only step with every robot idle and held (no cost), then due goals."""
@@ -270,7 +277,8 @@ class Rollout:
         ctx.base_cmd.zero_()
         self._write_commands(torch.ones(self.n_envs, dtype=torch.bool, device=self.device))
         self.physics(counted=False)
-        self.read_due_goals()
+        if self.read_due_goals():
+            self.stop_hopeless()
 
     def cut_at_horizon(self) -> None:
         """Plans still running at the horizon time out where they are."""
@@ -298,7 +306,7 @@ class Rollout:
         goal, success = self.goal, self.success
         all_ok = success.all(dim=1)
         feasible = all_ok & goal
-        goal_fail = all_ok & ~goal
+        goal_fail = all_ok & ~goal & ~self.stopped  # a stopped plan's goal was never read
         self.fail_code[goal_fail] = Failure.GOAL_NOT_REACHED
         self.fail_action[goal_fail] = A
         self.distance[goal_fail] = self.goal_dist[goal_fail]
