@@ -5,7 +5,8 @@
 * the same eight seed-task plans realized with and without the bound, each in a fresh scene:
   every row that was not stopped has bit-identical cost, flags and failure; every stopped row
   (running ones, and done ones still settling when the bound appeared) costs more unpruned than
-  the ``keep``-th cheapest feasible plan (so it could not have been one of them); the ``keep`` cheapest feasible rows are the same rows at the same costs; and the
+  the ``keep``-th cheapest feasible plan (so it could not have been one of them); the ``keep``
+  cheapest feasible rows are the same rows at the same costs; and the
   pruned batch simulates fewer steps.
 
 * end to end: the seed-task golden run (``tests/golden_runs.py``) with ``ce.prune`` on has the
