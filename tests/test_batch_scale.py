@@ -3,8 +3,9 @@ config is composed (``${realize_scaled:N,SCALE}``, ``realize.app.hydra_edge``).
 
 What a user relies on: ``levers=exact`` gives the paper's batch, ``levers=fast`` (what
 ``experiment=seed_paper`` uses) half of it in as many shards (both cores busy), a number on the
-command line is used as it is, and a bad scale is one error line naming the key. The search-time and cost A/B is ``scripts/bench_levers.py``
-(docs/results.md); the golden runs check that ``levers=exact`` is the paper's algorithm bit for bit.
+command line is used as it is, and a bad scale is one error line naming the key. The search-time
+and cost A/B is ``scripts/bench_levers.py`` (docs/results.md); the golden runs check that
+``levers=exact`` is the paper's algorithm bit for bit.
 """
 
 from __future__ import annotations

@@ -103,7 +103,7 @@ class Rollout:
             self.check_actions()
             if self.read_due_goals():
                 self.stop_hopeless()  # the bound can only move when a goal was read
-        self.stop_hopeless()  # the last finished plans settle (physics only, no cost) unless hopeless
+        # the last finished plans settle (physics only, no cost); stop_hopeless already stopped those past the bound
         while bool((self.settle_left > 0).any()):
             self.settle()
         self.cut_at_horizon()
