@@ -20,6 +20,7 @@ from torch import Tensor
 from realize.robot.layout import BASE_XY
 from realize.search.protocol import EvalResult
 from realize.realization.context import StepContext
+from realize.world.state import SceneState
 
 
 @dataclass
@@ -47,6 +48,8 @@ class RolloutResult:
     world_cost: Tensor | None = None  # robust search: (N, R) each sample's cost in each world
     world_feasible: Tensor | None = None  # robust search: (N, R) its success in each world
     stopped: Tensor | None = None  # (N,) bool, ce.prune: stopped as it could not be an elite (None: off)
+    # per plan, the scene state it ended in where it was feasible (None: not feasible), if asked (``capture_end``)
+    end_states: list[SceneState | None] | None = None
 
     def ordinary(self) -> RolloutResult:
         """A copy whose tensors are ordinary ones (a rollout runs in inference mode, whose tensors

@@ -60,13 +60,13 @@ class RealizerSpec(Protocol):
 class Rollout:
     """One rollout of a batch Z in progress: the per-plan state (N,) and the phases of a step."""
 
-    def __init__(self, realizer: PlanRealizer, Z: Tensor, record: bool):
+    def __init__(self, realizer: PlanRealizer, Z: Tensor, record: bool, starts: list[SceneState] | None = None):
         scene, task = realizer.scene, realizer.task
         self.realizer, self.scene, self.task, self.cfg = realizer, scene, task, realizer.cfg
         self.templates = realizer.templates
         n, dev = scene.n_envs, realizer.device
         self.n_envs, self.device, self.m = n, dev, Z.shape[0]
-        scene.reset(seed=realizer.seed, state=realizer.start)
+        scene.reset(seed=realizer.seed, state=realizer.start if starts is None else starts)
         self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy,
                                realizer.occupancy_tight, realizer.geometry)
         self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
@@ -155,10 +155,9 @@ class Rollout:
             self.ctx.hold_arm(r)
 
     def _tracked(self, region: Region, params: Tensor, rows: Tensor, frame: int) -> tuple[Tensor, Tensor | None]:
-        """Parameters of ``rows`` resolved against where the movable object ``frame`` (its index;
-        -1: the region is not framed by one) their region is framed by is seen now
-        (``controller.track_objects``; ``realize.realization.tracking``), and that object's shift
-        (len, 3), or None: untracked."""
+        """Parameters of ``rows`` resolved against where the movable object ``frame`` (index; -1: none)
+        framing their region is seen now (``controller.track_objects``; ``realize.realization.tracking``),
+        and that object's shift (len, 3), or None: untracked."""
         if not self.cfg.track_objects or frame < 0:
             return params, None
         return track_region(region, params, self.scene.geometry.objects[frame], self.ctx.objects[rows, frame, :3],
@@ -218,10 +217,8 @@ class Rollout:
             failed = done & ~ok
             if failed.any():
                 r = rows[failed]
-                self.fail_code[r] = code[failed]
-                self.fail_action[r] = a
                 self.distance[r] = tpl.distance(ctx, rows)[failed]
-                self.running[r] = False
+                self._fail(r, code[failed], a)
                 ctx.hold_arm(r)
             if ok.any():
                 r = rows[ok]
@@ -282,9 +279,7 @@ class Rollout:
 
     def cut_at_horizon(self) -> None:
         """Plans still running at the horizon time out where they are."""
-        cut = self.running.clone()
-        if cut.any():
-            self._stop_where(cut, Failure.TIMEOUT)
+        self._stop_where(self.running.clone(), Failure.TIMEOUT)
 
     def _stop_where(self, cut: Tensor, code: Failure) -> None:
         """Running plans ``cut`` (N,) stop in their current action with ``code``, and their
@@ -379,18 +374,23 @@ class PlanRealizer:
         return cls(spec.task if task is None else task, scene, spec.rollout,
                    seed=spec.seed if seed is None else seed, start=spec.start, keep_best=spec.keep_best)
 
-    def rollout(self, Z: Tensor, record: bool = False) -> RolloutResult:
-        """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it."""
+    def rollout(self, Z: Tensor, record: bool = False, starts: list[SceneState] | None = None,
+                capture_end: bool = False) -> RolloutResult:
+        """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it; row i
+        starts from ``starts[i]`` (else ``self.start``); ``capture_end``: fill ``end_states``."""
         t0 = time.perf_counter()
         n, m = self.scene.n_envs, Z.shape[0]
         if Z.ndim != 2 or Z.shape[1] != self.layout.dim:
             raise ValueError(f"Z must be (M, {self.layout.dim}), got {tuple(Z.shape)}")
-        if m > n:
-            raise ValueError(f"{m} samples but the scene has only {n} copies (ce.n_envs)")
+        if m > n or (starts is not None and len(starts) != m):
+            raise ValueError(f"{m} samples ({n} copies, ce.n_envs), {'no' if starts is None else len(starts)} starts")
         # inference mode: no version counters or autograd bookkeeping on the ~1,700 small ops of
         # a control step; the result is copied out as ordinary tensors (callers may edit them)
         with torch.inference_mode():
-            res = Rollout(self, Z, record).run(t0)
+            res = Rollout(self, Z, record, starts).run(t0)
+            if capture_end:  # finished copies are frozen: the state each feasible plan ended in
+                res.end_states = [self.scene.capture_state(i, "stitched segment") if bool(ok) else None
+                                  for i, ok in enumerate(res.feasible.tolist())]
         res = res.ordinary()
         self.last = res
         return res

@@ -23,7 +23,7 @@ Whole-body joint vector ``q`` (n_dof): base x, base y, base yaw, then the robot'
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -36,6 +36,7 @@ from realize.scene.backends import open_backend
 from realize.scene.object_properties import ObjectProperties
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
+from realize.scene.state_rows import state_row
 from realize.world.state import ObjectPose, SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook"]
@@ -127,10 +128,12 @@ class BatchedScene(ObjectProperties):
     # reset and freeze change tensors in place that a rollout (run in inference mode) may have
     # made: only inference mode may do that, so they run in it too
     @torch.inference_mode()
-    def reset(self, seed: int = 0, randomize: bool = False, state: SceneState | None = None) -> None:
+    def reset(self, seed: int = 0, randomize: bool = False,
+              state: SceneState | Sequence[SceneState] | None = None) -> None:
         """Put every copy back in the task's initial state (same state for all unless randomize,
         or ``env.randomize_resets``), or, with ``state``, every copy in that state (robot joints,
-        object poses, gripper command; at rest). Resets are history-free on a deterministic
+        object poses, gripper command; at rest); a sequence of states puts copy i in ``state[i]``
+        (copies past its end in its first). Resets are history-free on a deterministic
         backend: a rollout in a used scene equals one in a fresh scene bit for bit.
 
         A state that holds an object is simulated for ``RESTORE_SETTLE_STEPS`` control periods
@@ -144,17 +147,20 @@ class BatchedScene(ObjectProperties):
         self._impl.after_reset()
         if self._fixed_base:  # where this reset bolted every copy's base
             self._base_fixed_pose = self.u.base_poses().to(self.device, torch.float32)
-        if state is not None:
-            self._restore(state)
+        states = [] if state is None else [state] if isinstance(state, SceneState) else list(state)
+        if states:
+            self._restore(states)
         self.state_changed()
         q = self.whole_body_q()
         self._base_cmd.zero_()
         self._arm_target = q[:, UPPER].clone()
         self._arm_vel_target = torch.zeros_like(self._arm_target)
-        closed = state is not None and state.gripper_closed
-        self._grip_target.fill_(self._grip_closed if closed else self._grip_open)
+        closed = [s.gripper_closed for s in states] or [False]
+        closed += closed[:1] * (self.n_envs - len(closed))
+        self._grip_target.copy_(torch.where(torch.tensor(closed[:self.n_envs], device=self._grip_target.device),
+                                            self._grip_closed, self._grip_open).to(self._grip_target.dtype))
         self._apply_targets()
-        if state is not None and state.held is not None:
+        if any(s.held is not None for s in states):
             for _ in range(RESTORE_SETTLE_STEPS):
                 self._impl.step(self.substeps)
         self.state_changed()  # a caller may move things through ``u`` before the first read
@@ -162,29 +168,12 @@ class BatchedScene(ObjectProperties):
         for hook, _ in self._hooks:
             hook(0)
 
-    def _restore(self, state: SceneState) -> None:
-        n = self.n_envs
-        row = torch.zeros(len(self.joint_names))
-        base = torch.tensor(state.base, dtype=torch.float32)
-        base[:2] -= self._start_xy.cpu()  # the base joints are relative to the task's robot start
-        for name, v in zip(self.robot.base.joints, base.tolist()):  # a fixed base has none: it stays where it is
-            row[self.joint_names.index(name)] = v
-        self.robot.check_state_joints(state.joints, state.source or "state")
-        for name in self.state_joints:  # joints a state leaves out take the robot's rest pose
-            row[self.joint_names.index(name)] = state.joints.get(name, self.robot.rest_value(name))
-        unknown = sorted(set(state.objects) - set(self.object_names))
-        if unknown:
-            raise ConfigError(f"{state.source or 'state'}: objects {unknown} are not in the scene; its objects: "
-                              f"{list(self.object_names)}")
-        poses = []
-        for o in self.geometry.objects:  # objects a state leaves out start at their rest pose
-            pose = state.objects.get(o.name)
-            if pose is None:
-                q = (math.cos(o.yaw / 2), 0.0, 0.0, math.sin(o.yaw / 2))
-                poses.append([*o.position, *q])
-            else:
-                poses.append([*pose.position, *pose.quaternion])
-        self._impl.set_state(row.repeat(n, 1), torch.tensor(poses, dtype=torch.float32).repeat(n, 1, 1))
+    def _restore(self, states: Sequence[SceneState]) -> None:
+        if len(states) > self.n_envs:
+            raise ValueError(f"{len(states)} states for {self.n_envs} copies")
+        rows, poses = zip(*(state_row(self, s) for s in states))
+        pad = self.n_envs - len(states)  # copies past the states' end take the first one
+        self._impl.set_state(torch.stack([*rows, *rows[:1] * pad]), torch.stack([*poses, *poses[:1] * pad]))
 
     def capture_state(self, copy: int = 0, source: str = "") -> SceneState:
         """Copy ``copy``'s state now (no velocities; held only if the gripper is closed): ``reset(state=)`` restores it."""

@@ -27,9 +27,10 @@ import torch
 from torch import Tensor
 
 from realize.realization.result import RolloutResult
+from realize.world.state import SceneState
 
-__all__ = ["RowBlock", "split_rows", "shard_rows", "group_shards", "deal_rows", "worker_parts", "check_batch",
-           "join_results"]
+__all__ = ["RowBlock", "split_rows", "shard_rows", "group_shards", "deal_rows", "worker_parts", "worker_starts",
+           "check_batch", "join_results"]
 
 
 @dataclass(frozen=True)
@@ -102,6 +103,19 @@ def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]], unit: int = 1)
     return out
 
 
+def worker_starts(starts: Sequence[SceneState] | None, m: int, groups: Sequence[Sequence[RowBlock]],
+                  unit: int = 1) -> list[list[list[SceneState] | None]]:
+    """Per worker, the start states of the rows each of its shards realizes (as ``worker_parts``
+    deals an ``m``-row batch; None everywhere without ``starts``)."""
+    slices = deal_rows(m, sum(len(g) for g in groups), unit)
+    parts = [None if starts is None else list(starts[s]) for s in slices]
+    out, k = [], 0
+    for g in groups:
+        out.append(parts[k:k + len(g)])
+        k += len(g)
+    return out
+
+
 def _pad_frames(t: Tensor | None, frames: int) -> Tensor | None:
     """(M, T, ...) -> (M, frames, ...), the last frame repeated (a finished block holds still)."""
     if t is None or t.shape[1] == frames:
@@ -121,6 +135,7 @@ def join_results(parts: Sequence[RolloutResult]) -> RolloutResult:
         wall_time_s=max(p.wall_time_s for p in parts), sim_steps=max(p.sim_steps for p in parts),
         horizon_cost=parts[0].horizon_cost,
         stopped=None if any(p.stopped is None for p in parts) else cat("stopped"),
+        end_states=None if any(p.end_states is None for p in parts) else [s for p in parts for s in p.end_states],
     )
     recorded = [p for p in parts if p.traj_t is not None]
     if len(recorded) == len(parts):

@@ -21,13 +21,14 @@ from torch import Tensor
 
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
-from realize.app.workers.blocks import RowBlock, check_batch, deal_rows, group_shards, shard_rows
+from realize.app.workers.blocks import RowBlock, check_batch, group_shards, shard_rows, worker_parts, worker_starts
 from realize.app.workers.settings import physx_threads, worker_count
 from realize.app.workers.worker import ShardWorker
 
 if TYPE_CHECKING:
     from realize.app.run_config import RunSpec
     from realize.tasks.spec import TaskSpec
+    from realize.world.state import SceneState
 
 __all__ = ["RolloutPool", "InProcessPool", "open_pool", "run_shards"]
 
@@ -43,7 +44,8 @@ class RolloutPool(Protocol):
     kind: str
     setup_time_s: float
 
-    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult: ...
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False,
+                starts: Sequence[SceneState] | None = None, capture_end: bool = False) -> RolloutResult: ...
 
     def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None: ...
 
@@ -63,10 +65,12 @@ class InProcessPool:
         self.worker = ShardWorker(spec, tasks, shards, physx_threads)
         self.n_envs, self.backend, self.setup_time_s = self.worker.stop, self.worker.backend, self.worker.setup_time_s
 
-    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False,
+                starts: Sequence[SceneState] | None = None, capture_end: bool = False) -> RolloutResult:
         check_batch(Z, self.n_envs)
-        parts = [Z[s] for s in deal_rows(Z.shape[0], len(self.worker.shards), self.worker.unit)]
-        return self.worker.rollout(candidate, parts, record)
+        (parts,) = worker_parts(Z, [self.worker.shards], self.worker.unit)
+        (start_parts,) = worker_starts(starts, Z.shape[0], [self.worker.shards], self.worker.unit)
+        return self.worker.rollout(candidate, parts, record, start_parts, capture_end)
 
     def retask(self, spec: RunSpec, tasks: Sequence[TaskSpec]) -> None:
         """Realize ``tasks`` from now on, on the scenes already built (``ShardWorker.retask``)."""

@@ -33,12 +33,13 @@ from typing import TYPE_CHECKING, Any
 from torch import Tensor
 
 from realize.realization.result import RolloutResult
-from realize.app.workers.blocks import RowBlock, check_batch, join_results, worker_parts
+from realize.app.workers.blocks import RowBlock, check_batch, join_results, worker_parts, worker_starts
 from realize.app.workers.errors import WorkerFailed
 
 if TYPE_CHECKING:
     from realize.app.run_config import RunSpec
     from realize.tasks.spec import TaskSpec
+    from realize.world.state import SceneState
 
 __all__ = ["ProcessPool", "WorkerFailed", "last_lines"]
 
@@ -128,11 +129,11 @@ def worker_main(conn: Connection, payload: bytes, k: int, log_path: str | None, 
             log.info("%s done in %.1f s", msg[0], time.perf_counter() - t0)
             _send(conn, ("retasked",))
             continue
-        _, candidate, parts, record = msg
+        _, candidate, parts, record, starts, capture_end = msg
         log.info("rollout of %d rows (candidate %s)", sum(p.shape[0] for p in parts), candidate)
         t0 = time.perf_counter()
         try:
-            res = worker.rollout(candidate, parts, record)
+            res = worker.rollout(candidate, parts, record, starts, capture_end)
         except Exception:
             _send(conn, ("error", traceback.format_exc()))
             continue
@@ -282,14 +283,18 @@ class ProcessPool:
         return [s.proc.pid for s in self.slots]
 
     # -------------------------------------------------------------- work
-    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
-        """Realize the ``M <= n_envs`` rows of ``Z``: each worker its shards' rows, joined in order."""
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False,
+                starts: Sequence[SceneState] | None = None, capture_end: bool = False) -> RolloutResult:
+        """Realize the ``M <= n_envs`` rows of ``Z``: each worker its shards' rows, joined in order
+        (row i from ``starts[i]`` where given; ``capture_end``: ``PlanRealizer.rollout``)."""
         check_batch(Z, self.n_envs)
         t0 = time.perf_counter()
         per_worker = worker_parts(Z.detach().cpu(), self.groups, self.unit)
-        jobs = {k: parts for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
-        for k, parts in jobs.items():
-            _send(self.slots[k].conn, ("rollout", candidate, parts, record))
+        start_parts = worker_starts(starts, Z.shape[0], self.groups, self.unit)
+        jobs = {k: ("rollout", candidate, parts, record, start_parts[k], capture_end)
+                for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
+        for k, job in jobs.items():
+            _send(self.slots[k].conn, job)
         results: dict[int, RolloutResult] = {}
         retried: set[int] = set()
         while len(results) < len(jobs):
@@ -314,7 +319,7 @@ class ProcessPool:
                                 _exit_text(s.proc.exitcode))
                     retried.add(s.k)
                     fresh = self._restart(s)
-                    _send(fresh.conn, ("rollout", candidate, jobs[s.k], record))
+                    _send(fresh.conn, jobs[s.k])
         res = join_results([results[k] for k in sorted(results)])
         res.wall_time_s = time.perf_counter() - t0
         return res

@@ -42,12 +42,13 @@ from torch import Tensor
 
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
-from realize.app.workers.blocks import RowBlock, check_batch, join_results, worker_parts
+from realize.app.workers.blocks import RowBlock, check_batch, join_results, worker_parts, worker_starts
 from realize.app.workers.errors import WorkerFailed
 
 if TYPE_CHECKING:
     from realize.app.run_config import RunSpec
     from realize.tasks.spec import TaskSpec
+    from realize.world.state import SceneState
     from realize.app.workers.settings import WorkersSettings
 
 __all__ = ["RayPool", "ray_cores", "ray_release", "actor_cpus"]
@@ -184,11 +185,12 @@ class ShardActor:
                     node_ip=ray.util.get_node_ip_address(), logs=[p for p in logs if p.startswith("/")],
                     setup_time_s=self.worker.setup_time_s)
 
-    def rollout(self, candidate: int | None, parts: list[Tensor], record: bool) -> RolloutResult:
+    def rollout(self, candidate: int | None, parts: list[Tensor], record: bool, starts: Any = None,
+                capture_end: bool = False) -> RolloutResult:
         """Realize ``parts[k]`` in shard ``k`` (``ShardWorker.rollout``)."""
         assert self.worker is not None
         log.info("rollout of %d rows (candidate %s)", sum(p.shape[0] for p in parts), candidate)
-        res = self.worker.rollout(candidate, parts, record)
+        res = self.worker.rollout(candidate, parts, record, starts, capture_end)
         log.info("done in %.1f s, %d control steps", res.wall_time_s, res.sim_steps)
         return res
 
@@ -343,15 +345,18 @@ class RayPool:
         self.close()
 
     # -------------------------------------------------------------- work
-    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False) -> RolloutResult:
+    def rollout(self, candidate: int | None, Z: Tensor, record: bool = False,
+                starts: Sequence[SceneState] | None = None, capture_end: bool = False) -> RolloutResult:
         """Realize the ``M <= n_envs`` rows of ``Z``: each actor its shards' parts, joined in order."""
         ray = self._ray
         check_batch(Z, self.n_envs)
         t0 = time.perf_counter()
         per_worker = worker_parts(Z.detach().cpu(), self.groups, self.unit)
+        start_parts = worker_starts(starts, Z.shape[0], self.groups, self.unit)
         # each part copied out of Z: a view would send Z's whole storage to every actor
         jobs = {k: [p.clone() for p in parts] for k, parts in enumerate(per_worker) if sum(p.shape[0] for p in parts)}
-        pending = {self.slots[k].actor.rollout.remote(candidate, parts, record): k for k, parts in jobs.items()}
+        pending = {self.slots[k].actor.rollout.remote(candidate, parts, record, start_parts[k], capture_end): k
+                   for k, parts in jobs.items()}
         results: dict[int, RolloutResult] = {}
         retried: set[int] = set()
         while pending:
@@ -369,7 +374,7 @@ class RayPool:
                                 str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__)
                     retried.add(k)
                     fresh = self._restart(s)
-                    pending[fresh.actor.rollout.remote(candidate, jobs[k], record)] = k
+                    pending[fresh.actor.rollout.remote(candidate, jobs[k], record, start_parts[k], capture_end)] = k
         res = join_results([results[k] for k in sorted(results)])
         res.wall_time_s = time.perf_counter() - t0
         return res

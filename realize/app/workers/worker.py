@@ -28,6 +28,7 @@ from realize.app.workers.blocks import RowBlock, join_results
 if TYPE_CHECKING:
     from realize.app.run_config import RunSpec
     from realize.tasks.spec import TaskSpec
+    from realize.world.state import SceneState
 
 __all__ = ["ShardWorker", "worker_spec"]
 
@@ -92,13 +93,16 @@ class ShardWorker:
     def describe(self) -> str:
         return f"rows {self.first}-{self.stop - 1} ({len(self.shards)} shard(s))"
 
-    def rollout(self, candidate: int | None, parts: Sequence[Tensor], record: bool = False) -> RolloutResult:
-        """Realize ``parts[k]`` (rows of a batch, maybe none) in shard ``k`` of this worker."""
-        if len(parts) != len(self.shards):
+    def rollout(self, candidate: int | None, parts: Sequence[Tensor], record: bool = False,
+                starts: Sequence[list[SceneState] | None] | None = None, capture_end: bool = False) -> RolloutResult:
+        """Realize ``parts[k]`` (rows of a batch, maybe none) in shard ``k`` of this worker, from
+        ``starts[k]`` (one state per row) where given (``PlanRealizer.rollout``)."""
+        if len(parts) != len(self.shards) or (starts is not None and len(starts) != len(parts)):
             raise ValueError(f"{len(parts)} parts for {len(self.shards)} shards")
         t0 = time.perf_counter()
-        results = [realizers[0 if candidate is None else candidate].rollout(Z, record=record)
-                   for Z, realizers in zip(parts, self.realizers) if Z.shape[0]]
+        starts = [None] * len(parts) if starts is None else starts
+        results = [realizers[0 if candidate is None else candidate].rollout(Z, record, s, capture_end)
+                   for Z, s, realizers in zip(parts, starts, self.realizers) if Z.shape[0]]
         res = join_results(results)
         res.wall_time_s = time.perf_counter() - t0
         return res

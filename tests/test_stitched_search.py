@@ -1,0 +1,110 @@
+"""Stitched segments' search (``realize.search.stitched``) on an analytic two-segment problem:
+no simulator. The prefix's cost is a quadratic bowl, its end state the point it reached; the
+suffix's cost a bowl plus a term of where it starts; the whole plan's cost the two summed, so
+the stitched cost of a plan must equal its confirmed cost, and the search must find the bowls'
+joint minimum."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from realize.search.ce.config import CEConfig
+from realize.search.protocol import EvalResult
+from realize.search.stitched import StitchConfig, StitchedSearch
+from realize.tasks.param_layout import ParamLayout
+from realize.tasks.regions import Box
+
+A = torch.tensor([0.5, -1.0])  # the prefix's best point
+B = torch.tensor([-2.0, 1.5, 0.25])  # the suffix's best point
+
+
+def _layouts() -> tuple[ParamLayout, ParamLayout, ParamLayout]:
+    p, s = Box([-3.0, -3.0], [3.0, 3.0]), Box([-3.0, -3.0, -3.0], [3.0, 3.0, 3.0])
+    return ParamLayout({"P": p, "S": s}), ParamLayout({"P": p}), ParamLayout({"S": s})
+
+
+def _prefix_cost(zp: torch.Tensor) -> torch.Tensor:
+    return 100.0 + 20.0 * ((zp - A) ** 2).sum(1)
+
+
+def _suffix_cost(zs: torch.Tensor, start: torch.Tensor) -> torch.Tensor:
+    return 200.0 + 20.0 * ((zs - B) ** 2).sum(1) + 5.0 * start.abs().sum(1)
+
+
+class Evaluator:
+    """The three segments' costs, and the checks that the search hands each what it should."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, int]] = []
+        self.ends: list[tuple[float, ...]] = []  # every end state the prefix handed out
+
+    def __call__(self, segment, Z, starts):
+        Z = Z.double()
+        self.calls.append((segment, Z.shape[0]))
+        if segment == "prefix":
+            assert starts is None
+            feasible = Z[:, 0] > -1.0  # a third of the region fails "the grasp"
+            ends = [tuple(z.tolist()) if ok else None for z, ok in zip(Z, feasible.tolist())]
+            self.ends += [e for e in ends if e is not None]
+            return EvalResult(_prefix_cost(Z), feasible, feasible.double(), torch.zeros(len(Z))), ends
+        if segment == "suffix":
+            assert starts is not None and len(starts) == Z.shape[0]
+            assert all(s in self.ends for s in starts), "a suffix row started from a state no prefix ended in"
+            start = torch.tensor(starts, dtype=torch.float64)
+            return EvalResult(_suffix_cost(Z, start), torch.ones(len(Z), dtype=torch.bool)), None
+        assert segment == "full" and starts is None
+        zp, zs = Z[:, :2], Z[:, 2:]
+        cost = _prefix_cost(zp) + _suffix_cost(zs, zp)
+        return EvalResult(cost, zp[:, 0] > -1.0), None
+
+
+def _search(cfg: StitchConfig, seed: int = 0) -> StitchedSearch:
+    full, pre, suf = _layouts()
+    ce = CEConfig(n_envs=cfg.n_prefix, n_elite=5, iterations=cfg.iterations, seed=seed)
+    return StitchedSearch(full, pre, suf, [0, 1], [2, 3, 4], ce, cfg)
+
+
+def test_stitched_search_finds_the_joint_minimum_and_confirms_its_cost() -> None:
+    ev = Evaluator()
+    cfg = StitchConfig(n_prefix=60, n_suffix=60, iterations=12, pool=5, confirm=4)
+    res = _search(cfg).run(ev)
+    assert res.feasible
+    # the whole plan's minimum: the prefix at A, the suffix at B, the prefix's end (A) paid by the suffix
+    best = 100.0 + 200.0 + 5.0 * float(A.abs().sum())
+    assert best <= res.cost < best + 3.0
+    # the analytic suffix cost depends on the real start only: stitched == confirmed, plan for plan
+    for stitched, confirmed, ok in res.confirmed:
+        assert ok and math.isclose(stitched, confirmed, rel_tol=1e-9)
+    # the suffix starts at iteration 1; the confirmation realizes cfg.confirm whole plans at the end
+    assert [c for c in ev.calls if c[0] == "suffix"] == [("suffix", 60)] * (cfg.iterations - 1)
+    assert ev.calls[-1] == ("full", cfg.confirm)
+    assert res.samples == 60 * cfg.iterations + 60 * (cfg.iterations - 1) + cfg.confirm
+    assert [h.pool for h in res.history] == [5] * cfg.iterations
+
+
+def test_stitched_search_is_deterministic() -> None:
+    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
+    a, b = _search(cfg).run(Evaluator()), _search(cfg).run(Evaluator())
+    assert torch.equal(a.z, b.z) and a.confirmed == b.confirmed
+
+
+def test_the_pool_keeps_the_cheapest_feasible_prefixes_with_their_states() -> None:
+    s = _search(StitchConfig(n_prefix=6, n_suffix=6, iterations=2, pool=3, confirm=1))
+    Z = torch.tensor([[0.0, 0.0], [-2.0, 0.0], [0.5, -1.0], [1.0, 1.0], [0.4, -1.0], [2.0, 2.0]], dtype=torch.float64)
+    ok = Z[:, 0] > -1.0
+    s._add_to_pool(Z, EvalResult(_prefix_cost(Z), ok), [tuple(z.tolist()) if f else None for z, f in zip(Z, ok)])
+    assert s.pool_z.tolist() == [[0.5, -1.0], [0.4, -1.0], [0.0, 0.0]]
+    assert s.pool_state == [tuple(z) for z in s.pool_z.tolist()]
+
+
+def test_a_split_that_does_not_cover_the_columns_is_refused() -> None:
+    full, pre, suf = _layouts()
+    with pytest.raises(ValueError, match="split the plan's 5 columns"):
+        StitchedSearch(full, pre, suf, [0, 1], [1, 2, 3], CEConfig(n_envs=10, n_elite=2), StitchConfig())
+    with pytest.raises(ValueError, match="stitch.iterations must be >= 2"):
+        StitchConfig(iterations=1)
+    with pytest.raises(ValueError, match="stitch.pool = 0"):
+        StitchConfig(pool=0)
