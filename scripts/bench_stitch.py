@@ -83,7 +83,7 @@ def main() -> None:
                     with tempfile.TemporaryDirectory(prefix=f"{exp}-{seed}-exact-") as tmp:
                         row = run_one(exp, seed, ["levers=exact"], Path(tmp) / "run")
                     w.writerow({"experiment": exp, "seed": seed, "variant": "exact", "overrides": "levers=exact",
-                                "commit": commit_of(), **row})
+                                "commit": commit_of(REPO), **row})
                     f.flush()
                 cmd = [sys.executable, __file__, "--child", exp, str(seed), *(f"--{k.replace('_', '-')}={v}"
                        for k, v in budget.items()), *args.overrides]
@@ -96,7 +96,7 @@ def main() -> None:
                 print(f"{exp} seed {seed} stitched: stitched cost {row['stitched_cost']}, confirmed "
                       f"{row['best_cost']} ({row['confirm_s']} s to confirm)", flush=True)
                 w.writerow({"experiment": exp, "seed": seed, "variant": "stitch", "overrides": name,
-                            "commit": commit_of(), **row})
+                            "commit": commit_of(REPO), **row})
                 f.flush()
     report(read(args.out))
 
