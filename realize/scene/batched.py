@@ -22,7 +22,6 @@ Whole-body joint vector ``q`` (n_dof): base x, base y, base yaw, then the robot'
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
