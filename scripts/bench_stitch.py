@@ -57,7 +57,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--experiments", default="seed_paper", help="comma-separated presets")
     ap.add_argument("--seeds", default="0", help="e.g. 0-2 or 0,3")
-    ap.add_argument("--out", type=Path, required=True, help="CSV to append rows to")
+    ap.add_argument("--out", type=Path, help="CSV to append rows to (required but in a child)")
     ap.add_argument("--no-exact", action="store_true", help="only the stitched runs")
     ap.add_argument("--n-prefix", type=int, default=100)
     ap.add_argument("--n-suffix", type=int, default=100)
@@ -71,6 +71,8 @@ def main() -> None:
     if args.child:
         print(json.dumps(child(args.child[0], int(args.child[1]), budget, args.overrides)))
         return
+    if args.out is None:
+        ap.error("--out is required")
     name = "stitch=" + ",".join(f"{k}={v}" for k, v in budget.items())
     new_file = not args.out.exists() or args.out.stat().st_size == 0
     with open(args.out, "a", newline="") as f:
