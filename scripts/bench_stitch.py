@@ -8,7 +8,9 @@ states, the ``--confirm`` cheapest stitched plans realized whole) with ``levers=
 then validates the plan it returns in the run's validation worlds (``validation.replicas``
 perturbed worlds, the exact run's seed). Rows go to ``--out`` in ``bench_levers.py``'s columns
 (``search_s`` for the stitched search: every segment's rollouts, the bookkeeping and the
-confirmation), and its report prints the ratios and the issue's bounds.
+confirmation), and its report prints the ratios and the issue's bounds. Each stitched run's
+iterations (``StitchedIteration``: rows, feasible rows, pool, cheapest stitched cost so far,
+seconds per segment) go to a log beside ``--out``.
 
     python scripts/bench_stitch.py --seeds 0-2 --out stitch.csv
     python scripts/bench_stitch.py --experiments wall,ramp --seeds 0 --out stitch.csv
@@ -91,6 +93,8 @@ def main() -> None:
                        for k, v in budget.items()), *args.overrides]
                 t0 = time.perf_counter()
                 proc = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                log = args.out.with_name(f"{args.out.stem}-{exp}-{seed}-{name.replace('=', '_').replace(',', '_')}.log")
+                log.write_text(proc.stderr)  # the child's iterations, one line each
                 if proc.returncode != 0:
                     raise SystemExit(f"{exp} seed {seed} stitched: exited {proc.returncode}:\n{proc.stderr[-2000:]}")
                 row = json.loads(proc.stdout.strip().splitlines()[-1])
