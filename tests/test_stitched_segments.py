@@ -64,3 +64,32 @@ def test_prefix_end_state_continues_into_the_suffix(torch_single_thread: None) -
     stitched, whole_cost = float(first.cost[0] + rest.cost[0]), float(full.cost[0])
     assert bool(full.feasible[0]) and abs(stitched - whole_cost) <= 0.03 * whole_cost, (stitched, whole_cost)
     assert 150 < float(first.cost[0]) < 250 and 200 < float(rest.cost[0]) < 300  # two and three actions
+
+
+def test_worker_processes_carry_starts_and_end_states(tmp_path) -> None:
+    """Two worker processes, one copy per shard: each row's end state, and the suffix realized
+    from it, equal a fresh one-copy scene's that realized the same two rollouts, bit for bit.
+    (The same history: a restored state is not history-free after a rollout that ended holding
+    the cube near the same pose: the seed plan's suffix from one captured state costs 276 in a
+    fresh scene and 265 after another prefix rollout; docs/results.md, "Stitched segments".)"""
+    from realize.app.workers.blocks import group_shards
+    from realize.app.workers.pool import run_shards
+    from realize.app.workers.process import ProcessPool
+
+    spec = build_run_spec(compose_config("ce.n_envs=2", "ce.n_elite=1", "sim.shard_rows=1"))
+    prefix, suffix, pcols, scols = split_task(spec.task, 2)
+    Z = torch.tensor([FULL_Z, FULL_Z], dtype=torch.float64)
+    Z[1, pcols[0]] += 0.01  # another base position around table 1
+    Z[1, scols[0]] += 0.01  # and around table 2
+    with ProcessPool(spec, [spec.task, prefix, suffix], group_shards(run_shards(spec), 2), physx_threads=0,
+                     log_dir=tmp_path) as pool:
+        first = pool.rollout(1, Z[:, pcols], capture_end=True)
+        rest = pool.rollout(2, Z[:, scols], starts=first.end_states)
+    assert first.end_states[0] != first.end_states[1]
+    for i in range(2):
+        scene, (_, pre, suf) = open_realization(spec, [spec.task, prefix, suffix], n_envs=1)
+        with scene:
+            one = pre.rollout(Z[i:i + 1, pcols], capture_end=True)
+            again = suf.rollout(Z[i:i + 1, scols], starts=one.end_states)
+        assert bool(one.feasible[0]) and one.end_states == [first.end_states[i]]
+        assert bool(again.feasible[0]) and torch.equal(again.cost, rest.cost[i:i + 1])
