@@ -5,8 +5,9 @@ For each experiment and seed it runs ``python -m realize experiment=E seed=S lev
 search (``realize.app.stitched``: the plan cut after its first grasp, ``--n-prefix`` and
 ``--n-suffix`` rows per iteration, ``--iterations``, the ``--pool`` cheapest prefixes' end
 states, the ``--confirm`` cheapest stitched plans realized whole) with ``levers=all``'s pruning,
-then validates the plan it returns in the run's validation worlds (``validation.replicas``
-perturbed worlds, the exact run's seed). Rows go to ``--out`` in ``bench_levers.py``'s columns
+then validates its cheapest confirmed plans as a run's validation does (``validation.candidates``
+of them in ``validation.replicas`` perturbed worlds, the exact run's seed; the cheapest whose 95 %
+lower bound reaches ``validation.min_success`` is returned, else the most robust). Rows go to ``--out`` in ``bench_levers.py``'s columns
 (``search_s`` for the stitched search: every segment's rollouts, the bookkeeping and the
 confirmation), and its report prints the ratios and the issue's bounds. Each stitched run's
 iterations (``StitchedIteration``: rows, feasible rows, pool, cheapest stitched cost so far,
@@ -22,6 +23,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import subprocess
 import sys
 import tempfile
@@ -48,10 +50,11 @@ def child(experiment: str, seed: int, budget: dict[str, int], overrides: list[st
                                           "logging.progress=false", "logging.rerun=false", *overrides]))
     res, _ = stitched_search(spec, StitchConfig(**budget),
                              on_iteration=lambda r: print(r, file=sys.stderr, flush=True))
-    validated = validate_plan(spec, res.z)[0] if res.feasible else ""
+    returned, table = validate_plan(spec, res) if res.feasible else (0, [(math.inf, "")])
     return {"search_s": round(res.search_s, 1), "iterations": len(res.history), "samples": res.samples,
             "row_steps": res.row_steps, "batch_steps": res.batch_steps, "stopped": "", "screened": "",
-            "best_cost": res.cost, "feasible": int(res.feasible), "validated": validated,
+            "best_cost": res.cost, "feasible": int(res.feasible), "validated": table[returned][1],
+            "returned_cost": table[returned][0], "validated_all": " ".join(f"{c:g}:{v}" for c, v in table),
             "stitched_cost": res.stitched_cost, "confirm_s": round(res.confirm_s, 1)}
 
 
@@ -100,7 +103,8 @@ def main() -> None:
                 row = json.loads(proc.stdout.strip().splitlines()[-1])
                 row["wall_s"] = round(time.perf_counter() - t0, 1)
                 print(f"{exp} seed {seed} stitched: stitched cost {row['stitched_cost']}, confirmed "
-                      f"{row['best_cost']} ({row['confirm_s']} s to confirm)", flush=True)
+                      f"{row['best_cost']} ({row['confirm_s']} s to confirm); validated (cost:share) "
+                      f"{row['validated_all']}, returned {row['returned_cost']}", flush=True)
                 w.writerow({"experiment": exp, "seed": seed, "variant": "stitch", "overrides": name,
                             "commit": commit_of(REPO), **row})
                 f.flush()

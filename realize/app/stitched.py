@@ -10,8 +10,8 @@ What it does:
     prefix, suffix), runs ``realize.search.stitched.StitchedSearch`` on them (the prefix's rows
     capture their end states, ``PlanRealizer.rollout(capture_end=True)``; the suffix's rows each
     start from one, ``starts``; the confirmation realizes whole plans) and returns its result;
-  * ``validate_plan(spec, z)``: the returned plan's success share in the validation's perturbed
-    worlds (``realize.app.validation``), as a run's validation checks its candidates.
+  * ``validate_plan(spec, result)``: the cheapest confirmed plans in the validation's perturbed
+    worlds, and the one a run's validation would return (``realize.app.candidate_validation``).
 On a CPU host the two segments run as two calls on the same workers, one after the other: each
 worker realizes its shards one after another anyway, so a batch holding both segments would cost
 the same.
@@ -112,15 +112,31 @@ def stitched_search(spec: RunSpec, stitch: StitchConfig, split: int | None = Non
         pool.close()
 
 
-def validate_plan(spec: RunSpec, z: Tensor, log_dir: Path | None = None) -> tuple[float, float]:
-    """(success share in ``validation.replicas`` perturbed worlds, cost in the unperturbed one) of
-    the plan ``z`` (D,), in the worlds a run's validation draws for its seed."""
+def validate_plan(spec: RunSpec, result: StitchedResult,
+                  log_dir: Path | None = None) -> tuple[int, list[tuple[float, float]]]:
+    """The confirmed feasible plans, cheapest first (``validation.candidates`` of them), each in
+    the run's ``validation.replicas`` perturbed worlds (pruning off), and the one a run's
+    validation would return: the cheapest whose 95 % Wilson lower bound reaches
+    ``validation.min_success``, else the most robust (``realize.app.candidate_validation``).
+    Returns (that plan's index in the list, [(confirmed cost, success share)] per plan)."""
+    from realize.app.candidate_validation import wilson_interval
     from realize.app.validation import simulate_worlds, validation_worlds
 
-    if spec.validation is None or spec.validation.replicas < 1:
-        raise ConfigError("validation is off: nothing to validate the stitched plan in")
-    r = spec.validation.replicas
-    worlds = validation_worlds(spec.task.perturbation, spec.geometry.objects, r, spec.seed)
+    v = spec.validation
+    if v is None or v.replicas < 1:
+        raise ConfigError("validation is off: nothing to validate the stitched plans in")
+    if result.candidates is None or not result.feasible:
+        raise ValueError("the stitched search confirmed no feasible plan")
+    done = result.confirmed
+    picked = sorted((k for k in range(len(done)) if done[k][2]), key=lambda k: (done[k][1], done[k][0], k))
+    picked = picked[:v.candidates]
+    u = v.replicas + 1  # world 0 the unperturbed one, then the perturbed ones
+    worlds = validation_worlds(spec.task.perturbation, spec.geometry.objects, v.replicas, spec.seed)
+    Z = result.candidates[picked].to(torch.float64).repeat_interleave(u, dim=0)
     vspec = dataclasses.replace(spec, ce=dataclasses.replace(spec.ce, prune=False))  # every world to its end
-    res, _ = simulate_worlds(vspec, z.reshape(1, -1).repeat(r + 1, 1).to(torch.float64), worlds, log_dir)
-    return float(res.feasible[1:].double().mean()), float(res.cost[0])
+    res, _ = simulate_worlds(vspec, Z, worlds.tile(len(picked) * u), log_dir)
+    ok = res.feasible.reshape(len(picked), u)[:, 1:]
+    table = [(done[k][1], float(ok[j].double().mean())) for j, k in enumerate(picked)]
+    good = [j for j in range(len(picked)) if wilson_interval(int(ok[j].sum()), v.replicas)[0] >= v.min_success]
+    best = good[0] if good else max(range(len(picked)), key=lambda j: (table[j][1], -table[j][0], -j))
+    return best, table

@@ -94,6 +94,7 @@ class StitchedResult:
     cost: float
     stitched_cost: float
     confirmed: list[tuple[float, float, bool]] = field(default_factory=list)  # (stitched, confirmed, feasible)
+    candidates: Tensor | None = None  # (len(confirmed), D) the confirmed plans, in ``confirmed``'s order
     history: list[StitchedIteration] = field(default_factory=list)
     search_s: float = 0.0
     confirm_s: float = 0.0
@@ -209,6 +210,6 @@ class StitchedSearch:
         confirmed = [(self.stitched[i][0], float(r.cost[k]), bool(r.feasible[k])) for k, i in enumerate(ranked)]
         ok = [k for k in range(len(ranked)) if confirmed[k][2]]
         if not ok:
-            return StitchedResult(None, math.inf, math.inf, confirmed, confirm_s=dt)
+            return StitchedResult(None, math.inf, math.inf, confirmed, Z, confirm_s=dt)
         k = min(ok, key=lambda k: (confirmed[k][1], confirmed[k][0], k))
-        return StitchedResult(Z[k].clone(), confirmed[k][1], confirmed[k][0], confirmed, confirm_s=dt)
+        return StitchedResult(Z[k].clone(), confirmed[k][1], confirmed[k][0], confirmed, Z, confirm_s=dt)
