@@ -36,16 +36,11 @@ from realize.search.protocol import EvalResult
 from realize.search.stitched import StitchConfig, StitchedIteration, StitchedResult, StitchedSearch
 from realize.tasks.goal_spec import GoalSpec
 from realize.tasks.spec import TaskSpec, task_for_plan
-from realize.tasks.suffix import task_suffix
+from realize.tasks.suffix import part_columns, task_suffix
 
 __all__ = ["split_task", "default_split", "stitched_search", "validate_plan", "SEGMENTS"]
 
 SEGMENTS = ("full", "prefix", "suffix")  # the pool's candidate index of each segment's task
-
-
-def _columns(full: TaskSpec, part: TaskSpec) -> list[int]:
-    return [i for name in part.layout.names for i in range(full.layout.slices[name].start,
-                                                            full.layout.slices[name].stop)]
 
 
 def split_task(task: TaskSpec, split: int) -> tuple[TaskSpec, TaskSpec, list[int], list[int]]:
@@ -62,7 +57,7 @@ def split_task(task: TaskSpec, split: int) -> tuple[TaskSpec, TaskSpec, list[int
     if shared:
         raise ConfigError(f"stitch.split = {split}: parameters {shared} are bound on both sides of the cut; "
                           "cut where no parameter (or goal region) is used on both sides")
-    return prefix, suffix, _columns(task, prefix), _columns(task, suffix)
+    return prefix, suffix, part_columns(task, prefix), part_columns(task, suffix)
 
 
 def default_split(task: TaskSpec) -> int:

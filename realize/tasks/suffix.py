@@ -6,6 +6,7 @@ What it does:
     and final cost; its eq. (2) cost then counts the remaining actions only;
   * ``suffix_columns(task, k)``: which columns of the full task's sample matrix the suffix's
     columns are (to pick a plan's remaining parameters out of a full one, e.g. a run's best);
+    ``part_columns(task, part)`` the same for any task over some of its parameters;
   * ``tail_index(whole, part)``: where a task mapping's plan is the tail of another's (same
     parameters, goal and final cost), so a new action sequence can be searched as a replan of
     those actions;
@@ -30,7 +31,7 @@ from realize.config import ConfigError
 from realize.world.state import SceneState
 from realize.tasks.spec import TaskSpec, check_hand, task_for_plan
 
-__all__ = ["task_suffix", "suffix_columns", "check_suffix_start", "tail_index"]
+__all__ = ["task_suffix", "suffix_columns", "part_columns", "check_suffix_start", "tail_index"]
 
 
 def task_suffix(task: TaskSpec, k: int, key: str = "replan.action") -> TaskSpec:
@@ -44,11 +45,16 @@ def task_suffix(task: TaskSpec, k: int, key: str = "replan.action") -> TaskSpec:
     return out
 
 
+def part_columns(task: TaskSpec, part: TaskSpec) -> list[int]:
+    """Column indices, in ``task``'s sample matrix, of ``part``'s columns (a task over some of
+    ``task``'s parameters: a suffix, or a stitched search's prefix)."""
+    full = task.layout
+    return [i for name in part.layout.names for i in range(full.slices[name].start, full.slices[name].stop)]
+
+
 def suffix_columns(task: TaskSpec, k: int) -> list[int]:
     """Column indices, in ``task``'s sample matrix, of ``task_suffix(task, k)``'s columns."""
-    sub = task_suffix(task, k).layout
-    full = task.layout
-    return [i for name in sub.names for i in range(full.slices[name].start, full.slices[name].stop)]
+    return part_columns(task, task_suffix(task, k))
 
 
 def check_suffix_start(task: TaskSpec, state: SceneState, where: str = "replan") -> None:
