@@ -93,14 +93,18 @@ def check_batch(Z: Tensor, n_envs: int) -> None:
         raise ValueError(f"{Z.shape[0]} samples but the run has only {n_envs} copies (ce.n_envs)")
 
 
-def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]], unit: int = 1) -> list[list[Tensor]]:
-    """Per worker (a group of consecutive shards), the parts of ``Z`` its shards realize."""
-    parts = [Z[s] for s in deal_rows(Z.shape[0], sum(len(g) for g in groups), unit)]
+def _by_worker(parts: list, groups: Sequence[Sequence[RowBlock]]) -> list[list]:
+    """One part per shard -> per worker (a group of consecutive shards), its shards' parts."""
     out, k = [], 0
     for g in groups:
         out.append(parts[k:k + len(g)])
         k += len(g)
     return out
+
+
+def worker_parts(Z: Tensor, groups: Sequence[Sequence[RowBlock]], unit: int = 1) -> list[list[Tensor]]:
+    """Per worker (a group of consecutive shards), the parts of ``Z`` its shards realize."""
+    return _by_worker([Z[s] for s in deal_rows(Z.shape[0], sum(len(g) for g in groups), unit)], groups)
 
 
 def worker_starts(starts: Sequence[SceneState] | None, m: int, groups: Sequence[Sequence[RowBlock]],
@@ -108,12 +112,7 @@ def worker_starts(starts: Sequence[SceneState] | None, m: int, groups: Sequence[
     """Per worker, the start states of the rows each of its shards realizes (as ``worker_parts``
     deals an ``m``-row batch; None everywhere without ``starts``)."""
     slices = deal_rows(m, sum(len(g) for g in groups), unit)
-    parts = [None if starts is None else list(starts[s]) for s in slices]
-    out, k = [], 0
-    for g in groups:
-        out.append(parts[k:k + len(g)])
-        k += len(g)
-    return out
+    return _by_worker([None if starts is None else list(starts[s]) for s in slices], groups)
 
 
 def _pad_frames(t: Tensor | None, frames: int) -> Tensor | None:
