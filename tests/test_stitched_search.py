@@ -13,7 +13,7 @@ import torch
 
 from realize.search.ce.config import CEConfig
 from realize.search.protocol import EvalResult
-from realize.search.stitched import StitchConfig, StitchedSearch
+from realize.search.stitched import SEGMENT_NAMES, StitchConfig, StitchedSearch
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
 
@@ -78,10 +78,10 @@ def test_stitched_search_finds_the_joint_minimum_and_confirms_its_cost() -> None
     # the analytic suffix cost depends on the real start only: stitched == confirmed, plan for plan
     for stitched, confirmed, ok in res.confirmed:
         assert ok and math.isclose(stitched, confirmed, rel_tol=1e-9)
-    # the suffix starts at iteration 1; the confirmation realizes cfg.confirm whole plans at the end
-    assert [c for c in ev.calls if c[0] == "suffix"] == [("suffix", 60)] * (cfg.iterations - 1)
-    assert ev.calls[-1] == ("full", cfg.confirm)
-    assert res.samples == 60 * cfg.iterations + 60 * (cfg.iterations - 1) + cfg.confirm
+    # each round a prefix, then a suffix from the pool it joined; the confirmation realizes
+    # cfg.confirm whole plans at the end
+    assert ev.calls == [("prefix", 60), ("suffix", 60)] * cfg.iterations + [("full", cfg.confirm)]
+    assert res.samples == 60 * cfg.iterations + 60 * cfg.iterations + cfg.confirm
     assert [h.pool for h in res.history] == [5] * cfg.iterations
 
 
@@ -95,7 +95,8 @@ def test_the_pool_keeps_the_cheapest_feasible_prefixes_with_their_states() -> No
     s = _search(StitchConfig(n_prefix=6, n_suffix=6, iterations=2, pool=3, confirm=1))
     Z = torch.tensor([[0.0, 0.0], [-2.0, 0.0], [0.5, -1.0], [1.0, 1.0], [0.4, -1.0], [2.0, 2.0]], dtype=torch.float64)
     ok = Z[:, 0] > -1.0
-    s._add_to_pool(Z, EvalResult(_prefix_cost(Z), ok), [tuple(z.tolist()) if f else None for z, f in zip(Z, ok)])
+    ends = [tuple(z.tolist()) if f else None for z, f in zip(Z, ok)]
+    s._add_to_pool(Z, EvalResult(_prefix_cost(Z), ok, end_states=ends))
     assert s.pool_z.tolist() == [[0.5, -1.0], [0.4, -1.0], [0.0, 0.0]]
     assert s.pool_state == [tuple(z) for z in s.pool_z.tolist()]
 
@@ -104,7 +105,38 @@ def test_a_split_that_does_not_cover_the_columns_is_refused() -> None:
     full, pre, suf = _layouts()
     with pytest.raises(ValueError, match="split the plan's 5 columns"):
         StitchedSearch(full, pre, suf, [0, 1], [1, 2, 3], CEConfig(n_envs=10, n_elite=2), StitchConfig())
-    with pytest.raises(ValueError, match="stitch.iterations must be >= 2"):
-        StitchConfig(iterations=1)
+    with pytest.raises(ValueError, match="stitch.iterations = 0 is invalid"):
+        StitchConfig(iterations=0)
     with pytest.raises(ValueError, match="stitch.pool = 0"):
         StitchConfig(pool=0)
+
+
+@pytest.mark.parametrize("pause_after", [1, 2, 5])  # after a prefix, after a suffix, mid-search
+def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_after: int) -> None:
+    import json
+
+    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
+    whole = _search(cfg).run(Evaluator())
+    ev, first = Evaluator(), _search(cfg)
+    for _ in range(pause_after):
+        b = first.ask()
+        r, ends = ev(SEGMENT_NAMES[b.candidate], b.Z, b.starts)
+        r.end_states = ends
+        first.tell(r)
+    saved = json.loads(json.dumps(first.state_dict()))  # as a checkpoint holds it
+    second = _search(cfg)
+    second.read_state = tuple  # the analytic states are tuples; JSON gives lists
+    second.load_state_dict(saved)
+    assert second.iterations_done == pause_after and second.pool_state == first.pool_state
+    rest = second.run(ev)
+    assert torch.equal(rest.z, whole.z) and rest.cost == whole.cost and rest.confirmed == whole.confirmed
+
+
+def test_the_confirmation_is_a_given_batch_whose_best_is_the_searchs() -> None:
+    s = _search(StitchConfig(n_prefix=20, n_suffix=20, iterations=2, pool=3, confirm=3))
+    res = s.run(Evaluator())
+    assert s.done and s.ask() is None and s.iterations_done == 5
+    st = s.report().state
+    assert st.best_feasible and st.best_cost == res.cost == min(c for _, c, ok in res.confirmed if ok)
+    with pytest.raises(RuntimeError, match="after the stitched search is done"):
+        s.tell(EvalResult(torch.zeros(3), torch.ones(3, dtype=torch.bool)))

@@ -12,7 +12,7 @@ import torch
 
 from realize.app.realizers import open_realization
 from realize.app.run_config import build_run_spec
-from realize.app.stitched import default_split, split_task
+from realize.tasks.split import default_split, split_task
 from realize.config import ConfigError
 from realize.world.state import SceneState
 from helpers import compose_config

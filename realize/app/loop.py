@@ -69,7 +69,9 @@ def search_loop(searcher: Searcher, sinks: SinkSet, open_pool: OpenPool, *, erro
             record = sinks.wants_trajectories
             while (batch := searcher.ask()) is not None:
                 t0 = time.perf_counter()
-                res = pool.rollout(batch.candidate, batch.Z, record=record)
+                segment = {} if batch.starts is None and not batch.capture_end else \
+                    {"starts": batch.starts, "capture_end": batch.capture_end}  # a stitched search's segment
+                res = pool.rollout(batch.candidate, batch.Z, record=record, **segment)
                 t_eval = time.perf_counter() - t0
                 rec = searcher.tell(res.to_eval(), eval_time=t_eval)
                 it = Iteration(done[0], batch, rec, res, rec.summary(batch.candidate), searcher.report(),

@@ -61,7 +61,7 @@ class RolloutResult:
         return EvalResult(cost=self.cost.double(), feasible=self.feasible, progress=self.progress.double(),
                           distance=self.distance.double(),
                           failure_cost=self.horizon_cost if math.isfinite(self.horizon_cost) else None,
-                          share=self.share, stopped=self.stopped)
+                          share=self.share, stopped=self.stopped, end_states=self.end_states)
 
 
 class TrajectoryRecorder:

@@ -34,13 +34,17 @@ __all__ = ["Batch", "EvalResult", "SearchReport", "Searcher"]
 @dataclass
 class Batch:
     """One iteration's samples. ``mean``/``std`` (D,) (or (k, D) with ``weights`` (k,) for a
-    mixture) are the distribution ``Z`` was drawn from; all ``None`` for a uniform batch."""
+    mixture) are the distribution ``Z`` was drawn from; all ``None`` for a uniform batch.
+    A stitched search's segments (``realize.search.stitched``) also set ``starts`` (one start
+    state per row; None: the task's start) and ``capture_end`` (the rows' end states are wanted)."""
 
     Z: Tensor
     candidate: int | None = None
     mean: Tensor | None = None
     std: Tensor | None = None
     weights: Tensor | None = None
+    starts: list[Any] | None = None
+    capture_end: bool = False
 
 
 @dataclass
@@ -65,6 +69,7 @@ class EvalResult:
     failure_cost: float | None = None
     share: Tensor | None = None  # robust search: each sample's success share over its worlds
     stopped: Tensor | None = None  # (N,) bool, ce.prune: rows stopped as they could not be an elite
+    end_states: list[Any] | None = None  # per row, its end state where feasible (asked by ``Batch.capture_end``)
 
     def to_cpu(self, n: int, dtype: torch.dtype) -> EvalResult:
         """Validate shapes against ``n`` and return a CPU copy in ``dtype`` (bool feasibility)."""
@@ -85,6 +90,7 @@ class EvalResult:
             failure_cost=self.failure_cost,
             share=None if self.share is None else vec(self.share, "share", dtype),
             stopped=None if self.stopped is None else vec(self.stopped, "stopped", torch.bool),
+            end_states=self.end_states,
         )
 
 

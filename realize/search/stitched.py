@@ -4,25 +4,29 @@ The seed paper's "next step": break a plan into smaller action sequences that ar
 in parallel and stitched together. Here a plan is cut before action ``split`` (for the seed
 task after the grasp): the prefix (actions ``0 .. split - 1``) and the suffix (``split ..``).
 
-What it does: ``StitchedSearch.run(evaluate)``, per iteration,
-  * draws ``n_prefix`` prefix samples from the prefix's own cross-entropy search
-    (``CrossEntropyOptimizer`` over the prefix's columns, ranked by the prefix's cost) and
-    realizes them from the task's start; each feasible one's end state joins a pool of the
+What it does: ``StitchedSearch`` is an ask/tell ``realize.search.protocol.Searcher`` whose
+batches are segments (``Batch.candidate``: ``PREFIX``, ``SUFFIX``, or ``None`` for the whole
+plan). Each of ``iterations`` rounds:
+  * a prefix batch: ``n_prefix`` samples of the prefix's own cross-entropy search
+    (``CrossEntropyOptimizer`` over the prefix's columns, ranked by the prefix's cost), realized
+    from the task's start with ``capture_end``; each feasible row's end state joins a pool of the
     ``pool`` cheapest prefixes found so far (its columns, its cost, its state);
-  * from iteration 1 on (the pool is empty before), draws ``n_suffix`` suffix samples from the
-    suffix's search and realizes sample i from pool entry ``i mod len(pool)``'s end state; the
-    suffix's search ranks them by the suffix's own cost (so pruning a suffix row by its own cost
-    is exact), and every feasible suffix row is a stitched plan of cost prefix + suffix;
-  * at the end, the ``confirm`` cheapest stitched plans are realized whole, from the task's start
-    (``"full"``), and the cheapest confirmed one is returned: a stitched cost is a guess (a
-    restored state starts at rest, its contacts made anew), the confirmed cost is the plan's.
-``evaluate(segment, Z, starts)`` (``segment``: "prefix" | "suffix" | "full"; ``starts``: one
-start state per row, or None) returns an ``EvalResult`` and, for the prefix, the rows' end
-states (None where infeasible); the states are opaque here.
+  * a suffix batch (once the pool holds a prefix): ``n_suffix`` samples of the suffix's search,
+    row i realized from pool entry ``i mod len(pool)``'s end state (``Batch.starts``), ranked by
+    the suffix's own cost (so pruning a suffix row by its own cost is exact); every feasible
+    suffix row is a stitched plan of cost prefix + suffix.
+Then one confirmation batch: the ``confirm`` cheapest stitched plans realized whole from the
+task's start (a third ``CrossEntropyOptimizer``, over the whole layout, ranks them:
+``CrossEntropyOptimizer.give``); its best is the search's (``report().state``). A stitched cost is
+a guess (a restored state starts at rest, its contacts made anew), the confirmed cost the plan's.
+``run(evaluate)`` drives the same ask/tell without a run directory (tests, ``scripts/bench_stitch.py``).
+``state_dict`` holds the three searches, the pool (its states through their ``to_json``; a
+``read_state`` given to the constructor reads them back) and the stitched plans kept.
 
-What it doesn't: simulate or capture states (``realize.app.stitched``), pick the split, keep a
-checkpoint, or rank a prefix by the suffixes it allows (a cheaper grasp that makes the place
-dearer still wins its pool place; the confirmation sees the sum).
+What it doesn't: simulate or capture states (``realize.app.stitched``, ``realize.app.loop``),
+pick the split, or rank a prefix by the suffixes it allows (a cheaper grasp that makes the place
+dearer still wins its pool place; the confirmation sees the sum). The segments' searches run a
+constant schedule without elite memory, screen or patience.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,10 +43,16 @@ from torch import Tensor
 
 from realize.search.ce.config import CEConfig
 from realize.search.ce.optimizer import CrossEntropyOptimizer
-from realize.search.protocol import EvalResult
+from realize.search.ce.state import IterationRecord
+from realize.search.protocol import Batch, EvalResult, SearchReport
 from realize.tasks.param_layout import ParamLayout
 
-__all__ = ["StitchConfig", "StitchedIteration", "StitchedResult", "StitchedSearch", "SegmentEvaluator"]
+__all__ = ["StitchConfig", "StitchedIteration", "StitchedResult", "StitchedSearch", "SegmentEvaluator",
+           "PREFIX", "SUFFIX", "SEGMENT_NAMES", "STITCHED_KIND"]
+
+PREFIX, SUFFIX = 1, 2  # a batch's candidate: the task index in the run's workers and the history key
+SEGMENT_NAMES: dict[int | None, str] = {None: "full", PREFIX: "prefix", SUFFIX: "suffix"}
+STITCHED_KIND = "stitched"  # the "kind" of its state_dict (a checkpoint's ce_state)
 
 # (segment, Z, starts) -> (result, end states of the rows or None)
 SegmentEvaluator = Callable[[str, Tensor, "Sequence[Any] | None"], "tuple[EvalResult, list[Any] | None]"]
@@ -50,28 +60,33 @@ SegmentEvaluator = Callable[[str, Tensor, "Sequence[Any] | None"], "tuple[EvalRe
 
 @dataclass(frozen=True)
 class StitchConfig:
-    """The stitched search's budget: samples per segment and iteration, the prefix pool, and how
-    many stitched plans are confirmed whole."""
+    """The stitched search's budget: samples per segment and round, rounds, the prefix pool, how
+    many stitched plans are confirmed whole, and the cut (``split``: the suffix's first action;
+    None: the action after the plan's first grasp, ``realize.tasks.split.default_split``)."""
 
     n_prefix: int = 100
     n_suffix: int = 100
     iterations: int = 10
     pool: int = 10
     confirm: int = 10
+    split: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("n_prefix", "n_suffix", "iterations", "pool", "confirm"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"stitch.{name} = {v!r} is invalid: expected an integer >= 1")
-        if self.iterations < 2:
-            raise ValueError("stitch.iterations must be >= 2: the suffix starts from the prefixes of iteration 0")
+
+    @property
+    def batches(self) -> int:
+        """Batches of a whole search: a prefix and a suffix per round, then the confirmation."""
+        return 2 * self.iterations + 1
 
 
 @dataclass
 class StitchedIteration:
-    """One iteration: rows and feasible rows per segment, the pool's size, the cheapest
-    stitched cost so far, and the seconds spent realizing each segment."""
+    """One round: rows and feasible rows per segment, the pool's size, the cheapest stitched
+    cost so far, and the seconds spent realizing each segment."""
 
     iteration: int
     prefix_rows: int
@@ -107,6 +122,10 @@ class StitchedResult:
         return self.z is not None
 
 
+def _state_json(s: Any) -> Any:
+    return s.to_json() if hasattr(s, "to_json") else s
+
+
 class StitchedSearch:
     """Cross-entropy search over a plan cut into a prefix and a suffix (module docstring).
 
@@ -114,102 +133,209 @@ class StitchedSearch:
     suffix's layouts, in their order (disjoint; together every column of ``layout``)."""
 
     def __init__(self, layout: ParamLayout, prefix: ParamLayout, suffix: ParamLayout, prefix_cols: Sequence[int],
-                 suffix_cols: Sequence[int], ce: CEConfig, cfg: StitchConfig) -> None:
+                 suffix_cols: Sequence[int], ce: CEConfig, cfg: StitchConfig, device: torch.device | str | None = None,
+                 read_state: Callable[[Any], Any] = lambda d: d) -> None:
         cols = list(prefix_cols) + list(suffix_cols)
         if sorted(cols) != list(range(layout.dim)) or len(prefix_cols) != prefix.dim or len(suffix_cols) != suffix.dim:
             raise ValueError(f"prefix columns {list(prefix_cols)} and suffix columns {list(suffix_cols)} must split "
                              f"the plan's {layout.dim} columns between its two segments")
-        self.layout, self.cfg = layout, cfg
+        self.layout, self.cfg, self.read_state = layout, cfg, read_state
         self.prefix_cols, self.suffix_cols = torch.tensor(prefix_cols), torch.tensor(suffix_cols)
-        one = dict(keep_elites=False, patience=None, screen=False, schedule="constant", n_envs_end=None)
-        self.pre = CrossEntropyOptimizer(prefix, dataclasses.replace(ce, n_envs=cfg.n_prefix, iterations=cfg.iterations,
-                                                                     **one))
-        self.suf = CrossEntropyOptimizer(suffix, dataclasses.replace(ce, n_envs=cfg.n_suffix, seed=ce.seed + 1,
-                                                                     iterations=cfg.iterations - 1, **one))
-        self.pool_z = torch.zeros(0, prefix.dim, dtype=ce.torch_dtype)
-        self.pool_cost = torch.zeros(0, dtype=ce.torch_dtype)
+        one = dict(keep_elites=False, patience=None, screen=False, schedule="constant", n_envs_end=None,
+                   iterations=cfg.iterations)
+
+        def opt(lay: ParamLayout, n: int, seed: int, **kw: Any) -> CrossEntropyOptimizer:
+            c = dataclasses.replace(ce, n_envs=n, n_elite=min(ce.n_elite, n), seed=seed, **{**one, **kw})
+            return CrossEntropyOptimizer(lay, c, device=device)
+
+        self.pre = opt(prefix, cfg.n_prefix, ce.seed)
+        self.suf = opt(suffix, cfg.n_suffix, ce.seed + 1)
+        self.full = opt(layout, cfg.confirm, ce.seed + 2, iterations=1)
+        self.dtype = ce.torch_dtype
+        self.pool_z = torch.zeros(0, prefix.dim, dtype=self.dtype)
+        self.pool_cost = torch.zeros(0, dtype=self.dtype)
         self.pool_state: list[Any] = []
-        # every feasible stitched plan: (stitched cost, prefix columns, suffix columns)
+        # the ``confirm`` cheapest feasible stitched plans so far: (stitched cost, prefix columns, suffix columns)
         self.stitched: list[tuple[float, Tensor, Tensor]] = []
+        self.round, self.phase, self.batches = 0, "prefix", 0  # phase: prefix | suffix | confirm | done
+        self._src: Tensor | None = None  # the pending suffix batch's pool entries
+        self._Z: Tensor | None = None  # the pending batch's samples (CPU)
+
+    # ---- the Searcher protocol -------------------------------------------------------------
+
+    @property
+    def done(self) -> bool:
+        return self.phase == "done"
+
+    @property
+    def iterations_done(self) -> int:
+        return self.batches
+
+    def ask(self) -> Batch | None:
+        """The next segment's batch (``candidate``: PREFIX, SUFFIX or None for the confirmation)."""
+        if self.phase == "prefix":
+            b = self.pre.ask()
+            assert b is not None
+            b.candidate, b.capture_end = PREFIX, True
+        elif self.phase == "suffix":
+            b = self.suf.ask()
+            assert b is not None
+            self._src = torch.arange(b.Z.shape[0]) % len(self.pool_state)
+            b.candidate, b.starts = SUFFIX, [self.pool_state[i] for i in self._src.tolist()]
+        elif self.phase == "confirm":
+            Z = torch.cat([self._join(zp[None], zs[None]) for _, zp, zs in self.stitched])
+            self.full.give(Z)
+            b = self.full.ask()
+            assert b is not None
+        else:
+            return None
+        self._Z = b.Z.detach().cpu()
+        return b
+
+    def tell(self, result: EvalResult, eval_time: float = math.nan) -> IterationRecord:
+        """The evaluation of the last ``ask``'s batch (a prefix's with its ``end_states``)."""
+        if self.phase in ("prefix", "suffix") and self._Z is None:
+            raise RuntimeError("tell() called without a pending batch; call ask() first")
+        if self.phase == "prefix":
+            assert self._Z is not None
+            rec = self.pre.tell(result, eval_time=eval_time)
+            self._add_to_pool(self._Z, result)
+            self.phase = "suffix" if self.pool_state else self._next_round()
+        elif self.phase == "suffix":
+            assert self._src is not None
+            n = self._src.shape[0]
+            r = result.to_cpu(n, self.dtype)
+            rec = self.suf.tell(r, eval_time=eval_time)
+            total = r.cost + self.pool_cost[self._src]
+            for i in torch.nonzero(r.feasible).flatten().tolist():
+                self._keep((float(total[i]), self.pool_z[self._src[i]].clone(), self._Z[i].to(self.dtype).clone()))
+            self._src = None
+            self.phase = self._next_round()
+        elif self.phase == "confirm":
+            rec = self.full.tell(result, eval_time=eval_time)
+            self.phase = "done"
+        else:
+            raise RuntimeError("tell() after the stitched search is done")
+        self.batches += 1
+        self._Z = None
+        return rec
+
+    def report(self) -> SearchReport:
+        """The confirmation's standing (no best plan before the stitched plans are confirmed),
+        with the two segments' distributions side by side as its ``mean``/``std`` once both have
+        one (one normal each, ``ce.n_modes = 1``): what a warm start or a replan of the run
+        starts from."""
+        state, pre, suf = self.full.state, self.pre.state, self.suf.state
+        if pre.mean is not None and suf.mean is not None and pre.mean.ndim == suf.mean.ndim == 1:
+            assert pre.std is not None and suf.std is not None
+            state.mean, state.std = self._join(pre.mean[None], suf.mean[None])[0], self._join(pre.std[None],
+                                                                                             suf.std[None])[0]
+            state.weights = None
+        return SearchReport(lead=None, state=state)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "kind": STITCHED_KIND, "round": self.round, "phase": self.phase, "batches": self.batches,
+            "prefix": self.pre.state_dict(), "suffix": self.suf.state_dict(), "full": self.full.state_dict(),
+            "pool": {"z": self.pool_z.tolist(), "cost": self.pool_cost.tolist(),
+                     "states": [_state_json(s) for s in self.pool_state]},
+            "stitched": [[c, zp.tolist(), zs.tolist()] for c, zp, zs in self.stitched],
+        }
+
+    def load_state_dict(self, d: Mapping[str, Any]) -> None:
+        """Continue from ``state_dict()`` output; ``ValueError`` if it is not a stitched search's."""
+        if d.get("kind") != STITCHED_KIND:
+            raise ValueError(f"not a stitched search's state (kind {d.get('kind')!r})")
+        try:
+            self.pre.load_state_dict(d["prefix"])
+            self.suf.load_state_dict(d["suffix"])
+            self.full.load_state_dict(d["full"])
+            pool = d["pool"]
+            self.pool_z = torch.tensor(pool["z"], dtype=self.dtype).reshape(-1, self.pool_z.shape[1])
+            self.pool_cost = torch.tensor(pool["cost"], dtype=self.dtype).reshape(-1)
+            self.pool_state = [self.read_state(s) for s in pool["states"]]
+            self.stitched = [(float(c), torch.tensor(zp, dtype=self.dtype), torch.tensor(zs, dtype=self.dtype))
+                             for c, zp, zs in d["stitched"]]
+            self.round, self.phase, self.batches = int(d["round"]), str(d["phase"]), int(d["batches"])
+        except (KeyError, TypeError, ValueError, RuntimeError) as e:
+            raise ValueError(f"malformed stitched state ({type(e).__name__}: {e})") from None
+        if self.phase not in ("prefix", "suffix", "confirm", "done") or not (
+                len(self.pool_state) == len(self.pool_cost) == self.pool_z.shape[0]):
+            raise ValueError("malformed stitched state (phase / pool)")
+        self._src = None
+
+    # ---- without a run directory -----------------------------------------------------------
+
+    def run(self, evaluate: SegmentEvaluator,
+            on_iteration: Callable[[StitchedIteration], None] | None = None) -> StitchedResult:
+        """Ask/tell to the end with ``evaluate(segment, Z, starts)``; the confirmed plans and the
+        rounds' history (module docstring)."""
+        t_start = time.perf_counter()
+        history: list[StitchedIteration] = []
+        row: dict[str, Any] = {}
+        samples, confirm_s = 0, 0.0
+        confirmed: list[tuple[float, float, bool]] = []
+        Zc: Tensor | None = None
+        while (batch := self.ask()) is not None:
+            seg, rnd = SEGMENT_NAMES[batch.candidate], self.round
+            t0 = time.perf_counter()
+            r, ends = evaluate(seg, batch.Z, batch.starts)
+            dt = time.perf_counter() - t0
+            r.end_states = ends
+            rec = self.tell(r, eval_time=dt)
+            samples += rec.n_envs
+            if seg == "full":
+                Zc, confirm_s = batch.Z.detach().cpu().clone(), dt
+                confirmed = [(c, float(rec.cost[k]), bool(rec.feasible[k])) for k, (c, _, _) in enumerate(self.stitched)]
+                continue
+            row[seg] = (rec.n_envs, rec.n_feasible, dt)
+            if self.round != rnd or self.done:  # the round ended
+                (np_, fp, tp), (ns, fs, ts) = (row.get(k, (0, 0, 0.0)) for k in ("prefix", "suffix"))
+                best = self.stitched[0][0] if self.stitched else math.inf
+                history.append(StitchedIteration(rnd, np_, fp, ns, fs, len(self.pool_state), best, tp, ts))
+                if on_iteration is not None:
+                    on_iteration(history[-1])
+                row = {}
+        s = self.full.state
+        out = StitchedResult(None, math.inf, math.inf, confirmed, Zc, history, confirm_s=confirm_s, samples=samples)
+        if s.best_feasible and s.best_z is not None:
+            k = next(k for k in range(len(confirmed)) if Zc is not None and torch.equal(Zc[k].to(s.best_z), s.best_z))
+            out.z, out.cost, out.stitched_cost = s.best_z.clone(), float(s.best_cost), confirmed[k][0]
+        out.search_s = time.perf_counter() - t_start
+        return out
+
+    # ---- internals ---------------------------------------------------------------------------
+
+    def _next_round(self) -> str:
+        self.round += 1
+        if self.round < self.cfg.iterations:
+            return "prefix"
+        return "confirm" if self.stitched else "done"
 
     def _join(self, zp: Tensor, zs: Tensor) -> Tensor:
-        z = torch.empty(zp.shape[0], self.layout.dim, dtype=zp.dtype)
-        z[:, self.prefix_cols] = zp
-        z[:, self.suffix_cols] = zs.to(zp.dtype)
+        z = torch.empty(zp.shape[0], self.layout.dim, dtype=self.dtype)
+        z[:, self.prefix_cols] = zp.to(self.dtype)
+        z[:, self.suffix_cols] = zs.to(self.dtype)
         return z
 
-    def _add_to_pool(self, Z: Tensor, r: EvalResult, ends: list[Any] | None) -> None:
+    def _keep(self, plan: tuple[float, Tensor, Tensor]) -> None:
+        """Keep the ``confirm`` cheapest stitched plans (ties: the one found first)."""
+        k = len(self.stitched)
+        while k > 0 and self.stitched[k - 1][0] > plan[0]:
+            k -= 1
+        self.stitched.insert(k, plan)
+        del self.stitched[self.cfg.confirm:]
+
+    def _add_to_pool(self, Z: Tensor, result: EvalResult) -> None:
         """The ``pool`` cheapest feasible prefixes so far (ties: the older first, then row order)."""
+        r = result.to_cpu(Z.shape[0], self.dtype)
         ok = torch.nonzero(r.feasible).flatten()
+        ends = result.end_states
         if ends is None and len(ok):
             raise ValueError("the prefix's evaluation returned no end states")
-        z = torch.cat([self.pool_z, Z[ok].to(self.pool_z.dtype)])
-        cost = torch.cat([self.pool_cost, r.cost[ok].to(self.pool_cost.dtype)])
+        z = torch.cat([self.pool_z, Z[ok].to(self.dtype)])
+        cost = torch.cat([self.pool_cost, r.cost[ok]])
         states = self.pool_state + [ends[i] for i in ok.tolist()] if len(ok) else self.pool_state
         keep = torch.sort(cost, stable=True).indices[:self.cfg.pool]
         self.pool_z, self.pool_cost = z[keep], cost[keep]
         self.pool_state = [states[i] for i in keep.tolist()]
-
-    def _suffix_step(self, evaluate: SegmentEvaluator) -> tuple[int, int, float]:
-        batch = self.suf.ask()
-        assert batch is not None
-        n = batch.Z.shape[0]
-        src = torch.arange(n) % len(self.pool_state)
-        t0 = time.perf_counter()
-        r, _ = evaluate("suffix", batch.Z, [self.pool_state[i] for i in src.tolist()])
-        dt = time.perf_counter() - t0
-        r = r.to_cpu(n, self.pool_cost.dtype)
-        self.suf.tell(r, eval_time=dt)
-        total = r.cost + self.pool_cost[src]
-        for i in torch.nonzero(r.feasible).flatten().tolist():
-            self.stitched.append((float(total[i]), self.pool_z[src[i]].clone(), batch.Z[i].detach().cpu().clone()))
-        return n, int(r.feasible.sum()), dt
-
-    def run(self, evaluate: SegmentEvaluator,
-            on_iteration: Callable[[StitchedIteration], None] | None = None) -> StitchedResult:
-        """Search, then confirm the cheapest stitched plans whole (module docstring)."""
-        t_start = time.perf_counter()
-        history: list[StitchedIteration] = []
-        samples = 0
-        for it in range(self.cfg.iterations):
-            batch = self.pre.ask()
-            assert batch is not None
-            t0 = time.perf_counter()
-            r, ends = evaluate("prefix", batch.Z, None)
-            dt_p = time.perf_counter() - t0
-            r = r.to_cpu(batch.Z.shape[0], self.pool_cost.dtype)
-            self.pre.tell(r, eval_time=dt_p)
-            n_s = f_s = 0
-            dt_s = 0.0
-            if self.pool_state and not self.suf.done:  # the suffix starts from earlier iterations' prefixes
-                n_s, f_s, dt_s = self._suffix_step(evaluate)
-            self._add_to_pool(batch.Z.detach().cpu(), r, ends)
-            samples += batch.Z.shape[0] + n_s
-            best = min((c for c, _, _ in self.stitched), default=math.inf)
-            rec = StitchedIteration(it, batch.Z.shape[0], int(r.feasible.sum()), n_s, f_s, len(self.pool_state),
-                                    best, dt_p, dt_s)
-            history.append(rec)
-            if on_iteration is not None:
-                on_iteration(rec)
-        out = self.confirm(evaluate)
-        out.history, out.samples = history, samples + len(out.confirmed)
-        out.search_s = time.perf_counter() - t_start
-        return out
-
-    def confirm(self, evaluate: SegmentEvaluator) -> StitchedResult:
-        """Realize the ``confirm`` cheapest stitched plans whole; the cheapest feasible one wins
-        (ties: the cheaper stitched cost, then the order found)."""
-        ranked = sorted(range(len(self.stitched)), key=lambda i: (self.stitched[i][0], i))[:self.cfg.confirm]
-        if not ranked:
-            return StitchedResult(None, math.inf, math.inf)
-        Z = torch.cat([self._join(self.stitched[i][1][None], self.stitched[i][2][None]) for i in ranked])
-        t0 = time.perf_counter()
-        r, _ = evaluate("full", Z, None)
-        dt = time.perf_counter() - t0
-        r = r.to_cpu(Z.shape[0], Z.dtype)
-        confirmed = [(self.stitched[i][0], float(r.cost[k]), bool(r.feasible[k])) for k, i in enumerate(ranked)]
-        ok = [k for k in range(len(ranked)) if confirmed[k][2]]
-        if not ok:
-            return StitchedResult(None, math.inf, math.inf, confirmed, Z, confirm_s=dt)
-        k = min(ok, key=lambda k: (confirmed[k][1], confirmed[k][0], k))
-        return StitchedResult(Z[k].clone(), confirmed[k][1], confirmed[k][0], confirmed, Z, confirm_s=dt)

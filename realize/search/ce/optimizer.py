@@ -65,15 +65,9 @@ class CrossEntropyOptimizer:
     the continued run draws exactly the samples the uninterrupted one would have.
     """
 
-    def __init__(
-        self,
-        layout: ParamLayout,
-        config: CEConfig,
-        device: torch.device | str | None = None,
-        state: CEState | None = None,
-        warm: WarmDistribution | None = None,
-        screen: Callable[[Tensor], Tensor] | None = None,
-    ) -> None:
+    def __init__(self, layout: ParamLayout, config: CEConfig, device: torch.device | str | None = None,
+                 state: CEState | None = None, warm: WarmDistribution | None = None,
+                 screen: Callable[[Tensor], Tensor] | None = None) -> None:
         if not isinstance(layout, ParamLayout):
             raise TypeError(f"layout must be a ParamLayout, got {type(layout).__name__}")
         self.layout = layout
@@ -93,6 +87,7 @@ class CrossEntropyOptimizer:
             self._state = self._check_state(state.copy())
             self._gen.set_state(self._state.rng_state)
         self._pending: tuple[Batch, float] | None = None
+        self._given = False  # the pending batch came from ``give``
         # ce.screen: (N, D) -> (N,) bool, the samples physics would fail for certain; they are
         # drawn again (at most ce.screen_tries times) and kept apart, not simulated
         self._screen = screen if config.screen else None
@@ -169,6 +164,19 @@ class CrossEntropyOptimizer:
         # the evaluator may not alter our copy
         return Batch(b.Z.to(self.device, copy=True), None, b.mean, b.std, b.weights)
 
+    def give(self, Z: Tensor) -> None:
+        """Make ``Z (N, D)`` the current iteration's batch instead of a draw: rows chosen elsewhere
+        (a stitched search's plans, confirmed whole: ``realize.search.stitched``). ``tell`` ranks
+        and refits from them as from drawn rows; the record says ``sampled_from = "given"``."""
+        if self.done:
+            raise RuntimeError("give() after the search is done")
+        if Z.ndim != 2 or Z.shape[1] != self.layout.dim:
+            raise ValueError(f"give(): expected rows of {self.layout.dim} parameters, got {tuple(Z.shape)}")
+        s = self._state
+        self._pending = (Batch(Z.detach().to("cpu", self.dtype).clone(), None, _clone(s.mean), _clone(s.std),
+                               _clone(s.weights)), time.perf_counter())
+        self._given = True
+
     def tell(self, result: EvalResult, eval_time: float = math.nan) -> IterationRecord:
         """Score the pending batch, update the distribution and the best, return the record
         (``eval_time``: the seconds the caller spent evaluating, kept in the record)."""
@@ -176,7 +184,8 @@ class CrossEntropyOptimizer:
             raise RuntimeError("tell() called without a pending batch; call ask() first")
         batch, t0 = self._pending
         Z = batch.Z
-        source = "uniform" if batch.mean is None else "warm" if self._warm_first else "gaussian"
+        source = "given" if self._given else "uniform" if batch.mean is None else \
+            "warm" if self._warm_first else "gaussian"
         cfg, s = self.config, self._state
         n = Z.shape[0]
         r = result.to_cpu(n, self.dtype)
@@ -236,7 +245,7 @@ class CrossEntropyOptimizer:
             screened_Z=self._screened if cfg.keep_samples else None,
             n_remembered=int((elite >= n).sum()) if self._keeps else None,
         )
-        self._screened = None
+        self._screened, self._given = None, False
         s.iteration += 1
         s.rng_state = self._gen.get_state()
         self._pending = None
@@ -257,7 +266,7 @@ class CrossEntropyOptimizer:
             raise ValueError(f"malformed CE state ({type(e).__name__}: {e})") from None
         self._state = self._check_state(state)
         self._gen.set_state(self._state.rng_state)
-        self._pending = None
+        self._pending, self._given = None, False
 
     # ---- convenience -----------------------------------------------------------------------
 
@@ -364,13 +373,9 @@ class CrossEntropyOptimizer:
         """Keep the batch's best single sample if it beats the best of all iterations."""
         s = self._state
         share = 1.0 if r.share is None else float(r.share[top])
-        cand = sort_key(
-            bool(r.feasible[top]),
-            float(r.cost[top]),
-            math.nan if r.progress is None else float(r.progress[top]),
-            math.nan if r.distance is None else float(r.distance[top]),
-            share,
-        )
+        cand = sort_key(bool(r.feasible[top]), float(r.cost[top]),
+                        math.nan if r.progress is None else float(r.progress[top]),
+                        math.nan if r.distance is None else float(r.distance[top]), share)
         best = sort_key(s.best_feasible, s.best_cost, s.best_progress, s.best_distance, s.best_share)
         if s.best_z is None or cand < best:
             s.best_z = Z[top].clone()
@@ -386,13 +391,7 @@ def _clone(v: Tensor | None) -> Tensor | None:
     return None if v is None else v.clone()
 
 
-def optimize(
-    layout: ParamLayout,
-    evaluate: Evaluator,
-    config: CEConfig,
-    device: torch.device | str | None = None,
-    on_iteration: IterationCallback | None = None,
-    state: CEState | None = None,
-) -> CEResult:
+def optimize(layout: ParamLayout, evaluate: Evaluator, config: CEConfig, device: torch.device | str | None = None,
+             on_iteration: IterationCallback | None = None, state: CEState | None = None) -> CEResult:
     """Run Algorithm 1: ``CrossEntropyOptimizer(layout, config, device, state).run(...)``."""
     return CrossEntropyOptimizer(layout, config, device=device, state=state).run(evaluate, on_iteration)

@@ -172,7 +172,8 @@ class IterationRecord:
     ``progress``/``distance`` (N,) the evaluation; ``elite_idx`` the rows used for the refit, best first
     (or, when the distribution was kept, the feasible rows); ``mean``/``std`` (D,) the
     distribution *after* this iteration's update (``None`` while still uniform);
-    ``sampled_from`` is ``"uniform"``, ``"gaussian"`` or ``"warm"`` (iteration 0 of a warm start); ``refit`` says what happened:
+    ``sampled_from`` is ``"uniform"``, ``"gaussian"``, ``"warm"`` (iteration 0 of a warm start) or
+    ``"given"`` (rows chosen elsewhere: ``CrossEntropyOptimizer.give``); ``refit`` says what happened:
     ``"elite"`` (>= n_elite feasible), ``"fallback_progress"``, ``"feasible_only"`` or ``"kept"``.
     ``best_cost`` is the best feasible cost of all iterations so far (inf if none; never
     increases); ``iteration_best_cost`` the best feasible cost of this batch. Elite cost stats
