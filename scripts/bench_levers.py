@@ -10,7 +10,7 @@ Per run it appends a CSV row to ``--out`` as soon as the run ends:
 * ``search_s``: the CE iterations' wall time (sum of ``iteration_time_s``), the issue's "search
   wall time"; ``wall_s``: the child's whole wall time (start-up, setup, search, validation);
 * ``iterations``: CE iterations done; ``samples``: plans simulated (sum of ``n_envs_per_iter``);
-* ``row_steps``: control steps summed over every simulated plan (a stopped plan counts to where
+* ``row_steps``: control steps summed over every simulated plan (every history file of the run) (a stopped plan counts to where
   it stopped); ``batch_steps``: the sum over iterations of the batch's longest plan, which an
   iteration's physics time follows (every copy is stepped until the batch ends);
 * ``stopped``: plans stopped because they could no longer be an elite (``ce.prune``);
@@ -65,8 +65,10 @@ def run_one(experiment: str, seed: int, overrides: list[str], run_dir: Path) -> 
                          f"{proc.stderr[-2000:]}")
     rd = RunDir(run_dir)
     doc = rd.result_json() or {}
-    hist = rd.history_arrays()
-    steps = [hist[k] for k in sorted(hist) if k.startswith("steps_")]
+    # every history file: a stitched run's segments are in history.npz, history_c1.npz and history_c2.npz
+    keys = [None] + [int(p.stem.rsplit("_c", 1)[1]) for p in sorted(run_dir.glob("history_c*.npz"))]
+    hists = [rd.history_arrays(k) for k in keys]
+    steps = [h[k] for h in hists for k in sorted(h) if k.startswith("steps_")]
     val = doc.get("validation") or {}
     return {
         "search_s": round(float(sum(doc["iteration_time_s"])), 1), "wall_s": round(wall, 1),

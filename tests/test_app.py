@@ -52,9 +52,11 @@ def test_default_config_validates_without_simulating(no_sim: None) -> None:
 def test_experiment_presets() -> None:
     seed = build_run_spec(plain(["experiment=seed_paper_exact"]))
     assert (seed.ce.n_envs, seed.ce.n_elite, seed.ce.iterations) == (200, 10, 10)
-    fast = build_run_spec(plain(["experiment=seed_paper"]))  # levers=fast: half the batch, memory, screen
+    fast = build_run_spec(plain(["experiment=seed_paper", "levers=fast"]))  # half the batch, memory, screen
     assert (fast.ce.n_envs, fast.ce.n_elite, fast.ce.iterations, fast.ce.keep_elites) == (100, 10, 10, True)
-    assert (fast.ce.screen, fast.ce.patience, fast.ce.prune) == (True, 3, True)
+    assert (fast.ce.screen, fast.ce.patience, fast.ce.prune, fast.stitch) == (True, 3, True, None)
+    stitched = build_run_spec(plain(["experiment=seed_paper"]))  # levers=stitched, the preset's choice
+    assert stitched.stitch is not None and (stitched.ce.n_envs, stitched.stitch.n_prefix) == (76, 50)
     journal = build_run_spec(plain(["experiment=journal", "scene=wall"]))
     assert journal.ce.schedule == "linear"
     assert journal.ce.n_envs_at(0) == 3000 and journal.ce.n_envs_at(19) == 300

@@ -30,17 +30,19 @@ def test_levers_exact_runs_the_papers_batch_and_levers_fast_half_of_it_on_as_man
     assert _batch("experiment=seed_paper_exact") == (200, 100, 1.0)
     assert _batch("experiment=seed_paper", "levers=exact") == (200, 100, 1.0)
     assert _batch("experiment=seed_paper", "levers=all") == (200, 100, 1.0)  # the default levers: no scale
-    n, rows, scale = _batch("experiment=seed_paper")  # levers=fast, the preset's choice
+    n, rows, scale = _batch("experiment=seed_paper", "levers=fast")
     assert (n, rows, scale) == (100, 50, 0.5)
     # the shards (what keeps both cores of a laptop busy) are as many as the paper's batch has
     assert len(shard_rows(n, rows)) == len(shard_rows(200, 100)) == 2
+    n, rows, scale = _batch("experiment=seed_paper")  # levers=stitched, the preset's choice: 76 copies
+    assert (n, rows, scale) == (76, 38, 0.38) and len(shard_rows(n, rows)) == 2
     spec = build_run_spec(compose_config("experiment=seed_paper", "levers=fast"))  # the named set of both
     assert (spec.ce.n_envs, spec.sim.shard_rows, spec.ce.keep_elites, spec.ce.prune) == (100, 50, True, True)
 
 
 def test_a_batch_given_on_the_command_line_is_not_scaled() -> None:
     assert _batch("experiment=seed_paper", "ce.n_envs=150")[0] == 150
-    assert _batch("experiment=seed_paper", "ce.batch_scale=0.25") == (50, 25, 0.25)
+    assert _batch("experiment=seed_paper", "levers=fast", "ce.batch_scale=0.25") == (50, 25, 0.25)
     # presets that write their batch as a number keep it under every lever
     for preset in ("wall", "ramp", "tower3", "two_cubes"):
         assert _batch(f"experiment={preset}")[:2] == _batch(f"experiment={preset}", "levers=exact")[:2]

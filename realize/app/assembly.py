@@ -3,7 +3,9 @@
 What it does: ``prepare_run(cfg, out_dir)`` validates the whole config first (``realize.app.run_config``;
 a ``ConfigError`` leaves a ``failed`` result.json and nothing simulated), picks the searcher
 (``CrossEntropyOptimizer`` for one plan; ``SuccessiveHalving`` over the planner's candidates
-with ``task.planner.top_k > 1``) and the sinks, in their order per iteration:
+with ``task.planner.top_k > 1``; ``StitchedSearch`` with ``stitch.enabled``, whose batches are
+the plan's two segments and the confirmation: ``realize.app.stitched.run_segments``) and the
+sinks, in their order per iteration:
 
   1. ``CheckpointSink``: ``history.npz`` (``history_c{i}.npz`` per candidate), then
      ``checkpoint.json``, the commit point;
@@ -47,6 +49,7 @@ from realize.app.hydra_edge import register_resolvers, resolution_error
 from realize.app.loop import search_loop
 from realize.app.objective import record_objective
 from realize.app.replan import replan_config
+from realize.app.resume_config import RESUME_ALLOWED_PREFIXES, resume_config
 from realize.app.workers.pool import RolloutPool, open_pool
 from realize.app.run_config import RunSpec, build_run_spec
 from realize.app.task_plans import load_task_file
@@ -58,6 +61,7 @@ from realize.run_dir.names import CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, RES
 from realize.run_dir.result_doc import ResultDoc
 from realize.run_dir.summaries import IterationSummary
 from realize.search.protocol import SearchReport, Searcher
+from realize.search.stitched import SEGMENT_NAMES
 from realize.sinks.base import Iteration, Sink, SinkSet
 from realize.sinks.files import CheckpointSink, ResultSink, RunClock
 from realize.sinks.progress import ProgressSink
@@ -73,8 +77,6 @@ log = logging.getLogger("realize")
 # (spec, tasks, worker log dir) -> the run's rollout workers (a planner's, which it keeps open)
 PoolSource = Callable[[RunSpec, Sequence[Any], Path], RolloutPool]
 
-# overrides a resumed run accepts (everything else comes from the run's saved config)
-RESUME_ALLOWED_PREFIXES = ("resume", "logging", "workers", "hydra.", "validation", "sim.cpu_workers")
 
 
 @dataclass
@@ -111,33 +113,6 @@ def plain_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
 
 
 
-def _resume_config(current: dict[str, Any], ckpt: Checkpoint, overrides: Sequence[str]) -> dict[str, Any]:
-    """The config a resumed run uses: the saved one, every group of it included, with only what
-    ``overrides`` (the command line's) name of the ``logging``, ``workers`` and ``validation``
-    groups and ``sim.cpu_workers`` taken from ``current`` on top (none changes the search's
-    numbers: a run may go on with other workers and threads, e.g. on another machine, and
-    validate its candidates once it ends).
-    ``validation=off`` replaces the saved group; ``workers.n=2`` changes that one key."""
-    from realize.app.compose import parse_overrides
-
-    extra = [o for o in overrides if not str(o).lstrip("+~").startswith(RESUME_ALLOWED_PREFIXES)]
-    if extra:
-        raise ConfigError(
-            f"resume: a resumed run uses its saved config; drop the override(s) {extra} "
-            "(only logging.*, workers.*, validation.* and sim.cpu_workers may change)"
-        )
-    base, cur = OmegaConf.create(dict(ckpt.config)), OmegaConf.create(dict(current))
-    for o in parse_overrides([str(x) for x in overrides]):
-        key = o.key_or_group
-        if not key.startswith(("resume", "hydra")) and not o.is_delete():  # (the others were refused)
-            OmegaConf.update(base, key, OmegaConf.select(cur, key, throw_on_missing=False), merge=False,
-                             force_add=True)
-    cfg = OmegaConf.to_container(base, resolve=True)
-    assert isinstance(cfg, dict)
-    cfg["resume"] = current.get("resume")
-    return cfg
-
-
 def prepare_run(cfg: DictConfig | Mapping[str, Any], out_dir: Path | str, cli_overrides: Sequence[str] = (), *,
                 merged: bool = False) -> _Assembly:
     """The validated run of ``cfg`` in ``out_dir`` (``resume``: the resumed run's directory and
@@ -157,7 +132,7 @@ def prepare_run(cfg: DictConfig | Mapping[str, Any], out_dir: Path | str, cli_ov
             except CheckpointError as e:
                 raise ConfigError(str(e)) from None
             run_dir = Path(str(current["resume"]))
-            current = _resume_config(current, ckpt, cli_overrides)
+            current = resume_config(current, ckpt, cli_overrides)
         elif current.get("replan_from") is not None and not merged:  # the earlier run's config, changes on top
             current = replan_config(current, cli_overrides)
         return _Assembly(build_run_spec(current), run_dir, ckpt, clock)
@@ -186,6 +161,12 @@ class _Assembly:
         self.spec, self.run_dir, self.rd, self.clock = spec, run_dir, RunDir(run_dir), clock
         self.tasks = list(spec.candidates) if spec.halving else [spec.task]
         self.keys: list[int | None] = list(range(len(self.tasks))) if spec.halving else [None]
+        self.stitched: Searcher | None = None
+        if spec.stitch is not None:  # the whole plan (its confirmation), the prefix and the suffix
+            from realize.app.stitched import run_segments
+
+            self.tasks, self.keys, self.stitched = run_segments(spec)
+        self.batches = spec.ce.iterations if spec.stitch is None else spec.stitch.batches
         self.warm: WarmStart | None = None
         warm_from = spec.warm_start
         if warm_from is None and spec.replan is not None and spec.replan.warm:
@@ -205,6 +186,8 @@ class _Assembly:
 
     def _searcher(self) -> Searcher:
         spec = self.spec
+        if self.stitched is not None:
+            return self.stitched
         if spec.halving:
             assert spec.budget is not None
             plans = [CandidateSpec(t.describe(), t.layout, t.n_actions) for t in self.tasks]
@@ -254,10 +237,15 @@ class _Assembly:
     def _doc(self, status: str, error: str | None, report: SearchReport,
              records: Sequence[IterationSummary]) -> ResultDoc:
         spec, lead = self.spec, report.lead
-        doc = result_doc(status=status, state=report.state, summaries=[r for r in records if r.candidate == lead],
-                          task=self.tasks[0 if lead is None else lead], iterations=spec.ce.iterations,
+        mine = records if spec.stitch is not None else [r for r in records if r.candidate == lead]  # (all segments)
+        doc = result_doc(status=status, state=report.state, summaries=mine,
+                          task=self.tasks[0 if lead is None else lead], iterations=self.batches,
                           seed=spec.seed, config=spec.config, run_dir=self.run_dir, wall_time_s=self.clock.wall(),
                           error=error, info=self.info, halving=report.halving)
+        if spec.stitch is not None:
+            from realize.app.stitched import stitched_doc
+
+            doc.extra["stitched"] = stitched_doc(spec.stitch, self.tasks, records)
         if spec.replan is not None:  # where this run replanned from
             doc.extra["replan"] = spec.replan.to_json(warm_start=self.info.warm_start)
         if getattr(self, "stopped_early", False):  # a replan that had its plan before its last iteration
@@ -277,10 +265,11 @@ class _Assembly:
             actions = {k: [str(a) for a in t.plan] for k, t in zip(self.keys, self.tasks)}
             sinks.append(RerunSink(plans, spec.geometry, padding, spec.ce.iterations, record=spec.logging.record,
                                    actions=actions, control_freq=spec.sim.control_freq, robot=spec.robot))
-        if not spec.halving:  # the figures' readers assume one parameter layout
+        if not spec.halving and spec.stitch is None:  # the figures' readers assume one parameter layout
             sinks.append(TrajectorySink(self.rd, spec.task.layout, spec.geometry, padding, record=spec.logging.record))
-        sinks.append(ProgressSink(spec.ce.iterations, self.start, "CE top-k" if spec.halving else "CE",
-                                  spec.logging.progress))
+        desc = "CE top-k" if spec.halving else "CE stitched" if spec.stitch is not None else "CE"
+        labels = None if spec.stitch is None else {k: SEGMENT_NAMES[k] for k in self.keys}
+        sinks.append(ProgressSink(self.batches, self.start, desc, spec.logging.progress, labels))
         return sinks
 
     def _open_pool(self, source: PoolSource | None = None) -> RolloutPool:
@@ -301,6 +290,9 @@ class _Assembly:
         else:
             log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), pool.n_envs, pool.backend,
                      self.info.setup_time_s)
+        if spec.stitch is not None:
+            log.info("stitched segments: %s, then %s; %s", self.tasks[1].describe(), self.tasks[2].describe(),
+                     spec.stitch)
         return pool
 
     def execute(self, after_iteration: Callable[[int], None] | None = None, *, pools: PoolSource | None = None,
@@ -316,7 +308,7 @@ class _Assembly:
             status, exit_code, n_done = "done", 0, self.start
         else:
             if self.start:
-                log.info("resuming %s after iteration %d of %d", run_dir, self.start, spec.ce.iterations)
+                log.info("resuming %s after iteration %d of %d", run_dir, self.start, self.batches)
             if spec.halving and len(self.tasks) < spec.planner.top_k:
                 log.info("the planner returned %d distinct plan(s) for top_k = %d", len(self.tasks),
                          spec.planner.top_k)
@@ -378,11 +370,12 @@ class _Assembly:
             hist, rrd = candidate_file(HISTORY_FILE, 0) + ", ...", candidate_file(spec.logging.rrd, 0) + ", ..."
         else:
             hist, rrd = HISTORY_FILE, spec.logging.rrd
-        early = ""
-        if o.status == "done" and not spec.halving and o.iterations_done < spec.ce.iterations:
-            early = " (stopped early: ce.patience / ce.converge_std / ce.sample_budget)"
+        early, what = "", "CE iterations" if spec.stitch is None else "batches of a stitched search"
+        if o.status == "done" and not spec.halving and o.iterations_done < self.batches:
+            early = " (stopped early: ce.patience / ce.converge_std / ce.sample_budget)" if spec.stitch is None else \
+                " (no prefix or no stitched plan was feasible)"
         print(
-            f"realize: {o.status} after {o.iterations_done}/{spec.ce.iterations} CE iterations{early}; "
+            f"realize: {o.status} after {o.iterations_done}/{self.batches} {what}{early}; "
             f"best cost {cost}; feasible {o.feasible}; wall time {o.wall_time_s:.1f} s\n"
             f"results: {o.run_dir / RESULT_FILE} (also {hist}, {CHECKPOINT_FILE}"
             + (f", {rrd}" if spec.logging.rerun else "")

@@ -149,6 +149,7 @@ class Planner:
         """Open the workers replans on ``budget`` will use (for the plan of ``source``, default
         the last result) before the first replan, so that it does not wait for them: a robot's
         planner is up before the robot moves. Returns the seconds it took."""
+        from realize.app.replan import one_search
         from realize.app.run_config import build_run_spec
 
         t0 = time.perf_counter()
@@ -157,7 +158,7 @@ class Planner:
             set_key(cfg, k, v)
         cfg["replan_from"], cfg["resume"] = None, None
         cfg["replan"] = {"action": None, "state": None, "warm": True}
-        spec = build_run_spec(cfg)
+        spec = build_run_spec(one_search(cfg))
         self._pool(spec, [spec.task], self._source(source) / "replans" / "workers")
         return time.perf_counter() - t0
 

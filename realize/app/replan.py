@@ -36,7 +36,7 @@ from realize.world.state import SceneState, load_state
 from realize.tasks.spec import TaskSpec
 from realize.tasks.suffix import check_suffix_start, task_suffix
 
-__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "read_replan", "saved_config",
+__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "one_search", "read_replan", "saved_config",
            "check_no_replan", "REFUSED_OVERRIDES"]
 
 # overrides a replan refuses: they would change the plan, not the world or the search
@@ -128,7 +128,7 @@ def replan_config(current: Mapping[str, Any], overrides: Sequence[str]) -> dict[
     out["replan_from"] = run_dir
     out["replan"] = current.get("replan")
     out["resume"] = None
-    return out
+    return one_search(out)
 
 
 def replan_overrides_config(base: Mapping[str, Any], run_dir: str, changes: Sequence[str], *, action: int,
@@ -152,7 +152,16 @@ def replan_overrides_config(base: Mapping[str, Any], run_dir: str, changes: Sequ
     out["replan_from"] = str(run_dir)
     out["replan"] = {"action": action, "state": str(state), "warm": bool(warm)}
     out["resume"] = None
-    return out
+    return one_search(out)
+
+
+def one_search(cfg: dict[str, Any]) -> dict[str, Any]:
+    """``cfg`` with stitched segments off (``stitch.enabled``): a replan searches the remaining
+    actions with one cross-entropy search, warm-started from the run's final distribution, also
+    where the run itself was stitched (``levers=stitched``)."""
+    if isinstance(cfg.get("stitch"), Mapping):
+        cfg["stitch"] = {**cfg["stitch"], "enabled": False}
+    return cfg
 
 
 def read_replan(replan_from: str, d: Any, task: TaskSpec, top_k: int) -> tuple[TaskSpec, ReplanSpec]:

@@ -3,7 +3,7 @@
 What it does: ``build_run_spec(d)`` takes the resolved config of one run (a plain mapping with
 the groups ``task``, ``scene``, ``robot``, ``sim``, ``controller``, ``ce``, ``logging``, ``workers``, ``validation`` and
 the top-level keys ``seed``, ``device``, ``resume``, ``task_file``, ``task_origin``, ``warm_start``, ``replan_from``,
-``replan``) and returns a
+``replan``, ``stitch``) and returns a
 ``RunSpec`` of validated objects (``TaskSpec`` (a replan's: the remaining actions, ``realize.app.replan``), ``GeometryCfg``/``SceneGeometry``, ``SimSettings``, ``RolloutConfig``,
 ``CEConfig``, ``LoggingSettings``, ``PlannerSettings`` and the ``Placement``: where the run's
 tensors live and the search's dtype). Every problem raises ``realize.config.ConfigError`` with
@@ -36,6 +36,7 @@ import torch
 
 from realize.search.budget import HalvingBudget, plan_budget
 from realize.search.ce.config import CEConfig
+from realize.search.stitched import StitchConfig
 from realize.config import ConfigError, Settings, as_mapping, check_unknown, setting
 from realize.app.task_plans import (PlannerSettings, TaskOrigin, build_task_candidates, check_halving_budget,
                                 load_task_file)
@@ -51,11 +52,11 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
     from realize.tasks.spec import TaskSpec
     from realize.tasks.worlds import Worlds
 
-__all__ = ["LoggingSettings", "ValidationSettings", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
+__all__ = ["LoggingSettings", "ValidationSettings", "StitchSettings", "read_stitch", "stitch_refusal", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",
-                            "replan")
+                            "replan", "stitch")
 DEVICES = ("auto", "cpu", "cuda")
 _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
 _BACKEND_DEVICE = {"cpu": "cpu", "gpu": "cuda"}
@@ -77,6 +78,53 @@ class LoggingSettings(Settings):
     rrd: str = setting("realize.rrd", check=_check_rrd)  # its file name (relative to the run directory)
     record: bool = True  # record sample trajectories in the rollout (rerun scene view, figure files)
     progress: bool = True  # tqdm progress bar per CE iteration
+
+
+@dataclass
+class StitchSettings(Settings):
+    """The run config's ``stitch`` node: search the plan as two segments realized side by side,
+    then confirmed whole (``realize.search.stitched``; ``levers=stitched`` turns it on)."""
+
+    config_key = "stitch"
+
+    enabled: bool = False
+    split: int | None = setting(None, ge=1)  # the second segment's first action (None: after the first grasp)
+    n_prefix: int | None = setting(None, ge=1)  # prefix rows per round (None: ce.n_envs)
+    n_suffix: int | None = setting(None, ge=1)  # suffix rows per round (None: ce.n_envs)
+    pool: int = setting(10, ge=1)  # the cheapest prefixes whose end states the suffix rows start from
+    confirm: int = setting(10, ge=1)  # the cheapest stitched plans realized whole at the end (at most ce.n_envs)
+
+
+def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, refusal: str | None) -> StitchConfig | None:
+    """The stitched search's budget (``None``: off): rounds are ``ce.iterations``, the rows at
+    most ``ce.n_envs`` (the scene's copies; ``confirm`` is capped there), the split checked on ``task``. ``refusal``: what
+    of the run a stitched search cannot do (a ``ConfigError`` when it is on)."""
+    from realize.tasks.split import default_split, split_task
+
+    st = StitchSettings.from_mapping(d if d is not None else {})
+    if not st.enabled:
+        return None
+    if refusal is not None:
+        raise ConfigError(f"stitch.enabled: stitched segments cannot run {refusal}")
+    n_prefix, n_suffix = st.n_prefix or ce.n_envs, st.n_suffix or ce.n_envs
+    for name, v in (("n_prefix", n_prefix), ("n_suffix", n_suffix)):
+        if v > ce.n_envs:
+            raise ConfigError(f"stitch.{name} = {v} is more than ce.n_envs = {ce.n_envs}, the scene's copies: "
+                              f"raise ce.n_envs or lower stitch.{name}")
+    split = default_split(task) if st.split is None else st.split
+    split_task(task, split)  # refuses a bad cut before anything runs
+    return StitchConfig(n_prefix, n_suffix, ce.iterations, st.pool, min(st.confirm, ce.n_envs), split)
+
+
+def stitch_refusal(ce: CEConfig, top_k: int, replan: bool, warm_start: bool) -> str | None:
+    """What of a run a stitched search cannot do, or None."""
+    for bad, what in ((ce.replicas > 1, "a robust search (ce.replicas > 1)"),
+                      (ce.knn_robust > 0, "a kNN-ranked search (ce.knn_robust > 0)"),
+                      (top_k > 1, "several candidate plans (task.planner.top_k > 1)"),
+                      (replan, "a replan (replan_from)"), (warm_start, "a warm start (warm_start)")):
+        if bad:
+            return what
+    return None
 
 
 @dataclass
@@ -147,6 +195,7 @@ class RunSpec:
     worlds: Worlds | None = None
     # replan_from: the plan's remaining actions from a given state (realize.app.replan); None otherwise
     replan: ReplanSpec | None = None
+    stitch: StitchConfig | None = None  # stitched segments (realize.search.stitched); None: one CE over the plan
 
     @property
     def start(self) -> SceneState | None:
@@ -244,7 +293,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     d = as_mapping(d, "config")
     check_unknown(d, list(TOP_LEVEL_KEYS), "config")
     check_retired(d)  # a saved run's are dropped when it is read (realize.run_dir.upgrade)
-    top = {k: v for k, v in d.items() if k not in GROUPS and k not in ("replan", "task_origin")}
+    top = {k: v for k, v in d.items() if k not in GROUPS and k not in ("replan", "task_origin", "stitch")}
     for k in ("resume", "task_file", "warm_start", "replan_from"):
         if top.get(k) is not None:
             top[k] = str(top[k])
@@ -308,6 +357,8 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     if planner.top_k > 1:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)
 
+    stitch = read_stitch(d.get("stitch"), ce, task, stitch_refusal(ce, planner.top_k, replan is not None,
+                                                                    keys.warm_start is not None))
     rollout = _read_rollout(d.get("controller"))
     robot.fabric_exclusions(rollout.fabric.collision_exclude, [s.name for s in robot.spheres()])  # at the edge
     return RunSpec(
@@ -330,4 +381,5 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         warm_start=keys.warm_start,
         replan=replan,
         validation=ValidationSettings.from_mapping(d.get("validation", {"replicas": 0})),
+        stitch=stitch,
     )

@@ -1,11 +1,11 @@
 """Stitched segments on a run's workers: the plan cut in two, realized side by side, confirmed whole.
 
-What it does:
-  * ``split_task(task, split)``: the prefix task (actions ``0 .. split - 1``, no goal, no final
-    cost: its cost counts its own control steps), the suffix task (``realize.tasks.suffix``:
-    actions ``split ..``, the goal and the final cost) and the full layout's columns of each; a
-    parameter both segments bind (a plan that comes back to a region) is one ``ConfigError``;
-  * ``default_split(task)``: the action after the plan's first grasp (the seed's example);
+What it does (the cut itself is ``realize.tasks.split``'s ``split_task`` and ``default_split``,
+importable from here too):
+  * ``run_segments(spec)`` and ``stitched_doc``: a run with ``stitch.enabled``: its three tasks,
+    history keys and ``StitchedSearch`` (``realize.app.assembly`` runs it in the search loop:
+    ``history.npz`` holds the confirmation, ``history_c1.npz`` the prefix's rounds,
+    ``history_c2.npz`` the suffix's), and what its ``result.json`` says of the segments;
   * ``stitched_search(spec, stitch)``: opens the run's workers with the three tasks (whole plan,
     prefix, suffix), runs ``realize.search.stitched.StitchedSearch`` on them (the prefix's rows
     capture their end states, ``PlanRealizer.rollout(capture_end=True)``; the suffix's rows each
@@ -15,9 +15,10 @@ What it does:
 On a CPU host the two segments run as two calls on the same workers, one after the other: each
 worker realizes its shards one after another anyway, so a batch holding both segments would cost
 the same.
-What it doesn't: write a run directory or a checkpoint (a research lever measured by
-``scripts/bench_stitch.py``, not a run mode yet), or run a robust, kNN-ranked, top-k or replan
-search (refused).
+What it doesn't: write a run directory or a checkpoint (``scripts/bench_stitch.py`` measures the
+search this way; a run with ``stitch.enabled`` goes through ``realize.app.assembly`` and the
+search loop like any run), or run a robust, kNN-ranked, top-k, replan or warm-started search
+(refused).
 """
 
 from __future__ import annotations
@@ -30,53 +31,50 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from realize.app.run_config import RunSpec
+from realize.app.run_config import RunSpec, stitch_refusal
 from realize.config import ConfigError
 from realize.search.protocol import EvalResult
-from realize.search.stitched import StitchConfig, StitchedIteration, StitchedResult, StitchedSearch
-from realize.tasks.goal_spec import GoalSpec
-from realize.tasks.spec import TaskSpec, task_for_plan
-from realize.tasks.suffix import part_columns, task_suffix
+from realize.run_dir.names import HISTORY_FILE, candidate_file
+from realize.run_dir.summaries import IterationSummary
+from realize.search.stitched import (PREFIX, SEGMENT_NAMES, SUFFIX, StitchConfig, StitchedIteration, StitchedResult,
+                                     StitchedSearch)
+from realize.tasks.spec import TaskSpec
+from realize.tasks.split import default_split, split_task
 
-__all__ = ["split_task", "default_split", "stitched_search", "validate_plan", "SEGMENTS"]
+__all__ = ["split_task", "default_split", "run_segments", "stitched_doc", "stitched_search", "validate_plan", "SEGMENTS"]
 
 SEGMENTS = ("full", "prefix", "suffix")  # the pool's candidate index of each segment's task
 
 
-def split_task(task: TaskSpec, split: int) -> tuple[TaskSpec, TaskSpec, list[int], list[int]]:
-    """(prefix task, suffix task, prefix columns, suffix columns) of ``task`` cut before ``split``."""
-    n = task.n_actions
-    if isinstance(split, bool) or not isinstance(split, int) or not 1 <= split < n:
-        actions = "; ".join(f"{i}: {a}" for i, a in enumerate(task.plan))
-        raise ConfigError(f"stitch.split = {split!r} is invalid: the second segment's first action, 1 .. {n - 1} "
-                          f"({actions})")
-    prefix = task_for_plan(dataclasses.replace(task, goal=GoalSpec(), final_cost=0.0), task.plan[:split])
-    prefix.name = f"{task.name}[:{split}]"
-    suffix = task_suffix(task, split, key="stitch.split")
-    shared = sorted(set(prefix.layout.names) & set(suffix.layout.names))
-    if shared:
-        raise ConfigError(f"stitch.split = {split}: parameters {shared} are bound on both sides of the cut; "
-                          "cut where no parameter (or goal region) is used on both sides")
-    return prefix, suffix, part_columns(task, prefix), part_columns(task, suffix)
+def run_segments(spec: RunSpec) -> tuple[list[TaskSpec], list[int | None], StitchedSearch]:
+    """A run with ``stitch.enabled``: its tasks (the whole plan, the prefix, the suffix: the
+    workers' tasks 0, 1, 2), the history keys of their batches (None, PREFIX, SUFFIX) and the
+    searcher (its pool's states read back from a checkpoint as ``SceneState``)."""
+    from realize.world.state import SceneState
+
+    st = spec.stitch
+    assert st is not None and st.split is not None  # (resolved by build_run_spec)
+    prefix, suffix, pcols, scols = split_task(spec.task, st.split)
+    search = StitchedSearch(spec.task.layout, prefix.layout, suffix.layout, pcols, scols, spec.ce, st,
+                            device=spec.placement.device, read_state=SceneState.from_json)
+    return [spec.task, prefix, suffix], [None, PREFIX, SUFFIX], search
 
 
-def default_split(task: TaskSpec) -> int:
-    """The action after the plan's first grasp; a ``ConfigError`` where none is followed by another."""
-    for i, a in enumerate(task.plan[:-1]):
-        if a.template == "grasp":
-            return i + 1
-    raise ConfigError(f"stitch.split: the plan of {task.source} has no grasp followed by another action; give "
-                      "the second segment's first action (0-based)")
+def stitched_doc(st: StitchConfig, tasks: Sequence[TaskSpec], records: Sequence[IterationSummary]) -> dict[str, Any]:
+    """``result.json["stitched"]``: the cut, the budget, each batch's segment (the top level's
+    per-iteration series hold every batch, in order) and each segment's history file."""
+    names = {k: SEGMENT_NAMES[k] for k in (None, PREFIX, SUFFIX)}
+    return {"split": st.split, "prefix": tasks[1].describe(), "suffix": tasks[2].describe(),
+            "n_prefix": st.n_prefix, "n_suffix": st.n_suffix, "rounds": st.iterations, "pool": st.pool,
+            "confirm": st.confirm, "segment_per_iter": [names[r.candidate] for r in records],
+            "history": {names[k]: HISTORY_FILE if k is None else candidate_file(HISTORY_FILE, k)
+                        for k in (None, PREFIX, SUFFIX)}}
 
 
 def _check(spec: RunSpec) -> None:
-    ce = spec.ce
-    for bad, what in ((ce.replicas > 1, "a robust search (ce.replicas > 1)"),
-                      (ce.knn_robust > 0, "a kNN-ranked search (ce.knn_robust > 0)"),
-                      (spec.halving, "several candidate plans (task.planner.top_k > 1)"),
-                      (spec.replan is not None, "a replan (replan_from)")):
-        if bad:
-            raise ConfigError(f"stitched segments cannot run {what}")
+    refusal = stitch_refusal(spec.ce, spec.planner.top_k, spec.replan is not None, spec.warm_start is not None)
+    if refusal is not None:
+        raise ConfigError(f"stitched segments cannot run {refusal}")
 
 
 def stitched_search(spec: RunSpec, stitch: StitchConfig, split: int | None = None, *, log_dir: Path | None = None,
@@ -85,7 +83,7 @@ def stitched_search(spec: RunSpec, stitch: StitchConfig, split: int | None = Non
     from realize.app.workers.pool import open_pool
 
     _check(spec)
-    k = default_split(spec.task) if split is None else split
+    k = split if split is not None else stitch.split if stitch.split is not None else default_split(spec.task)
     prefix, suffix, pcols, scols = split_task(spec.task, k)
     pool = open_pool(spec, [spec.task, prefix, suffix], log_dir=log_dir,
                      n_envs=max(stitch.n_prefix, stitch.n_suffix, stitch.confirm))

@@ -3,7 +3,7 @@
 What it does: ``ProgressSink`` shows ``iterations done / planned`` on stderr; the postfix says
 the iteration's success share (with ``ce.prune``, how many rows were stopped as they could not be
 an elite: they count as not succeeded) and the best feasible cost so far of the plan searched (for
-a top-k run also which candidate ran, in which halving round). Off with ``logging.progress=false``.
+a top-k run also which candidate ran, in which halving round; for a stitched run which segment). Off with ``logging.progress=false``.
 Not critical.
 What it doesn't: log anything else (``logging`` does).
 """
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Mapping
 from typing import Any
 
 from realize.sinks.base import Iteration
@@ -26,8 +27,10 @@ class ProgressSink:
     critical = False
     wants_trajectories = False
 
-    def __init__(self, total: int, initial: int = 0, desc: str = "CE", enabled: bool = True) -> None:
+    def __init__(self, total: int, initial: int = 0, desc: str = "CE", enabled: bool = True,
+                 labels: Mapping[int | None, str] | None = None) -> None:
         self.total, self.initial, self.desc, self.enabled = total, initial, desc, enabled
+        self.labels = labels  # a stitched search's: each batch's segment by its candidate key
         self.bar: Any = None
 
     def open(self) -> None:
@@ -38,7 +41,8 @@ class ProgressSink:
 
     def on_iteration(self, it: Iteration) -> None:
         rec = it.record
-        where = "" if it.batch.candidate is None else f"candidate {it.batch.candidate} (round {it.report.round}), "
+        c = it.batch.candidate
+        where = f"{self.labels[c]}, " if self.labels else "" if c is None else f"candidate {c} (round {it.report.round}), "
         cost = f"{rec.best_cost:.0f}" if math.isfinite(rec.best_cost) else "-"
         stopped = f" ({rec.n_stopped} stopped: could not be an elite)" if rec.n_stopped else ""
         screened = f", {rec.n_screened} screened out" if rec.n_screened else ""

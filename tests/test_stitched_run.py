@@ -1,0 +1,101 @@
+"""A run with stitched segments (``levers=stitched``: ``stitch.enabled``) through the search loop:
+its files and their bookkeeping (every confirmed plan is a feasible prefix row joined to a
+feasible suffix row, the best is the cheapest confirmed), its plan against the physics (replayed
+alone, the cube ends on table 2), a resume equal to the run without the interruption, and the
+config it refuses. Small batches, the seed task."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers import compose_config, plain
+from realize.app.replay import replay
+from realize.app.run import run
+from realize.app.run_config import build_run_spec
+from realize.config import ConfigError
+from realize.run_dir.directory import RunDir
+
+OVER = ["levers=stitched", "ce.n_envs=12", "stitch.n_prefix=8", "ce.n_elite=3", "ce.iterations=2", "seed=0",
+        "validation=off", "logging.progress=false", "logging.rerun=false", "logging.record=false"]
+SEGMENTS = ["prefix", "suffix", "prefix", "suffix", "full"]
+
+
+@pytest.fixture(scope="module")
+def stitched_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("stitched")
+    out = run(compose_config(*OVER), d)
+    assert out.status == "done" and out.feasible
+    return d
+
+
+def _rows(h: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    its = sorted({k.rsplit("_", 1)[1] for k in h if k.startswith("Z_")}, key=int)
+    return (np.concatenate([h[f"Z_{i}"] for i in its]), np.concatenate([h[f"cost_{i}"] for i in its]),
+            np.concatenate([h[f"feasible_{i}"] for i in its]))
+
+
+def test_a_stitched_run_writes_each_segment_and_returns_the_cheapest_confirmed_plan(stitched_run: Path) -> None:
+    doc = json.loads((stitched_run / "result.json").read_text())
+    st = doc["stitched"]
+    assert st["segment_per_iter"] == SEGMENTS and st["split"] == 2
+    assert st["prefix"] == "move_to(Table1), grasp(cube, Cube_g)"
+    assert doc["iterations_done"] == doc["iterations"] == 5
+    assert doc["n_envs_per_iter"][:4] == [8, 12, 8, 12] and 1 <= doc["n_envs_per_iter"][4] <= 10
+    rd = RunDir(stitched_run)
+    h1, h2 = rd.history_arrays(1), rd.history_arrays(2)
+    zp, _, okp = _rows(h1)
+    zs, _, oks = _rows(h2)
+    zf, cf, okf = _rows(rd.history_arrays())
+    assert len(zp) == 16 and len(zs) == 24 and len(zf) == doc["n_envs_per_iter"][4]
+    cols = doc["columns"]  # each segment's columns, by name, in the whole plan's
+    pc, sc = ([cols.index(str(c)) for c in h["column_names"]] for h in (h1, h2))
+    assert sorted(pc + sc) == list(range(len(cols)))
+    for z in zf:  # every confirmed plan: a feasible prefix row joined to a feasible suffix row
+        assert any(np.array_equal(z[pc], p) for p in zp[okp])
+        assert any(np.array_equal(z[sc], s) for s in zs[oks])
+    assert okf.any()
+    best = int(np.argmin(np.where(okf, cf, np.inf)))
+    assert doc["best_cost"] == float(cf[best]) and doc["best_z"] == zf[best].tolist()
+
+
+def test_the_stitched_runs_plan_puts_the_cube_on_table_2_replayed_alone(stitched_run: Path) -> None:
+    rep = replay(stitched_run, exact=True)
+    assert rep.feasible, rep.failure  # the goal: the cube on table 2, the robot at the exit
+    assert rep.matches  # its shard re-run: the search's cost, bit for bit
+
+
+def test_a_resumed_stitched_run_equals_the_uninterrupted_one(stitched_run: Path, tmp_path: Path) -> None:
+    def stop(i: int) -> None:
+        if i == 1:  # after the first round's suffix: the pool and the stitched plans are in the checkpoint
+            raise KeyboardInterrupt
+
+    cut = tmp_path / "cut"
+    assert run(compose_config(*OVER), cut, after_iteration=stop).interrupted
+    ckpt = json.loads((cut / "checkpoint.json").read_text())
+    assert ckpt["ce_state"]["kind"] == "stitched" and ckpt["ce_state"]["pool"]["states"]
+    run(compose_config("logging.progress=false", f"resume={cut}"), tmp_path / "hydra_dir")
+    a, b = (json.loads((d / "result.json").read_text()) for d in (stitched_run, cut))
+    for k in ("best_cost", "best_z", "n_feasible_per_iter", "best_cost_per_iter", "stitched"):
+        assert a[k] == b[k], k
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["stitch.n_prefix=20"], "stitch.n_prefix = 20 is more than ce.n_envs = 12"),
+    (["stitch.split=5"], "stitch.split = 5 is invalid"),
+    (["ce.replicas=2"], "cannot run a robust search"),
+    (["warm_start=nowhere"], "cannot run a warm start"),
+])
+def test_what_a_stitched_run_cannot_do_is_one_config_error(extra: list[str], needle: str) -> None:
+    with pytest.raises(ConfigError, match=needle):
+        build_run_spec(plain(OVER + extra))
+
+
+def test_levers_stitched_on_the_seed_task_runs_76_and_50_rows_in_38_copy_shards() -> None:
+    spec = build_run_spec(plain(["experiment=seed_paper"]))
+    assert spec.stitch is not None and (spec.ce.n_envs, spec.sim.shard_rows) == (76, 38)
+    assert (spec.stitch.n_prefix, spec.stitch.n_suffix, spec.stitch.split, spec.stitch.iterations) == (50, 76, 2, 10)
+    assert build_run_spec(plain(["experiment=seed_paper_exact"])).stitch is None
