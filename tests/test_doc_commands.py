@@ -82,8 +82,8 @@ def quickstart_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_python_quickstart_runs(quickstart_run: Path) -> None:
     """README.md's Python quickstart writes its run; docs/python_api.md shows the same code."""
     doc = json.loads((quickstart_run / RESULT_FILE).read_text())
-    # experiment=seed_paper searches stitched segments: 2 rounds of a prefix and a suffix, then the confirmation
-    assert doc["status"] == "done" and doc["iterations_done"] == doc["iterations"] == 5 and doc["feasible"]
+    # experiment=seed_paper searches stitched segments: 2 prefix batches, 1 suffix batch, the confirmation
+    assert doc["status"] == "done" and doc["iterations_done"] == doc["iterations"] == 4 and doc["feasible"]
     assert doc_block("docs/python_api.md", "python").text == doc_block("README.md", "python").text
 
 

@@ -78,10 +78,11 @@ def test_stitched_search_finds_the_joint_minimum_and_confirms_its_cost() -> None
     # the analytic suffix cost depends on the real start only: stitched == confirmed, plan for plan
     for stitched, confirmed, ok in res.confirmed:
         assert ok and math.isclose(stitched, confirmed, rel_tol=1e-9)
-    # each round a prefix, then a suffix from the pool it joined; the confirmation realizes
-    # cfg.confirm whole plans at the end
-    assert ev.calls == [("prefix", 60), ("suffix", 60)] * cfg.iterations + [("full", cfg.confirm)]
-    assert res.samples == 60 * cfg.iterations + 60 * cfg.iterations + cfg.confirm
+    # each round a prefix, then (from round 1 on) a suffix from the pool of the rounds before;
+    # the confirmation realizes cfg.confirm whole plans at the end
+    assert ev.calls == [("prefix", 60)] + [("prefix", 60), ("suffix", 60)] * (cfg.iterations - 1) + \
+        [("full", cfg.confirm)]
+    assert res.samples == 60 * cfg.iterations + 60 * (cfg.iterations - 1) + cfg.confirm
     assert [h.pool for h in res.history] == [5] * cfg.iterations
 
 
@@ -105,13 +106,13 @@ def test_a_split_that_does_not_cover_the_columns_is_refused() -> None:
     full, pre, suf = _layouts()
     with pytest.raises(ValueError, match="split the plan's 5 columns"):
         StitchedSearch(full, pre, suf, [0, 1], [1, 2, 3], CEConfig(n_envs=10, n_elite=2), StitchConfig())
-    with pytest.raises(ValueError, match="stitch.iterations = 0 is invalid"):
-        StitchConfig(iterations=0)
+    with pytest.raises(ValueError, match="stitch.iterations must be >= 2"):
+        StitchConfig(iterations=1)
     with pytest.raises(ValueError, match="stitch.pool = 0"):
         StitchConfig(pool=0)
 
 
-@pytest.mark.parametrize("pause_after", [1, 2, 5])  # after a prefix, after a suffix, mid-search
+@pytest.mark.parametrize("pause_after", [1, 2, 3])  # round 0, a prefix whose rows wait for the suffix, a round
 def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_after: int) -> None:
     import json
 
@@ -135,8 +136,18 @@ def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_af
 def test_the_confirmation_is_a_given_batch_whose_best_is_the_searchs() -> None:
     s = _search(StitchConfig(n_prefix=20, n_suffix=20, iterations=2, pool=3, confirm=3))
     res = s.run(Evaluator())
-    assert s.done and s.ask() is None and s.iterations_done == 5
+    assert s.done and s.ask() is None and s.iterations_done == 4
     st = s.report().state
     assert st.best_feasible and st.best_cost == res.cost == min(c for _, c, ok in res.confirmed if ok)
     with pytest.raises(RuntimeError, match="after the stitched search is done"):
         s.tell(EvalResult(torch.zeros(3), torch.ones(3, dtype=torch.bool)))
+
+
+def test_a_smoothed_search_confirms_too() -> None:
+    """``ce.alpha < 1`` smooths each refit towards the last distribution; the confirmation's
+    search has none before its given batch, so it smooths towards that batch's own spread."""
+    full, pre, suf = _layouts()
+    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=3)
+    ce = CEConfig(n_envs=20, n_elite=5, iterations=3, seed=0, alpha=0.7)
+    res = StitchedSearch(full, pre, suf, [0, 1], [2, 3, 4], ce, cfg).run(Evaluator())
+    assert res.feasible and res.confirmed

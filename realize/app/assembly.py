@@ -368,6 +368,9 @@ class _Assembly:
         cost = f"{o.best_cost:.0f}" if math.isfinite(o.best_cost) else "none"
         if spec.halving:
             hist, rrd = candidate_file(HISTORY_FILE, 0) + ", ...", candidate_file(spec.logging.rrd, 0) + ", ..."
+        elif spec.stitch is not None:  # the confirmation, then the prefix's and the suffix's batches
+            hist, rrd = (", ".join([f, *(candidate_file(f, k) for k in self.keys[1:])])
+                         for f in (HISTORY_FILE, spec.logging.rrd))
         else:
             hist, rrd = HISTORY_FILE, spec.logging.rrd
         early, what = "", "CE iterations" if spec.stitch is None else "batches of a stitched search"

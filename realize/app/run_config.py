@@ -111,6 +111,9 @@ def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, refusal: str | None) -> St
         if v > ce.n_envs:
             raise ConfigError(f"stitch.{name} = {v} is more than ce.n_envs = {ce.n_envs}, the scene's copies: "
                               f"raise ce.n_envs or lower stitch.{name}")
+    if ce.iterations < 2:
+        raise ConfigError(f"ce.iterations = {ce.iterations}: a stitched search needs at least 2 rounds (the suffix "
+                          "starts from the prefixes of the rounds before it)")
     split = default_split(task) if st.split is None else st.split
     split_task(task, split)  # refuses a bad cut before anything runs
     return StitchConfig(n_prefix, n_suffix, ce.iterations, st.pool, min(st.confirm, ce.n_envs), split)

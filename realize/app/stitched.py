@@ -43,7 +43,7 @@ from realize.tasks.split import default_split, split_task
 
 __all__ = ["split_task", "default_split", "run_segments", "stitched_doc", "stitched_search", "validate_plan", "SEGMENTS"]
 
-SEGMENTS = ("full", "prefix", "suffix")  # the pool's candidate index of each segment's task
+SEGMENTS = tuple(SEGMENT_NAMES[k] for k in (None, PREFIX, SUFFIX))  # the workers' task index of each segment
 
 
 def run_segments(spec: RunSpec) -> tuple[list[TaskSpec], list[int | None], StitchedSearch]:
@@ -63,12 +63,11 @@ def run_segments(spec: RunSpec) -> tuple[list[TaskSpec], list[int | None], Stitc
 def stitched_doc(st: StitchConfig, tasks: Sequence[TaskSpec], records: Sequence[IterationSummary]) -> dict[str, Any]:
     """``result.json["stitched"]``: the cut, the budget, each batch's segment (the top level's
     per-iteration series hold every batch, in order) and each segment's history file."""
-    names = {k: SEGMENT_NAMES[k] for k in (None, PREFIX, SUFFIX)}
     return {"split": st.split, "prefix": tasks[1].describe(), "suffix": tasks[2].describe(),
             "n_prefix": st.n_prefix, "n_suffix": st.n_suffix, "rounds": st.iterations, "pool": st.pool,
-            "confirm": st.confirm, "segment_per_iter": [names[r.candidate] for r in records],
-            "history": {names[k]: HISTORY_FILE if k is None else candidate_file(HISTORY_FILE, k)
-                        for k in (None, PREFIX, SUFFIX)}}
+            "confirm": st.confirm, "segment_per_iter": [SEGMENT_NAMES[r.candidate] for r in records],
+            "history": {name: HISTORY_FILE if k is None else candidate_file(HISTORY_FILE, k)
+                        for k, name in SEGMENT_NAMES.items()}}
 
 
 def _check(spec: RunSpec) -> None:

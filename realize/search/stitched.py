@@ -9,19 +9,25 @@ batches are segments (``Batch.candidate``: ``PREFIX``, ``SUFFIX``, or ``None`` f
 plan). Each of ``iterations`` rounds:
   * a prefix batch: ``n_prefix`` samples of the prefix's own cross-entropy search
     (``CrossEntropyOptimizer`` over the prefix's columns, ranked by the prefix's cost), realized
-    from the task's start with ``capture_end``; each feasible row's end state joins a pool of the
-    ``pool`` cheapest prefixes found so far (its columns, its cost, its state);
-  * a suffix batch (once the pool holds a prefix): ``n_suffix`` samples of the suffix's search,
-    row i realized from pool entry ``i mod len(pool)``'s end state (``Batch.starts``), ranked by
-    the suffix's own cost (so pruning a suffix row by its own cost is exact); every feasible
-    suffix row is a stitched plan of cost prefix + suffix.
+    from the task's start with ``capture_end``;
+  * from round 1 on, a suffix batch: ``n_suffix`` samples of the suffix's search, row i realized
+    from pool entry ``i mod len(pool)``'s end state (``Batch.starts``), ranked by the suffix's own
+    cost (so pruning a suffix row by its own cost is exact); every feasible suffix row is a
+    stitched plan of cost prefix + suffix;
+  * then the round's feasible prefixes join the pool of the ``pool`` cheapest prefixes found so
+    far (their columns, costs and end states). The suffix of round r thus starts from rounds
+    0 .. r - 1's prefixes, and the last round's prefix batch feeds no suffix: kept so that the
+    search is the one measured (docs/results.md, "Stitched segments"), and so that every suffix
+    batch follows a prefix batch on the workers (a restore after a suffix rollout is not
+    history-free there); dropping it would save about 5 % of the time.
 Then one confirmation batch: the ``confirm`` cheapest stitched plans realized whole from the
 task's start (a third ``CrossEntropyOptimizer``, over the whole layout, ranks them:
 ``CrossEntropyOptimizer.give``); its best is the search's (``report().state``). A stitched cost is
 a guess (a restored state starts at rest, its contacts made anew), the confirmed cost the plan's.
 ``run(evaluate)`` drives the same ask/tell without a run directory (tests, ``scripts/bench_stitch.py``).
-``state_dict`` holds the three searches, the pool (its states through their ``to_json``; a
-``read_state`` given to the constructor reads them back) and the stitched plans kept.
+``state_dict`` holds the three searches, the pool and the round's prefixes waiting to join it
+(states through their ``to_json``; a ``read_state`` given to the constructor reads them back)
+and the stitched plans kept.
 
 What it doesn't: simulate or capture states (``realize.app.stitched``, ``realize.app.loop``),
 pick the split, or rank a prefix by the suffixes it allows (a cheaper grasp that makes the place
@@ -76,11 +82,14 @@ class StitchConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"stitch.{name} = {v!r} is invalid: expected an integer >= 1")
+        if self.iterations < 2:
+            raise ValueError("stitch.iterations must be >= 2: the suffix starts from the prefixes of round 0")
 
     @property
     def batches(self) -> int:
-        """Batches of a whole search: a prefix and a suffix per round, then the confirmation."""
-        return 2 * self.iterations + 1
+        """Batches of a whole search: a prefix per round, a suffix per round after the first, then
+        the confirmation."""
+        return 2 * self.iterations
 
 
 @dataclass
@@ -149,7 +158,7 @@ class StitchedSearch:
             return CrossEntropyOptimizer(lay, c, device=device)
 
         self.pre = opt(prefix, cfg.n_prefix, ce.seed)
-        self.suf = opt(suffix, cfg.n_suffix, ce.seed + 1)
+        self.suf = opt(suffix, cfg.n_suffix, ce.seed + 1, iterations=cfg.iterations - 1)
         self.full = opt(layout, cfg.confirm, ce.seed + 2, iterations=1)
         self.dtype = ce.torch_dtype
         self.pool_z = torch.zeros(0, prefix.dim, dtype=self.dtype)
@@ -160,6 +169,8 @@ class StitchedSearch:
         self.round, self.phase, self.batches = 0, "prefix", 0  # phase: prefix | suffix | confirm | done
         self._src: Tensor | None = None  # the pending suffix batch's pool entries
         self._Z: Tensor | None = None  # the pending batch's samples (CPU)
+        # this round's feasible prefixes, which join the pool once the round's suffix has run
+        self.fresh_z, self.fresh_cost, self.fresh_state = self.pool_z, self.pool_cost, []
 
     # ---- the Searcher protocol -------------------------------------------------------------
 
@@ -199,8 +210,12 @@ class StitchedSearch:
         if self.phase == "prefix":
             assert self._Z is not None
             rec = self.pre.tell(result, eval_time=eval_time)
-            self._add_to_pool(self._Z, result)
-            self.phase = "suffix" if self.pool_state else self._next_round()
+            self._fresh(self._Z, result)
+            if self.pool_state and not self.suf.done:  # the suffix starts from earlier rounds' prefixes
+                self.phase = "suffix"
+            else:
+                self._join_fresh()
+                self.phase = self._next_round()
         elif self.phase == "suffix":
             assert self._src is not None
             n = self._src.shape[0]
@@ -210,6 +225,7 @@ class StitchedSearch:
             for i in torch.nonzero(r.feasible).flatten().tolist():
                 self._keep((float(total[i]), self.pool_z[self._src[i]].clone(), self._Z[i].to(self.dtype).clone()))
             self._src = None
+            self._join_fresh()
             self.phase = self._next_round()
         elif self.phase == "confirm":
             rec = self.full.tell(result, eval_time=eval_time)
@@ -239,6 +255,8 @@ class StitchedSearch:
             "prefix": self.pre.state_dict(), "suffix": self.suf.state_dict(), "full": self.full.state_dict(),
             "pool": {"z": self.pool_z.tolist(), "cost": self.pool_cost.tolist(),
                      "states": [_state_json(s) for s in self.pool_state]},
+            "fresh": {"z": self.fresh_z.tolist(), "cost": self.fresh_cost.tolist(),
+                      "states": [_state_json(s) for s in self.fresh_state]},
             "stitched": [[c, zp.tolist(), zs.tolist()] for c, zp, zs in self.stitched],
         }
 
@@ -250,17 +268,19 @@ class StitchedSearch:
             self.pre.load_state_dict(d["prefix"])
             self.suf.load_state_dict(d["suffix"])
             self.full.load_state_dict(d["full"])
-            pool = d["pool"]
-            self.pool_z = torch.tensor(pool["z"], dtype=self.dtype).reshape(-1, self.pool_z.shape[1])
-            self.pool_cost = torch.tensor(pool["cost"], dtype=self.dtype).reshape(-1)
-            self.pool_state = [self.read_state(s) for s in pool["states"]]
+            dim = self.pool_z.shape[1]
+            (self.pool_z, self.pool_cost, self.pool_state), (self.fresh_z, self.fresh_cost, self.fresh_state) = (
+                (torch.tensor(p["z"], dtype=self.dtype).reshape(-1, dim), torch.tensor(p["cost"], dtype=self.dtype
+                                                                                       ).reshape(-1),
+                 [self.read_state(x) for x in p["states"]]) for p in (d["pool"], d["fresh"]))
             self.stitched = [(float(c), torch.tensor(zp, dtype=self.dtype), torch.tensor(zs, dtype=self.dtype))
                              for c, zp, zs in d["stitched"]]
             self.round, self.phase, self.batches = int(d["round"]), str(d["phase"]), int(d["batches"])
         except (KeyError, TypeError, ValueError, RuntimeError) as e:
             raise ValueError(f"malformed stitched state ({type(e).__name__}: {e})") from None
         if self.phase not in ("prefix", "suffix", "confirm", "done") or not (
-                len(self.pool_state) == len(self.pool_cost) == self.pool_z.shape[0]):
+                len(self.pool_state) == len(self.pool_cost) == self.pool_z.shape[0]
+                and len(self.fresh_state) == len(self.fresh_cost) == self.fresh_z.shape[0]):
             raise ValueError("malformed stitched state (phase / pool)")
         self._src = None
 
@@ -326,16 +346,26 @@ class StitchedSearch:
         self.stitched.insert(k, plan)
         del self.stitched[self.cfg.confirm:]
 
-    def _add_to_pool(self, Z: Tensor, result: EvalResult) -> None:
-        """The ``pool`` cheapest feasible prefixes so far (ties: the older first, then row order)."""
+    def _fresh(self, Z: Tensor, result: EvalResult) -> None:
+        """This round's feasible prefixes: their columns, costs and end states."""
         r = result.to_cpu(Z.shape[0], self.dtype)
         ok = torch.nonzero(r.feasible).flatten()
         ends = result.end_states
         if ends is None and len(ok):
             raise ValueError("the prefix's evaluation returned no end states")
-        z = torch.cat([self.pool_z, Z[ok].to(self.dtype)])
-        cost = torch.cat([self.pool_cost, r.cost[ok]])
-        states = self.pool_state + [ends[i] for i in ok.tolist()] if len(ok) else self.pool_state
+        self.fresh_z, self.fresh_cost = Z[ok].to(self.dtype), r.cost[ok]
+        self.fresh_state = [ends[i] for i in ok.tolist()] if ends is not None else []
+
+    def _join_fresh(self) -> None:
+        """The ``pool`` cheapest feasible prefixes so far (ties: the older first, then row order)."""
+        z, cost = torch.cat([self.pool_z, self.fresh_z]), torch.cat([self.pool_cost, self.fresh_cost])
+        states = self.pool_state + self.fresh_state
         keep = torch.sort(cost, stable=True).indices[:self.cfg.pool]
         self.pool_z, self.pool_cost = z[keep], cost[keep]
         self.pool_state = [states[i] for i in keep.tolist()]
+        self.fresh_z, self.fresh_cost, self.fresh_state = self.fresh_z[:0], self.fresh_cost[:0], []
+
+    def _add_to_pool(self, Z: Tensor, result: EvalResult) -> None:
+        """``Z``'s feasible rows join the pool now (``_fresh`` then ``_join_fresh``)."""
+        self._fresh(Z, result)
+        self._join_fresh()

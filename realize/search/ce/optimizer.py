@@ -199,7 +199,7 @@ class CrossEntropyOptimizer:
             order = robust_order(order, robust, r.feasible)
 
         elite, refit = choose_elites(order, int(rr.feasible.sum()), cfg)
-        if source == "uniform":
+        if source == "uniform" or (source == "given" and s.init_mean is None):  # (what a first refit smooths from)
             s.init_mean = Z.mean(0)
             s.init_std = Z.std(0, correction=0)
         if refit != "kept":
