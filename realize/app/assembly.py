@@ -78,7 +78,6 @@ log = logging.getLogger("realize")
 PoolSource = Callable[[RunSpec, Sequence[Any], Path], RolloutPool]
 
 
-
 @dataclass
 class RunOutcome:
     """What ``run`` returns: where the results are and how the run ended."""

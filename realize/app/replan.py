@@ -36,8 +36,8 @@ from realize.world.state import SceneState, load_state
 from realize.tasks.spec import TaskSpec
 from realize.tasks.suffix import check_suffix_start, task_suffix
 
-__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "one_search", "read_replan", "saved_config",
-           "check_no_replan", "REFUSED_OVERRIDES"]
+__all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_config", "one_search", "read_replan",
+           "saved_config", "check_no_replan", "REFUSED_OVERRIDES"]
 
 # overrides a replan refuses: they would change the plan, not the world or the search
 REFUSED_OVERRIDES = ("task", "task_file", "task.plan", "task.goal", "task.planner", "task.name", "experiment",

@@ -52,7 +52,8 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
     from realize.tasks.spec import TaskSpec
     from realize.tasks.worlds import Worlds
 
-__all__ = ["LoggingSettings", "ValidationSettings", "StitchSettings", "read_stitch", "stitch_refusal", "Placement", "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
+__all__ = ["LoggingSettings", "ValidationSettings", "StitchSettings", "read_stitch", "stitch_refusal", "Placement",
+           "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",

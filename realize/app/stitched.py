@@ -41,7 +41,8 @@ from realize.search.stitched import (PREFIX, SEGMENT_NAMES, SUFFIX, StitchConfig
 from realize.tasks.spec import TaskSpec
 from realize.tasks.split import default_split, split_task
 
-__all__ = ["split_task", "default_split", "run_segments", "stitched_doc", "stitched_search", "validate_plan", "SEGMENTS"]
+__all__ = ["split_task", "default_split", "run_segments", "stitched_doc", "stitched_search", "validate_plan",
+           "SEGMENTS"]
 
 SEGMENTS = tuple(SEGMENT_NAMES[k] for k in (None, PREFIX, SUFFIX))  # the workers' task index of each segment
 
