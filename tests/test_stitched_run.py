@@ -20,7 +20,7 @@ from realize.config import ConfigError
 from realize.run_dir.directory import RunDir
 
 OVER = ["levers=stitched", "ce.n_envs=12", "stitch.n_prefix=8", "ce.n_elite=3", "ce.iterations=3", "seed=0",
-        "validation=off", "logging.progress=false", "logging.rerun=false", "logging.record=false"]
+        "validation=off", "logging.progress=false", "logging.rerun=false"]
 # round 0's prefix, rounds 1 and 2's prefix and suffix, the confirmation
 SEGMENTS = ["prefix", "prefix", "suffix", "prefix", "suffix", "full"]
 
@@ -61,6 +61,23 @@ def test_a_stitched_run_writes_each_segment_and_returns_the_cheapest_confirmed_p
     assert okf.any()
     best = int(np.argmin(np.where(okf, cf, np.inf)))
     assert doc["best_cost"] == float(cf[best]) and doc["best_z"] == zf[best].tolist()
+
+
+def test_the_paper_figures_draw_a_stitched_run(stitched_run: Path, tmp_path: Path) -> None:
+    """Fig. 2 draws the confirmation's whole plans (the run's only whole-plan batch); Fig. 3 each
+    parameter's distribution per round from its segment's history: the prefix's from round 0,
+    the suffix's from round 1."""
+    from realize.figures.fig2 import fig2
+    from realize.figures.fig3 import fig3
+
+    assert (stitched_run / "scene.json").is_file() and (stitched_run / "trajectories_iter0.npz").is_file()
+    assert not (stitched_run / "trajectories_iter1.npz").exists()  # (a segment's batches are not whole plans)
+    png, _ = fig2(stitched_run, out_png=tmp_path / "fig2.png")
+    assert png.stat().st_size > 0
+    _, csv_path = fig3(stitched_run, out_png=tmp_path / "fig3.png")
+    rows = [line.split(",") for line in csv_path.read_text().splitlines()[1:]]
+    rounds = {p: sorted({int(r[1]) for r in rows if r[0] == p}) for p in {r[0] for r in rows}}
+    assert rounds["Table1"] == [0, 1, 2, 3] and rounds["Table2"] == [1, 2, 3]  # 3 rounds and the final refit
 
 
 def test_the_stitched_runs_plan_puts_the_cube_on_table_2_replayed_alone(stitched_run: Path) -> None:

@@ -264,8 +264,9 @@ class _Assembly:
             actions = {k: [str(a) for a in t.plan] for k, t in zip(self.keys, self.tasks)}
             sinks.append(RerunSink(plans, spec.geometry, padding, spec.ce.iterations, record=spec.logging.record,
                                    actions=actions, control_freq=spec.sim.control_freq, robot=spec.robot))
-        if not spec.halving and spec.stitch is None:  # the figures' readers assume one parameter layout
-            sinks.append(TrajectorySink(self.rd, spec.task.layout, spec.geometry, padding, record=spec.logging.record))
+        if not spec.halving:  # the figures' readers assume one parameter layout (a stitched run's: the whole plan)
+            sinks.append(TrajectorySink(self.rd, spec.task.layout, spec.geometry, padding, record=spec.logging.record,
+                                        only="all" if spec.stitch is None else None))
         desc = "CE top-k" if spec.halving else "CE stitched" if spec.stitch is not None else "CE"
         labels = None if spec.stitch is None else {k: SEGMENT_NAMES[k] for k in self.keys}
         sinks.append(ProgressSink(self.batches, self.start, desc, spec.logging.progress, labels))

@@ -5,7 +5,10 @@ ellipse (x, y of 3-D parameters) of the distribution each iteration sampled from
 iteration, and the final refit (dashed); it writes the PNG and a CSV of the ellipses.
 ``sampling_distributions(history)`` is that sequence of distributions from ``history.npz``'s
 arrays: iteration ``i`` sampled from the refit of iteration ``i - 1``; iteration 0 (uniform)
-is shown with the moments of its samples; a mixture's heaviest mode.
+is shown with the moments of its samples; a mixture's heaviest mode. A stitched run
+(``levers=stitched``) draws each parameter from its segment's history (``history_c1.npz``, the
+prefix; ``history_c2.npz``, the suffix, which starts in round 1), one colour per round
+(``stitched_distributions``).
 What it doesn't: draw the other modes of a mixture (they are in ``mode_mean``/``mode_std``).
 """
 
@@ -26,7 +29,7 @@ from realize.run_dir.directory import RunDir
 from realize.run_dir.names import HISTORY_FILE, SCENE_FILE
 from realize.tasks.topdown import ellipse_params, param_xy, planar_params, region_outlines
 
-__all__ = ["fig3", "sampling_distributions"]
+__all__ = ["fig3", "sampling_distributions", "stitched_distributions"]
 
 
 def sampling_distributions(history: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -48,6 +51,22 @@ def sampling_distributions(history: Mapping[str, np.ndarray]) -> tuple[np.ndarra
                 m[i], s[i] = Z.mean(axis=0), Z.std(axis=0)
         labels.append("final" if i == n_it else ("uniform" if uniform else "gaussian"))
     return m, s, labels
+
+
+def stitched_distributions(rd: RunDir, columns: list[str]) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``sampling_distributions`` of a stitched run over the whole plan's ``columns``: row ``r``
+    holds round ``r``'s prefix distribution and the suffix's of the same round (the suffix's
+    iteration ``r - 1``; none in round 0), the last row both final refits."""
+    (hp, hs) = (rd.history_arrays(k) for k in (1, 2))
+    if "mean" not in hp or "mean" not in hs:
+        raise FileNotFoundError(f"fig3: {rd.path} is a stitched run without both segments' histories")
+    mp, sp, labels = sampling_distributions(hp)
+    ms, ss, _ = sampling_distributions(hs)
+    mean, std = np.full((mp.shape[0], len(columns)), np.nan), np.full((mp.shape[0], len(columns)), np.nan)
+    for h, m, sd, first in ((hp, mp, sp, 0), (hs, ms, ss, mp.shape[0] - ms.shape[0])):
+        cols = [columns.index(str(c)) for c in h["column_names"].tolist()]
+        mean[first:, cols], std[first:, cols] = m, sd
+    return mean, std, labels
 
 
 def fig3(
@@ -76,7 +95,9 @@ def fig3(
     run_dir = Path(run_dir)
     out_png = Path(out_png) if out_png else run_dir / "figures" / "fig3.png"
     out_csv = Path(out_csv) if out_csv else out_png.with_suffix(".csv")
-    mean, std, kinds = sampling_distributions(history)
+    stitched = "stitched" in (rd.result_json() or {})
+    mean, std, kinds = (stitched_distributions(rd, layout.column_names) if stitched
+                        else sampling_distributions(history))
     n_rows = mean.shape[0] if show_final else mean.shape[0] - 1
     params = planar_params(layout)
     ncol = min(len(params), 3)
@@ -93,9 +114,9 @@ def fig3(
             ax.plot(o[:, 0], o[:, 1], color=REGION_EDGE, lw=1.0, zorder=1)
         los, his = [], []
         for i in range(n_rows):
-            if not np.isfinite(mean[i]).all() or not np.isfinite(std[i]).all():
-                continue
             c, h = ellipse_params(layout, p, mean[i], std[i], n_sigma)
+            if not np.isfinite(c).all() or not np.isfinite(h).all():  # (a stitched run's suffix in round 0)
+                continue
             final = kinds[i] == "final"
             ax.add_patch(Ellipse(c, 2 * h[0], 2 * h[1], fill=False, lw=1.8 if final else 1.3,
                                  ls="--" if final else "-", edgecolor=cmap(norm(i)), zorder=2 + i))
@@ -124,13 +145,15 @@ def fig3(
     ticks = sorted(set(range(0, n_rows, step)) | ({n_rows - 1} if n_rows else set()))
     cb.set_ticks(ticks, labels=["final" if show_final and t == n_rows - 1 else str(t) for t in ticks])
     cb.minorticks_off()
-    cb.set_label("CE iteration" + (" (final: the last refit, dashed)" if show_final else ""))
+    final = " (final: the last refit, dashed)" if show_final else ""
+    cb.set_label(("round" if stitched else "CE iteration") + final)
     handles = [Line2D([], [], color=REGION_EDGE, lw=1.0, label="parameter region"),
                Line2D([], [], color=cmap(norm(0)), lw=1.3, label=f"sampling distribution ({n_sigma:g} sigma)")]
     if show_final:
         handles.append(Line2D([], [], color=cmap(norm(n_rows - 1)), lw=1.8, ls="--", label="final refit"))
     fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
-    fig.suptitle(f"Sampling distribution per CE iteration ({n_sigma:g}-sigma ellipses)", fontsize=11)
+    per = "round of the stitched search" if stitched else "CE iteration"
+    fig.suptitle(f"Sampling distribution per {per} ({n_sigma:g}-sigma ellipses)", fontsize=11)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=DPI)
     plt.close(fig)
