@@ -10,7 +10,10 @@ throughput issue (feasible in every run, iteration-0 success 3-30 %, last-iterat
 >= 85 % mean, mean best cost no more than 2 % above the reference's).
 
 The runs take today's defaults, speed levers included (docs/results.md, "Speed levers"); the reference
-rows predate them: pass ``levers=exact`` as an override to compare like with like.
+rows predate them: pass ``levers=exact`` as an override to compare like with like. Today's default
+(``levers=stitched``) runs batches of two segments and a confirmation, so its per-iteration
+success shares (iteration 0, last) are those of a prefix batch and of the confirmation, not the
+fidelity checks' CE iterations: compare those with ``levers=exact``.
 
 What it doesn't: run seeds in parallel (timings would interfere) or judge timing across
 machines: compare only rows measured on the same machine.
