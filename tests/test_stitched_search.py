@@ -97,7 +97,8 @@ def test_the_pool_keeps_the_cheapest_feasible_prefixes_with_their_states() -> No
     Z = torch.tensor([[0.0, 0.0], [-2.0, 0.0], [0.5, -1.0], [1.0, 1.0], [0.4, -1.0], [2.0, 2.0]], dtype=torch.float64)
     ok = Z[:, 0] > -1.0
     ends = [tuple(z.tolist()) if f else None for z, f in zip(Z, ok)]
-    s._add_to_pool(Z, EvalResult(_prefix_cost(Z), ok, end_states=ends))
+    s._fresh(Z, EvalResult(_prefix_cost(Z), ok, end_states=ends))  # the round's prefixes, then into the pool
+    s._join_fresh()
     assert s.pool_z.tolist() == [[0.5, -1.0], [0.4, -1.0], [0.0, 0.0]]
     assert s.pool_state == [tuple(z) for z in s.pool_z.tolist()]
 

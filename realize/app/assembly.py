@@ -266,7 +266,7 @@ class _Assembly:
                                    actions=actions, control_freq=spec.sim.control_freq, robot=spec.robot))
         if not spec.halving:  # the figures' readers assume one parameter layout (a stitched run's: the whole plan)
             sinks.append(TrajectorySink(self.rd, spec.task.layout, spec.geometry, padding, record=spec.logging.record,
-                                        only="all" if spec.stitch is None else None))
+                                        whole_plans_only=spec.stitch is not None))
         desc = "CE top-k" if spec.halving else "CE stitched" if spec.stitch is not None else "CE"
         labels = None if spec.stitch is None else {k: SEGMENT_NAMES[k] for k in self.keys}
         sinks.append(ProgressSink(self.batches, self.start, desc, spec.logging.progress, labels))

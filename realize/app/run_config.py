@@ -52,8 +52,8 @@ if TYPE_CHECKING:  # the simulator modules are imported where used: `realize` st
     from realize.tasks.spec import TaskSpec
     from realize.tasks.worlds import Worlds
 
-__all__ = ["LoggingSettings", "ValidationSettings", "StitchSettings", "read_stitch", "stitch_refusal", "Placement",
-           "RunSpec", "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
+__all__ = ["LoggingSettings", "ValidationSettings", "StitchSettings", "read_stitch", "Placement", "RunSpec",
+           "build_run_spec", "TOP_LEVEL_KEYS", "DEVICES"]
 
 GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging", "workers", "validation")
 TOP_LEVEL_KEYS = GROUPS + ("seed", "device", "resume", "task_file", "task_origin", "warm_start", "replan_from",
@@ -96,17 +96,22 @@ class StitchSettings(Settings):
     confirm: int = setting(10, ge=1)  # the cheapest stitched plans realized whole at the end (at most ce.n_envs)
 
 
-def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, refusal: str | None) -> StitchConfig | None:
+def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, top_k: int = 1, replan: bool = False,
+                warm_start: bool = False) -> StitchConfig | None:
     """The stitched search's budget (``None``: off): rounds are ``ce.iterations``, the rows at
-    most ``ce.n_envs`` (the scene's copies; ``confirm`` is capped there), the split checked on ``task``. ``refusal``: what
-    of the run a stitched search cannot do (a ``ConfigError`` when it is on)."""
+    most ``ce.n_envs`` (the scene's copies; ``confirm`` is capped there), the split checked on
+    ``task``. A robust, kNN-ranked, top-k, replan or warm-started run is refused."""
     from realize.tasks.split import default_split, split_task
 
     st = StitchSettings.from_mapping(d if d is not None else {})
     if not st.enabled:
         return None
-    if refusal is not None:
-        raise ConfigError(f"stitch.enabled: stitched segments cannot run {refusal}")
+    for bad, what in ((ce.replicas > 1, "a robust search (ce.replicas > 1)"),
+                      (ce.knn_robust > 0, "a kNN-ranked search (ce.knn_robust > 0)"),
+                      (top_k > 1, "several candidate plans (task.planner.top_k > 1)"),
+                      (replan, "a replan (replan_from)"), (warm_start, "a warm start (warm_start)")):
+        if bad:
+            raise ConfigError(f"stitch.enabled: stitched segments cannot run {what}")
     n_prefix, n_suffix = st.n_prefix or ce.n_envs, st.n_suffix or ce.n_envs
     for name, v in (("n_prefix", n_prefix), ("n_suffix", n_suffix)):
         if v > ce.n_envs:
@@ -118,17 +123,6 @@ def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, refusal: str | None) -> St
     split = default_split(task) if st.split is None else st.split
     split_task(task, split)  # refuses a bad cut before anything runs
     return StitchConfig(n_prefix, n_suffix, ce.iterations, st.pool, min(st.confirm, ce.n_envs), split)
-
-
-def stitch_refusal(ce: CEConfig, top_k: int, replan: bool, warm_start: bool) -> str | None:
-    """What of a run a stitched search cannot do, or None."""
-    for bad, what in ((ce.replicas > 1, "a robust search (ce.replicas > 1)"),
-                      (ce.knn_robust > 0, "a kNN-ranked search (ce.knn_robust > 0)"),
-                      (top_k > 1, "several candidate plans (task.planner.top_k > 1)"),
-                      (replan, "a replan (replan_from)"), (warm_start, "a warm start (warm_start)")):
-        if bad:
-            return what
-    return None
 
 
 @dataclass
@@ -361,8 +355,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     if planner.top_k > 1:
         budget = plan_budget(len(candidates), ce.iterations, ce.n_envs, planner.round_iterations)
 
-    stitch = read_stitch(d.get("stitch"), ce, task, stitch_refusal(ce, planner.top_k, replan is not None,
-                                                                    keys.warm_start is not None))
+    stitch = read_stitch(d.get("stitch"), ce, task, planner.top_k, replan is not None, keys.warm_start is not None)
     rollout = _read_rollout(d.get("controller"))
     robot.fabric_exclusions(rollout.fabric.collision_exclude, [s.name for s in robot.spheres()])  # at the edge
     return RunSpec(

@@ -24,7 +24,7 @@ Then one confirmation batch: the ``confirm`` cheapest stitched plans realized wh
 task's start (a third ``CrossEntropyOptimizer``, over the whole layout, ranks them:
 ``CrossEntropyOptimizer.give``); its best is the search's (``report().state``). A stitched cost is
 a guess (a restored state starts at rest, its contacts made anew), the confirmed cost the plan's.
-``run(evaluate)`` drives the same ask/tell without a run directory (tests, ``scripts/bench_stitch.py``).
+``run(evaluate)`` drives the same ask/tell without a run directory (the analytic tests).
 ``state_dict`` holds the three searches, the pool and the round's prefixes waiting to join it
 (states through their ``to_json``; a ``read_state`` given to the constructor reads them back)
 and the stitched plans kept.
@@ -123,8 +123,6 @@ class StitchedResult:
     search_s: float = 0.0
     confirm_s: float = 0.0
     samples: int = 0
-    row_steps: int = 0  # control steps summed over every simulated row (filled by the caller that simulates)
-    batch_steps: int = 0  # and over every call, of the call's longest row (each worker's shards end to end)
 
     @property
     def feasible(self) -> bool:
@@ -170,7 +168,7 @@ class StitchedSearch:
         self._src: Tensor | None = None  # the pending suffix batch's pool entries
         self._Z: Tensor | None = None  # the pending batch's samples (CPU)
         # this round's feasible prefixes, which join the pool once the round's suffix has run
-        self.fresh_z, self.fresh_cost, self.fresh_state = self.pool_z, self.pool_cost, []
+        self.fresh_z, self.fresh_cost, self.fresh_state = self.pool_z[:0], self.pool_cost[:0], []
 
     # ---- the Searcher protocol -------------------------------------------------------------
 
@@ -221,9 +219,7 @@ class StitchedSearch:
             n = self._src.shape[0]
             r = result.to_cpu(n, self.dtype)
             rec = self.suf.tell(r, eval_time=eval_time)
-            total = r.cost + self.pool_cost[self._src]
-            for i in torch.nonzero(r.feasible).flatten().tolist():
-                self._keep((float(total[i]), self.pool_z[self._src[i]].clone(), self._Z[i].to(self.dtype).clone()))
+            self._keep(r.cost + self.pool_cost[self._src], r.feasible)
             self._src = None
             self._join_fresh()
             self.phase = self._next_round()
@@ -244,8 +240,8 @@ class StitchedSearch:
         state, pre, suf = self.full.state, self.pre.state, self.suf.state
         if pre.mean is not None and suf.mean is not None and pre.mean.ndim == suf.mean.ndim == 1:
             assert pre.std is not None and suf.std is not None
-            state.mean, state.std = self._join(pre.mean[None], suf.mean[None])[0], self._join(pre.std[None],
-                                                                                             suf.std[None])[0]
+            state.mean = self._join(pre.mean[None], suf.mean[None])[0]
+            state.std = self._join(pre.std[None], suf.std[None])[0]
             state.weights = None
         return SearchReport(lead=None, state=state)
 
@@ -268,11 +264,8 @@ class StitchedSearch:
             self.pre.load_state_dict(d["prefix"])
             self.suf.load_state_dict(d["suffix"])
             self.full.load_state_dict(d["full"])
-            dim = self.pool_z.shape[1]
-            (self.pool_z, self.pool_cost, self.pool_state), (self.fresh_z, self.fresh_cost, self.fresh_state) = (
-                (torch.tensor(p["z"], dtype=self.dtype).reshape(-1, dim), torch.tensor(p["cost"], dtype=self.dtype
-                                                                                       ).reshape(-1),
-                 [self.read_state(x) for x in p["states"]]) for p in (d["pool"], d["fresh"]))
+            self.pool_z, self.pool_cost, self.pool_state = self._prefix_rows(d["pool"])
+            self.fresh_z, self.fresh_cost, self.fresh_state = self._prefix_rows(d["fresh"])
             self.stitched = [(float(c), torch.tensor(zp, dtype=self.dtype), torch.tensor(zs, dtype=self.dtype))
                              for c, zp, zs in d["stitched"]]
             self.round, self.phase, self.batches = int(d["round"]), str(d["phase"]), int(d["batches"])
@@ -283,6 +276,11 @@ class StitchedSearch:
                 and len(self.fresh_state) == len(self.fresh_cost) == self.fresh_z.shape[0]):
             raise ValueError("malformed stitched state (phase / pool)")
         self._src = None
+
+    def _prefix_rows(self, p: Mapping[str, Any]) -> tuple[Tensor, Tensor, list[Any]]:
+        """A ``state_dict``'s pool (or waiting prefixes) back as columns, costs and states."""
+        z = torch.tensor(p["z"], dtype=self.dtype).reshape(-1, self.pool_z.shape[1])
+        return z, torch.tensor(p["cost"], dtype=self.dtype).reshape(-1), [self.read_state(x) for x in p["states"]]
 
     # ---- without a run directory -----------------------------------------------------------
 
@@ -296,6 +294,7 @@ class StitchedSearch:
         samples, confirm_s = 0, 0.0
         confirmed: list[tuple[float, float, bool]] = []
         Zc: Tensor | None = None
+        best = 0
         while (batch := self.ask()) is not None:
             seg, rnd = SEGMENT_NAMES[batch.candidate], self.round
             t0 = time.perf_counter()
@@ -305,7 +304,7 @@ class StitchedSearch:
             rec = self.tell(r, eval_time=dt)
             samples += rec.n_envs
             if seg == "full":
-                Zc, confirm_s = batch.Z.detach().cpu().clone(), dt
+                Zc, confirm_s, best = batch.Z.detach().cpu().clone(), dt, rec.best_idx
                 confirmed = [(c, float(rec.cost[k]), bool(rec.feasible[k])) for k, (c, _, _) in enumerate(self.stitched)]
                 continue
             row[seg] = (rec.n_envs, rec.n_feasible, dt)
@@ -316,11 +315,9 @@ class StitchedSearch:
                 if on_iteration is not None:
                     on_iteration(history[-1])
                 row = {}
-        s = self.full.state
         out = StitchedResult(None, math.inf, math.inf, confirmed, Zc, history, confirm_s=confirm_s, samples=samples)
-        if s.best_feasible and s.best_z is not None:
-            k = next(k for k in range(len(confirmed)) if Zc is not None and torch.equal(Zc[k].to(s.best_z), s.best_z))
-            out.z, out.cost, out.stitched_cost = s.best_z.clone(), float(s.best_cost), confirmed[k][0]
+        if Zc is not None and confirmed[best][2]:  # the confirmation's best row (its search's best_z)
+            out.z, out.cost, out.stitched_cost = Zc[best].clone(), confirmed[best][1], confirmed[best][0]
         out.search_s = time.perf_counter() - t_start
         return out
 
@@ -338,13 +335,15 @@ class StitchedSearch:
         z[:, self.suffix_cols] = zs.to(self.dtype)
         return z
 
-    def _keep(self, plan: tuple[float, Tensor, Tensor]) -> None:
-        """Keep the ``confirm`` cheapest stitched plans (ties: the one found first)."""
-        k = len(self.stitched)
-        while k > 0 and self.stitched[k - 1][0] > plan[0]:
-            k -= 1
-        self.stitched.insert(k, plan)
-        del self.stitched[self.cfg.confirm:]
+    def _keep(self, total: Tensor, feasible: Tensor) -> None:
+        """Keep the ``confirm`` cheapest stitched plans: the kept ones and the suffix batch's
+        feasible rows (stitched cost ``total``), ties to the one found first."""
+        assert self._Z is not None and self._src is not None
+        ok = torch.nonzero(feasible).flatten()
+        ok = ok[torch.sort(total[ok], stable=True).indices[:self.cfg.confirm]]  # only these can be kept
+        new = [(float(total[i]), self.pool_z[self._src[i]].clone(), self._Z[i].to(self.dtype).clone())
+               for i in ok.tolist()]
+        self.stitched = sorted(self.stitched + new, key=lambda p: p[0])[:self.cfg.confirm]
 
     def _fresh(self, Z: Tensor, result: EvalResult) -> None:
         """This round's feasible prefixes: their columns, costs and end states."""
@@ -364,8 +363,3 @@ class StitchedSearch:
         self.pool_z, self.pool_cost = z[keep], cost[keep]
         self.pool_state = [states[i] for i in keep.tolist()]
         self.fresh_z, self.fresh_cost, self.fresh_state = self.fresh_z[:0], self.fresh_cost[:0], []
-
-    def _add_to_pool(self, Z: Tensor, result: EvalResult) -> None:
-        """``Z``'s feasible rows join the pool now (``_fresh`` then ``_join_fresh``)."""
-        self._fresh(Z, result)
-        self._join_fresh()

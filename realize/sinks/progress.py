@@ -3,7 +3,8 @@
 What it does: ``ProgressSink`` shows ``iterations done / planned`` on stderr; the postfix says
 the iteration's success share (with ``ce.prune``, how many rows were stopped as they could not be
 an elite: they count as not succeeded) and the best feasible cost so far of the plan searched (for
-a top-k run also which candidate ran, in which halving round; for a stitched run which segment). Off with ``logging.progress=false``.
+a top-k run also which candidate ran, in which halving round; for a stitched run which segment).
+Off with ``logging.progress=false``.
 Not critical.
 What it doesn't: log anything else (``logging`` does).
 """
@@ -42,7 +43,10 @@ class ProgressSink:
     def on_iteration(self, it: Iteration) -> None:
         rec = it.record
         c = it.batch.candidate
-        where = f"{self.labels[c]}, " if self.labels else "" if c is None else f"candidate {c} (round {it.report.round}), "
+        if self.labels:
+            where = f"{self.labels[c]}, "
+        else:
+            where = "" if c is None else f"candidate {c} (round {it.report.round}), "
         cost = f"{rec.best_cost:.0f}" if math.isfinite(rec.best_cost) else "-"
         stopped = f" ({rec.n_stopped} stopped: could not be an elite)" if rec.n_stopped else ""
         screened = f", {rec.n_screened} screened out" if rec.n_screened else ""

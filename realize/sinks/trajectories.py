@@ -5,7 +5,7 @@ for every iteration whose rollout recorded trajectories (``logging.record``), th
 and end-effector paths with the iteration's best feasible sample marked (the record's
 ``best_idx``: the first elite unless kNN-robust ranking reordered them). Only for single-plan
 runs (the figure readers assume one parameter layout); a stitched run's are its whole-plan
-batches (``only=None``: the confirmation), its segments' layouts being the plan's parts. Not critical.
+batches (``whole_plans_only``: the confirmation), its segments' layouts being the plan's parts. Not critical.
 What it doesn't: draw (``realize.figures``) or define the file format (``realize.run_dir.scene_files``).
 """
 
@@ -27,17 +27,17 @@ class TrajectorySink:
     critical = False
 
     def __init__(self, run_dir: RunDir, layout: ParamLayout, geometry: Any, padding: float,
-                 record: bool = True, only: Any = "all") -> None:
+                 record: bool = True, whole_plans_only: bool = False) -> None:
         self.rd, self.layout, self.geometry, self.padding = run_dir, layout, geometry, padding
         self.wants_trajectories = record  # logging.record: without it only scene.json is written
-        self.only = only  # the one batch candidate whose trajectories are written ("all": every batch)
+        self.whole_plans_only = whole_plans_only  # a stitched run: only batches of the whole plan (candidate None)
 
     def open(self) -> None:
         self.rd.write_scene(self.layout, self.geometry, padding=self.padding)
 
     def on_iteration(self, it: Iteration) -> None:
         rec, res = it.record, it.rollout
-        if res.traj_base is None or (self.only != "all" and it.batch.candidate != self.only):
+        if res.traj_base is None or (self.whole_plans_only and it.batch.candidate is not None):
             return
         top = int(rec.best_idx) if rec.elite_idx.numel() or rec.n_remembered else -1  # (ce.keep_elites: maybe none)
         best = top if top >= 0 and bool(rec.feasible[top]) else -1
