@@ -19,7 +19,6 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ import torch
 from torch import Tensor
 
 from realize.config import ConfigError
-from realize.paths import REPO_ROOT
+from realize.paths import REPO_ROOT, cache_dir
 
 __all__ = ["fixed_base_joints", "JointSpec", "resolve_urdf", "source_urdf", "parse_urdf_joints", "urdf_floats", "element_origin", "mesh_path",
            "rpy_matrix", "skew", "axis_rotation"]
@@ -67,18 +66,6 @@ def source_urdf(urdf: str) -> Path:
     return path
 
 
-def _cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    d = Path(base) / "realize" / "urdf"
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        return d
-    except OSError:  # a read-only home: the temp folder
-        d = Path(tempfile.gettempdir()) / "realize-urdf"
-        d.mkdir(parents=True, exist_ok=True)
-        return d
-
-
 def resolve_urdf(urdf: str, visual_mesh_ext: dict[str, str] | None = None) -> str:
     """The URDF file to load for a spec's ``urdf`` and ``visual_mesh_ext`` (see the module
     docstring): the source file itself, or a derived copy in the cache folder."""
@@ -103,7 +90,7 @@ def resolve_urdf(urdf: str, visual_mesh_ext: dict[str, str] | None = None) -> st
                           f"{visual_mesh_ext}: {missing[:3]}{' ...' if len(missing) > 3 else ''}")
     text = ET.tostring(tree.getroot(), encoding="unicode")
     key = hashlib.sha256((str(src) + text).encode()).hexdigest()[:12]
-    out = _cache_dir() / f"{src.stem}-{key}.urdf"
+    out = cache_dir("urdf") / f"{src.stem}-{key}.urdf"
     if not out.is_file() or out.read_text() != text:
         tmp = out.with_suffix(f".tmp{os.getpid()}")
         tmp.write_text(text)
