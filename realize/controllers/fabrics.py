@@ -314,8 +314,8 @@ def fabric_acceleration(
 
     # ---- energization and speed control
     reg = eps * eye
-    h_g = torch.linalg.solve(M_g + reg, f_g)
-    h_f = torch.linalg.solve(M_f + reg, f_f)
+    h_g = torch.linalg.solve_ex(M_g + reg, f_g)[0]
+    h_f = torch.linalg.solve_ex(M_f + reg, f_f)[0]
     qd2 = (qd * qd).sum(-1)
     alpha_geo = -(qd * (f_g - f_le)).sum(-1) / (eps + ((M_g * qd[:, None, :]).sum(-1) * qd).sum(-1))
     alpha_ex = -2.0 * (qd * h_g).sum(-1) / (eps + 2.0 * qd2)
