@@ -30,6 +30,7 @@ from torch import Tensor
 from realize.config import Settings, setting
 from realize.robot.layout import BASE, BASE_XY, YAW
 from realize.controllers.fabrics import FabricConfig, fabric_acceleration
+from realize.controllers.fabric_package import load_package
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.world.geometry import SceneGeometry
 from realize.robot.jacobians import point_jets, prefix_ends
@@ -59,6 +60,7 @@ class WholeBodyConfig(Settings):
     max_yaw_rate: float = setting(1.0, gt=0)  # rad/s
     max_joint_speed: float = setting(1.2, gt=0)  # rad/s, or m/s for a lift
     resync_tolerance: float = setting(0.08, gt=0)  # reference/measured drift that triggers a re-sync
+    compiled: bool = False  # CPU: run the step built ahead of time into native code (realize/controllers/fabric_package.py)
 
     def fabric(self) -> FabricConfig:
         return FabricConfig(gamma=self.gamma, beta_close=self.beta_close, beta_distant=self.beta_distant,
@@ -155,6 +157,10 @@ class WholeBodyFabric:
         if self.robot.base.fixed:
             limit[BASE] = 0.0
         self.speed_limit = limit
+        # the step built into native code (a speed lever); other devices, or no boxes, run eagerly
+        self._package = None
+        if self.cfg.compiled and self.device.type == "cpu" and self.boxes.shape[0] > 0:
+            self._package = load_package(self)
 
     def goal_points(self, position: Tensor, approach: Tensor, closing: Tensor) -> Tensor:
         """(N, 9) attractor goal from a TCP goal position and unit approach / closing axes (N, 3)."""
@@ -173,18 +179,28 @@ class WholeBodyFabric:
         """Advance the reference one control period towards ``goal`` (N, 9); returns (state, valid).
 
         Rows whose reference drifted more than ``resync_tolerance`` from the measured joints
-        (``q_meas``, (N, n_dof)) restart from the measured configuration at rest.
+        (``q_meas``, (N, n_dof)) restart from the measured configuration at rest. With
+        ``cfg.compiled`` (on the CPU, without a per-plan ``weight``) the built package computes it.
         """
-        q_meas = q_meas.to(self.device, self.dtype)
-        drift = (state.q - q_meas).abs().max(dim=1).values > self.cfg.resync_tolerance
-        q = torch.where(drift[:, None], q_meas, state.q)
+        args = (state.q, state.qd, q_meas.to(self.device, self.dtype), goal.to(self.device, self.dtype))
+        if self._package is not None and weight is None:
+            q_next, qd_next, valid = self._package(*(a.contiguous() for a in args), self.boxes)
+        else:
+            q_next, qd_next, valid = self.step_tensors(*args, self.boxes, weight)
+        return FabricState(q_next, qd_next), valid
+
+    def step_tensors(self, q_ref: Tensor, qd_ref: Tensor, q_meas: Tensor, goal: Tensor, boxes: Tensor,
+                     weight: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+        """The step on plain tensors, the scene's ``boxes`` (M, BOX_COLUMNS) an argument: ``(q, qd, valid)``
+        (what ``realize.controllers.fabric_package`` builds)."""
+        drift = (q_ref - q_meas).abs().max(dim=1).values > self.cfg.resync_tolerance
+        q = torch.where(drift[:, None], q_meas, q_ref)
         q = torch.maximum(torch.minimum(q, self._clamp_hi), self._clamp_lo)
-        qd = torch.where(drift[:, None], torch.zeros_like(state.qd), state.qd)
+        qd = torch.where(drift[:, None], torch.zeros_like(qd_ref), qd_ref)
         n = q.shape[0]
-        boxes = self.boxes.expand(n, -1, -1)
         qdd, valid = fabric_acceleration(
-            q, qd, goal.to(self.device, self.dtype), self.map, self.fabric_cfg,
-            obstacles=boxes, lower=self.lower, upper=self.upper, weight=weight,
+            q, qd, goal, self.map, self.fabric_cfg,
+            obstacles=boxes.expand(n, -1, -1), lower=self.lower, upper=self.upper, weight=weight,
             obstacle_distance=self.distance,
         )
         qd_next = qd + self.dt * qdd
@@ -193,4 +209,4 @@ class WholeBodyFabric:
         q_next = torch.maximum(torch.minimum(q_next, self._clamp_hi), self._clamp_lo)
         q_next = torch.where(valid[:, None], q_next, q_meas)
         qd_next = torch.where(valid[:, None], qd_next, torch.zeros_like(qd_next))
-        return FabricState(q_next, qd_next), valid
+        return q_next, qd_next, valid
