@@ -15,6 +15,8 @@ What it does: wraps the generic fabric (``realize.controllers.fabrics``) for a r
     commands a real robot; the reference is re-synchronised with the measured state when they
     drift apart (contacts). Outputs: base velocity (world frame), upper-joint position and
     velocity targets for the PD drives, at the control rate, and a per-plan ``valid`` flag.
+  * with ``compiled`` (a speed lever, off by default) the step runs as native code built ahead
+    of time (``realize.controllers.fabric_package``), on the CPU.
 What it doesn't: decide goals or phases (the grasp/place action templates do), or touch the
 simulator (the rollout writes the targets to ``realize.scene.BatchedScene``).
 """
