@@ -1,4 +1,4 @@
-"""Where the checkout's own files are: the repository root and the Hydra config directory.
+"""Where realize's files are: the checkout's root, its Hydra config directory and the per-user cache.
 
 What it does: ``REPO_ROOT`` (relative task/PDDL paths fall back to it), ``CONFIG_DIR``
 (``configs/``, the Hydra config tree of the ``realize`` command) and ``cache_dir`` (the per-user
