@@ -9,6 +9,8 @@ built once per machine (``make setup`` builds the default robot's) and shared wi
 
 from __future__ import annotations
 
+import os
+
 import pytest
 import torch
 
@@ -118,3 +120,24 @@ def test_prebuild_finds_the_package_a_run_loads(pair, monkeypatch, capsys) -> No
     monkeypatch.setattr(pb, "ensure_built", broken)
     assert not pb.prebuild(["fetch_omni"])
     assert "no g++" in capsys.readouterr().err
+
+
+def test_a_damaged_package_is_named_and_old_ones_are_pruned(monkeypatch, tmp_path) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    eager = _fabric(False, gamma=2.9)  # a key no other test builds
+    path = fabric_package.package_path(eager)
+    path.write_bytes(b"not a package")
+    with pytest.raises(ConfigError, match=r"cannot load the fabric step .*delete the file to build it again"):
+        _fabric(True, gamma=2.9)
+    # a build keeps the newest KEEP_PER_ROBOT packages of its robot, and other robots' packages
+    folder = path.parent
+    old = [folder / f"fetch_omni-{i:024d}.pt2" for i in range(fabric_package.KEEP_PER_ROBOT + 2)]
+    for i, p in enumerate(old):
+        p.write_bytes(b"x")
+        os.utime(p, (1000 + i, 1000 + i))
+    other = folder / "panda-000000000000000000000000.pt2"
+    other.write_bytes(b"x")
+    fabric_package._prune(path)
+    left = sorted(p.name for p in folder.glob("fetch_omni-*.pt2"))
+    assert path.name in left and len(left) == fabric_package.KEEP_PER_ROBOT
+    assert old[0].name not in left and old[-1].name in left and other.is_file()

@@ -7,7 +7,9 @@ live in ``realize.paths.cache_dir("fabric")``; a later process loads one in abou
 (building takes about a minute on a 2-core machine). The batch size and the number of scene
 boxes are dynamic, so one package serves every shard, subset of plans and world of a robot.
 Two processes that need the same package build it once (a file lock); a build is written under
-a temporary name and renamed into place, so no process reads half a package.
+a temporary name and renamed into place, so no process reads half a package. A build deletes all
+but the ``KEEP_PER_ROBOT`` newest packages of its robot; a file that does not load is a
+``ConfigError`` naming it.
 
 Numbers: per row the result equals the eager step's to within float32 rounding (the compiler sums
 in another order: about 3e-7 on the joint targets, tests/test_fabric_package.py), and a row's
@@ -40,6 +42,7 @@ from realize.paths import cache_dir
 
 __all__ = ["package_key", "package_path", "ensure_built", "load_package", "SIMD_BITS"]
 
+KEEP_PER_ROBOT = 8  # packages kept per robot in the cache folder (the newest)
 SIMD_BITS = 256  # vector width of the generated code: AVX2 on x86 (the same code on every host)
 _SOURCES = (Path(__file__).resolve().parent, Path(__file__).resolve().parent.parent / "robot")
 _LOADED: dict[Path, Callable[..., Any]] = {}
@@ -144,7 +147,19 @@ def ensure_built(fabric: Any) -> Path:
                               f"({type(e).__name__}: {first}); set controller.fabric.compiled=false "
                               "to run it eagerly") from e
         print(f"realize: built in {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+    _prune(path)
     return path
+
+
+def _prune(kept: Path, keep: int = KEEP_PER_ROBOT) -> None:
+    """Delete all but the ``keep`` newest packages of ``kept``'s robot (each source change of the
+    fabric's code makes a new one)."""
+    robot = kept.name.rsplit("-", 1)[0]
+    packages = sorted(kept.parent.glob(f"{robot}-*.pt2"), key=lambda p: p.stat().st_mtime, reverse=True)
+    for old in packages[keep:]:
+        if old != kept:
+            old.unlink(missing_ok=True)
+            old.with_suffix(".lock").unlink(missing_ok=True)
 
 
 def load_package(fabric: Any) -> Callable[..., tuple[Tensor, Tensor, Tensor]]:
@@ -154,5 +169,10 @@ def load_package(fabric: Any) -> Callable[..., tuple[Tensor, Tensor, Tensor]]:
     if path not in _LOADED:
         import torch._inductor
 
-        _LOADED[path] = torch._inductor.aoti_load_package(str(path))
+        try:
+            _LOADED[path] = torch._inductor.aoti_load_package(str(path))
+        except Exception as e:  # a damaged file: say which, and how to get a good one
+            raise ConfigError(f"controller.fabric.compiled = true: cannot load the fabric step {path} "
+                              f"({type(e).__name__}); delete the file to build it again, or set "
+                              "controller.fabric.compiled=false") from e
     return _LOADED[path]
