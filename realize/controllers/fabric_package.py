@@ -55,7 +55,7 @@ def _digest_tensors(obj: Any, h: Any, seen: set[int], depth: int = 0) -> None:
     seen.add(id(obj))
     if isinstance(obj, Tensor):
         h.update(f"{obj.dtype}{tuple(obj.shape)}".encode())
-        h.update(obj.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
+        h.update(obj.detach().cpu().reshape(-1).contiguous().view(torch.uint8).numpy().tobytes())
         return
     if isinstance(obj, dict):
         items = sorted(obj.items(), key=lambda kv: str(kv[0]))
