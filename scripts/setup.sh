@@ -31,8 +31,8 @@ physx_gpu() {
 
 # 6. the compiled fabric step (checked on every run: its key follows the source; seconds when built)
 fabric_step() {
-  command -v g++ >/dev/null 2>&1 || command -v "${CXX:-g++}" >/dev/null 2>&1 \
-    || { say "warning: no C++ compiler (g++): runs with controller.fabric.compiled=true will stop; install g++"; return 0; }
+  command -v "${CXX:-g++}" >/dev/null 2>&1 \
+    || { say "warning: no C++ compiler (${CXX:-g++}): runs with controller.fabric.compiled=true will stop; install g++"; return 0; }
   "$VENV/bin/python" -m realize.app.prebuild \
     || say "warning: the compiled fabric step did not build (above); runs with controller.fabric.compiled=true will stop"
 }
