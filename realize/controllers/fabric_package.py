@@ -27,10 +27,12 @@ import dataclasses
 import fcntl
 import hashlib
 import json
+import logging
 import os
 import platform
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -116,11 +118,21 @@ def _build(fabric: Any, out: Path) -> None:
     example = (q, torch.zeros_like(q), q.clone(), goal, fabric.boxes)
     rows = torch.export.Dim("rows", min=1, max=1 << 16)
     count = torch.export.Dim("boxes", min=1, max=4096)
-    with torch.no_grad():
-        program = torch.export.export(_Step(fabric), example, strict=False,
-                                      dynamic_shapes=({0: rows}, {0: rows}, {0: rows}, {0: rows}, {0: count}))
-    with torch._inductor.config.patch({"cpp.simdlen": SIMD_BITS}):
-        torch._inductor.aoti_compile_and_package(program, package_path=str(out))
+    # torch's own notes on the way (a deprecation inside torch.export, "using proxy executor" for
+    # linalg_solve_ex) are not the user's to act on: a failure still raises
+    inductor_log = logging.getLogger("torch._inductor")
+    level = inductor_log.level
+    inductor_log.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            with torch.no_grad():
+                program = torch.export.export(_Step(fabric), example, strict=False,
+                                              dynamic_shapes=({0: rows}, {0: rows}, {0: rows}, {0: rows}, {0: count}))
+            with torch._inductor.config.patch({"cpp.simdlen": SIMD_BITS}):
+                torch._inductor.aoti_compile_and_package(program, package_path=str(out))
+    finally:
+        inductor_log.setLevel(level)
 
 
 def ensure_built(fabric: Any) -> Path:
