@@ -23,9 +23,10 @@ the batch's first N plans in a scene of N copies (``--n 100``: what one of the t
 worker processes holds, ``sim.shard_rows``); ``--uniform`` rolls out N plans drawn from the
 task's uniform iteration-0 distribution instead (seed 0, as the search draws them), whose
 rollouts are longer and end in a tail of few running plans; it works for any task
-(``--uniform experiment=wall``), the late batch only for the seed task's columns. After the phases, the control
-steps are split by how many plans were still running, with the wall time per step in that
-band: the per-step cost that does not shrink with the running plans shows there.
+(``--uniform experiment=wall``), the late batch only for the seed task's columns. After the
+phases, the control steps are split by how many plans were still running, with the wall time
+per step in that band: the per-step cost that does not shrink with the running plans shows
+there.
 ``robot_steps_per_s`` is the robots simulated per wall second (copies x control steps / rollout
 wall time). The last line is ``non_physics_share: X`` = 1 - physics / rollout wall time.
 ``--reps R`` rolls out the batch R times in the same scene (the results must repeat bit for
