@@ -24,7 +24,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +32,7 @@ from hydra.types import RunMode
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
+from realize.file_lock import file_lock
 from realize.run_dir.directory import RunDir
 from realize.run_dir.jsonio import atomic_write_text
 from realize.run_dir.names import JOB_STATUS_FILE
@@ -134,32 +134,6 @@ def write_summary(sweep_dir: Path | str, filename: str = "summary.csv") -> Path:
     return out
 
 
-class _Lock:
-    """An exclusive ``flock`` on a file in the sweep directory (no-op where unsupported)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.fd: int | None = None
-
-    def __enter__(self) -> _Lock:
-        try:
-            import fcntl
-
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            fcntl.flock(self.fd, fcntl.LOCK_EX)
-        except (ImportError, OSError):
-            self.fd = None
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        if self.fd is not None:
-            import fcntl
-
-            fcntl.flock(self.fd, fcntl.LOCK_UN)
-            os.close(self.fd)
-
-
 class SweepSummary(Callback):
     """Hydra callback writing ``summary.csv`` in the sweep directory (see module docstring)."""
 
@@ -167,7 +141,7 @@ class SweepSummary(Callback):
         self.filename = filename
 
     def _update(self, sweep_dir: Path) -> None:
-        with _Lock(sweep_dir / f".{self.filename}.lock"):
+        with file_lock(sweep_dir / f".{self.filename}.lock"):
             out = write_summary(sweep_dir, self.filename)
         print(f"sweep summary: {out}", flush=True)
 

@@ -24,7 +24,6 @@ does, from its config).
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import hashlib
 import json
 import logging
@@ -40,6 +39,7 @@ import torch
 from torch import Tensor
 
 from realize.config import ConfigError
+from realize.file_lock import file_lock
 from realize.paths import cache_dir
 
 __all__ = ["package_key", "package_path", "ensure_built", "load_package", "SIMD_BITS"]
@@ -141,8 +141,7 @@ def ensure_built(fabric: Any) -> Path:
     path = package_path(fabric)
     if path.is_file():
         return path
-    with open(path.with_suffix(".lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # another process may be building it: wait for it
+    with file_lock(path.with_suffix(".lock")):  # another process may be building it: wait for it
         if path.is_file():
             return path
         print(f"realize: building the compiled fabric step of {fabric.robot.name} once for this "
