@@ -288,8 +288,8 @@ class RealizePickPlaceEnv(BaseEnv):
     @property
     def dynamic_actors(self) -> list:
         """Every dynamic actor (the movable objects of every copy) in build order:
-        ``realize.scene.BatchedScene`` takes them out of the PhysX scene and back in on reset,
-        which makes resets history-free."""
+        the CPU backend takes them out of the (new) PhysX system and back in on reset, in
+        this order, as the first reset of a built scene does (``realize.scene.cpu_tiled``)."""
         g = self.geometry
         first = [self.object_actors[o.name][c] for c in range(self.n_tiles) for o in g.objects if o.rests_on != FLOOR]
         return first + [a for o in g.objects if o.rests_on == FLOOR for a in self.object_actors[o.name]]

@@ -16,11 +16,11 @@ plan). Each of ``iterations`` rounds:
     stitched plan of cost prefix + suffix;
   * then the round's feasible prefixes join the pool of the ``pool`` cheapest prefixes found so
     far (their columns, costs and end states). The suffix of round r thus starts from rounds
-    0 .. r - 1's prefixes, and every suffix batch follows a prefix batch on the workers (a
-    restore is not history-free). The last round's prefix batch feeds no suffix, and it is
-    kept: dropping it (each round's suffix before its prefix, none in the last round) draws the
-    same samples and pools for about 2 % fewer batch steps, but the restores' noise moved and
-    seed 1 ended at 481, +11.6 % (docs/results.md, "Dropping the last prefix batch").
+    0 .. r - 1's prefixes. The last round's prefix batch feeds no suffix, and it is kept:
+    dropping it (each round's suffix before its prefix, none in the last round) draws the same
+    samples and pools for about 2 % fewer batch steps; measured while restores still depended on
+    the scene's history, that moved their noise and seed 1 ended at 481, +11.6 %
+    (docs/results.md, "Dropping the last prefix batch"). Restores are history-free now.
 Then one confirmation batch: the ``confirm`` cheapest stitched plans realized whole from the
 task's start (a third ``CrossEntropyOptimizer``, over the whole layout, ranks them:
 ``CrossEntropyOptimizer.give``); its best is the search's (``report().state``). A stitched cost is
