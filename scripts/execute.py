@@ -26,6 +26,8 @@ from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
+    from realize.app.planner import ReplanBudget
+
     p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()), epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run_dir")
@@ -36,8 +38,12 @@ def main(argv: list[str] | None = None) -> int:
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--open-only", action="store_true", help="no replanning")
     mode.add_argument("--closed-only", action="store_true", help="no open-loop baseline")
-    p.add_argument("--n-envs", type=int, default=None, help="copies per replan iteration (default 32)")
-    p.add_argument("--iterations", type=int, default=None, help="most CE iterations per replan (default 3)")
+    budget = ReplanBudget()  # the defaults the help names
+    p.add_argument("--n-envs", type=int, default=None,
+                   help=f"copies per replan iteration (default {budget.n_envs}, {budget.n_elite} elites; with N "
+                        f"given, {ReplanBudget.elites_for(32)} of 32: an eighth from 32 on, a quarter below)")
+    p.add_argument("--iterations", type=int, default=None,
+                   help=f"most CE iterations per replan (default {budget.iterations})")
     p.add_argument("--video", action="store_true", help="an MP4 per world")
     p.add_argument("--no-rerun", action="store_true", help="no .rrd per world")
     p.add_argument("--out", default=None, help="output directory (default RUN_DIR/execution/FAMILY)")
@@ -45,7 +51,6 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     from realize.app.execute import execute
-    from realize.app.planner import ReplanBudget
     from realize.config import ConfigError
     from realize.execution.settings import load_preset
 
@@ -59,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
             if v is not None:
                 settings = type(settings).from_mapping({**dataclasses.asdict(settings), key: v}, "execute")
         kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations)) if v is not None}
-        if a.n_envs is not None:  # a quarter of the copies are elites (the default budget's 4 of 32)
-            kw["n_elite"] = max(1, a.n_envs // 8 if a.n_envs >= 32 else a.n_envs // 4)
+        if a.n_envs is not None:
+            kw["n_elite"] = ReplanBudget.elites_for(a.n_envs)
         budget = ReplanBudget(**kw)
         name = Path(a.disturbance).stem
         s = execute(a.run_dir, settings, name=name, open_loop=not a.closed_only, closed_loop=not a.open_only,

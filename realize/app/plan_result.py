@@ -50,6 +50,12 @@ class ReplanBudget:
         if isinstance(self.validation, bool) or not isinstance(self.validation, int) or self.validation < 0:
             raise ConfigError(f"replan budget: validation = {self.validation!r} is invalid: an integer >= 0")
 
+    @staticmethod
+    def elites_for(n_envs: int) -> int:
+        """The elites of a budget given only its copies: an eighth from 32 copies on (the
+        default's 4 of 32), a quarter below, at least one."""
+        return max(1, n_envs // 8 if n_envs >= 32 else n_envs // 4)
+
     @classmethod
     def from_mapping(cls, d: Mapping[str, Any] | None, where: str = "replan budget") -> ReplanBudget:
         d = dict(d or {})
