@@ -3,7 +3,7 @@
 PY := .venv/bin/python
 ARGS ?=
 
-.PHONY: setup run test test-all bench gpu-check docs
+.PHONY: setup run test test-slow test-all bench gpu-check docs
 setup:
 	@bash scripts/setup.sh
 
@@ -11,12 +11,17 @@ run: setup
 	$(PY) -m realize experiment=seed_paper $(ARGS)
 
 # test files run in parallel, one file per process (its module fixtures built once), one process
-# per core up to 4: 7.4 -> 4.3 min on 2 cores. TEST_JOBS=0 runs them in this process.
+# per core up to 4. TEST_JOBS=0 runs them in this process. make test leaves out the tests marked
+# slow (whole runs, sweeps, several processes; one smoke test of each kind stays in), make
+# test-slow runs only those, make test-all both; CI runs make test and make test-slow.
 TEST_JOBS ?= auto
 PARALLEL = $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --maxprocesses 4 --dist loadfile)
 
 test: setup
 	$(PY) -m pytest -m "not slow" -q --durations=20 $(PARALLEL) $(ARGS)
+
+test-slow: setup
+	$(PY) -m pytest -m slow -q --durations=20 $(PARALLEL) $(ARGS)
 
 test-all: setup
 	$(PY) -m pytest -q $(PARALLEL) $(ARGS)

@@ -54,10 +54,8 @@ import torch
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))
 
-from helpers import compose_config  # noqa: E402  (tests/helpers.py: the one config composer)
-
+from realize.app.compose import compose_config  # noqa: E402  (the public composer, checked as the command line is)
 from realize.app.realizers import open_realization  # noqa: E402
 from realize.app.run_config import build_run_spec  # noqa: E402
 
@@ -195,7 +193,7 @@ def main() -> None:
     args = ap.parse_args()
     reps = args.reps or (1 if args.quick else 2)
     columns, Z = load_batch()
-    cfg = compose_config("experiment=seed_paper", *args.overrides, job_name="bench_rollout")
+    cfg = compose_config(["device=cpu", "experiment=seed_paper", *args.overrides])
     spec = build_run_spec(cfg)
     if not args.uniform and list(spec.task.layout.column_names) != columns:
         raise SystemExit(f"{BATCH_FILE.name} holds columns {columns}, the task has {list(spec.task.layout.column_names)}")

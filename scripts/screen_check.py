@@ -26,10 +26,8 @@ import torch
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))
 
-from helpers import compose_config  # noqa: E402  (tests/helpers.py: the one config composer)
-
+from realize.app.compose import compose_config  # noqa: E402  (the public composer, checked as the command line is)
 from realize.app.realizers import open_realization  # noqa: E402
 from realize.app.run_config import build_run_spec  # noqa: E402
 from realize.realization.screening import HandDepthScreen  # noqa: E402
@@ -42,7 +40,7 @@ def main() -> None:
     ap.add_argument("overrides", nargs="*", help="config overrides (default: experiment=seed_paper)")
     args = ap.parse_args()
     overrides = args.overrides or ["experiment=seed_paper"]
-    spec = build_run_spec(compose_config(*overrides, job_name="screen_check"))
+    spec = build_run_spec(compose_config(["device=cpu", *overrides]))
     screen = HandDepthScreen(spec.task, spec.geometry, spec.robot, spec.rollout, spec.ce.screen_depth,
                              spec.ce.torch_dtype)
     if not screen.active:

@@ -422,6 +422,7 @@ def _checkpoint_iteration(run_dir: Path) -> int | None:
         return None
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_sigint_subprocess_then_resume(tmp_path: Path, uninterrupted: Path) -> None:
     """Ctrl-C to the command mid-run: it exits 130 with an ``interrupted`` result, and resuming
     gives the uninterrupted run. The interrupt cannot miss the run: the process is frozen
@@ -497,6 +498,7 @@ def test_multirun_2x2_basic_launcher_summary(tmp_path: Path) -> None:
         assert float(r["final_success"]) == res["success_per_iter"][-1]
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_sweep_values_are_checked_before_job_0(tmp_path: Path) -> None:
     """``ce.n_elite=1,9,2`` with 4 plans: refused in one line, exit 2, before any job runs."""
     sweep = tmp_path / "sweep"
@@ -513,6 +515,7 @@ def test_sweep_values_are_checked_before_job_0(tmp_path: Path) -> None:
     assert p.returncode == 2 and "sweep job 1 (warm_start=" in p.stderr and not sweep.exists()
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_sweep_with_a_job_that_fails_when_it_starts(tmp_path: Path) -> None:
     """What only a job's start can find (a resumed run's corrupt checkpoint) fails that job;
     the others run, and every job is in the summary."""
@@ -537,10 +540,12 @@ def _two_seeds_done(tmp_path: Path, *launcher: str) -> None:
     assert len(rows) == 2 and {r["status"] for r in rows} == {"done"}
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_joblib_launcher_sweep(tmp_path: Path) -> None:
     _two_seeds_done(tmp_path, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_submitit_local_sweep(tmp_path: Path) -> None:
     _two_seeds_done(tmp_path, "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5")
 

@@ -84,6 +84,7 @@ def test_a_robust_searchs_candidates_rank_by_share_first() -> None:
     assert [(z.tolist(), c, sh) for z, c, _, sh in got] == [([2], 150.0, 1.0), ([1], 200.0, 1.0), ([0], 100.0, 0.5)]
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_a_run_validates_its_candidates_after_the_search_deterministically(tmp_path: Path) -> None:
     run = tmp_path / "run"
     res = realize_result("ce.n_envs=12", "ce.n_elite=3", "ce.iterations=2", "seed=3", "logging.rerun=false",

@@ -162,6 +162,7 @@ print("SAID" + json.dumps(said))
 """
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_checked_commands_are_accepted(quickstart_run: Path, tmp_path: Path) -> None:
     task_file = tmp_path / "my_task.yaml"
     task_file.write_text(doc_block("docs/task_files.md", "yaml").text)

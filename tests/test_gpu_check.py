@@ -50,6 +50,7 @@ def _imported(modules: Path) -> set[str]:
     return {m for m in names if m not in sys.stdlib_module_names and not m.startswith("_")}
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_gpu_check_runs_on_the_cpu_without_the_simulator(tmp_path: Path) -> None:
     site, modules, baseline = tmp_path / "site", tmp_path / "modules", tmp_path / "baseline"
     for d in (site, modules, baseline):

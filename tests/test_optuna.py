@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 import optuna
+import pytest
 import yaml
 
 from helpers import doc_block, realize_cli
@@ -18,6 +19,7 @@ from realize.app.objective import INFEASIBLE_FACTOR, run_objective
 from realize.run_dir.names import RESULT_FILE
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_three_trials_at_tiny_n(tmp_path: Path) -> None:
     sweep = tmp_path / "sweep"
     p = realize_cli("-m", "experiment=tune_ce", "hydra.sweeper.n_trials=3", "ce.n_envs=choice(4)",

@@ -111,6 +111,7 @@ def test_pruned_rows_could_not_win_and_the_rest_are_unchanged(both: tuple[Rollou
     assert pruned.sim_steps < full.sim_steps
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_pruning_keeps_the_search(tmp_path: Path) -> None:
     """``ce.prune`` stops only rows that could not be an elite: the seed task's golden run with it
     on has the same best plan and best cost per iteration, bit for bit; only the success share

@@ -136,6 +136,7 @@ def test_validation_writes_result_json(run_dir: Path) -> None:
     assert rep.success_share > 0  # seed 3 gave 3 of 4 when written; the key matters here
 
 
+@pytest.mark.slow  # a whole run and its video: make test-all
 def test_push_scene_gets_its_camera_and_noise(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """scene=push builds RealizeMoveAndPush-v1: the video camera and the validation noise reach
     that task too (they used to be patched into the pick-and-place task's registry entry only)."""
@@ -173,6 +174,7 @@ def test_push_scene_gets_its_camera_and_noise(tmp_path: Path, monkeypatch: pytes
     reader.close()
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_video_follows_the_action_and_labels_every_frame(tmp_path: Path) -> None:
     """The default video camera follows the robot and what it acts on: during the grasp the
     4.5 cm (red) cube is at least 20 px wide, and a dark caption band with white text tops

@@ -8,6 +8,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
 import yaml
 
 from helpers import REPO, realize_cli, tiny
@@ -60,6 +61,7 @@ def test_readme_lists_only_what_the_code_writes() -> None:
     assert not missing, f"the README leaves out {missing}"
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_a_runs_files_are_all_in_the_readme(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     p = realize_cli(*tiny(ce__iterations=1, controller__max_time_s=3, logging__rerun="true"), "workers.n=2",

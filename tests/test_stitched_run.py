@@ -86,6 +86,7 @@ def test_the_stitched_runs_plan_puts_the_cube_on_table_2_replayed_alone(stitched
     assert rep.matches  # its shard re-run: the search's cost, bit for bit
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_a_resumed_stitched_run_goes_on_from_its_checkpoint(stitched_run: Path, tmp_path: Path) -> None:
     """Interrupted after round 1's suffix, the resumed run goes on from the checkpoint's searches,
     pool and stitched plans, in fresh workers that restore the pool's states without the

@@ -66,6 +66,7 @@ def test_prefix_end_state_continues_into_the_suffix(torch_single_thread: None) -
     assert 150 < float(first.cost[0]) < 250 and 200 < float(rest.cost[0]) < 300  # two and three actions
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_worker_processes_carry_starts_and_end_states(tmp_path) -> None:
     """Two worker processes, one copy per shard: each row's end state, and the suffix realized
     from it, equal a fresh one-copy scene's that realized the same two rollouts, bit for bit.

@@ -74,6 +74,23 @@ def test_no_module_over_400_lines() -> None:
     assert not long, f"modules over {MAX_LINES} lines: {long}"
 
 
+def test_scripts_use_the_public_api_never_the_tests() -> None:
+    """A script is a thin shell over the library: it imports nothing from ``tests/`` (the
+    helpers there may change with the tests) and puts no ``tests`` folder on ``sys.path``."""
+    bad = []
+    for path in sorted((REPO / "scripts").glob("*.py")):
+        text = path.read_text()
+        tree = ast.parse(text)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in ("helpers", "tests"):
+                bad.append(f"{path.name}: from {node.module} import ...")
+            if isinstance(node, ast.Import) and any(a.name.split(".")[0] in ("helpers", "tests") for a in node.names):
+                bad.append(f"{path.name}: import {', '.join(a.name for a in node.names)}")
+        if re.search(r"""sys\.path\.insert\([^)]*["']tests["']""", text):
+            bad.append(f"{path.name}: puts tests/ on sys.path")
+    assert not bad, bad
+
+
 def test_no_import_cycle() -> None:
     mods = _modules()
     g = nx.DiGraph()

@@ -150,6 +150,7 @@ def test_topk_run_reads_back_typed(topk_run: Path) -> None:
         assert len(rd.load_history(candidate=c.index)) == c.iterations
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 @pytest.mark.parametrize("stop_at", [0, 1])
 def test_topk_interrupted_then_resumed_equals_uninterrupted(topk_run: Path, tmp_path: Path, stop_at: int) -> None:
     """Interrupted mid-round (after candidate 0's first iteration) or at the end of round 0, then

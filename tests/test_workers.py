@@ -112,6 +112,7 @@ def one_process(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return realize_result(*RUN16, "workers.n=1", run_dir=tmp_path_factory.mktemp("w1") / "run")
 
 
+@pytest.mark.slow  # make test's multi-process smoke test is the golden run seed_paper_default (two workers)
 def test_two_worker_processes_give_the_numbers_of_one_process(tmp_path: Path) -> None:
     one = realize_result(*RUN8, "workers.n=1", run_dir=tmp_path / "one")
     two = realize_result(*RUN8, "workers.n=2", "workers.backend=process", run_dir=tmp_path / "two")
@@ -183,6 +184,7 @@ def _worker_1_in_rollout(pool, log: Path) -> Callable[[list[int]], int | None]:
     return victim
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_a_killed_worker_is_replaced_and_its_rows_rerun(tmp_path: Path) -> None:
     from realize.app.workers.pool import InProcessPool, run_shards
 
@@ -255,6 +257,7 @@ def _gone(pids: list[int], within: float) -> bool:
     return not any(_alive(c) for c in pids)
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_ctrl_c_stops_every_worker(tmp_path: Path) -> None:
     p, workers, run_dir = _start_run(tmp_path)
     p.send_signal(signal.SIGINT)

@@ -157,6 +157,7 @@ def _actor_1_in_rollout(pool) -> Callable[[list[int]], int | None]:
     return victim
 
 
+@pytest.mark.slow  # starts Ray (about 9 s); make test keeps the config checks above
 def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and_batch) -> None:
     _, pool, Z, _ = pool_and_batch
     pids = pool.pids()
@@ -167,6 +168,7 @@ def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and
     assert pool.pids() == pids  # a bug is not re-run
 
 
+@pytest.mark.slow  # starts Ray; make test keeps the config checks above
 def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
     from realize.app.workers.pool import InProcessPool, run_shards
 
@@ -184,6 +186,7 @@ def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
     assert res.failure == want.failure
 
 
+@pytest.mark.slow  # starts Ray; make test keeps the config checks above
 def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> None:
     _, pool, Z, _ = pool_and_batch
     kill_on_rollout(_actor_1_in_rollout(pool), times=2)
@@ -196,6 +199,7 @@ def test_an_actor_killed_twice_stops_the_run_with_its_name(pool_and_batch) -> No
     assert "rollout of 4 rows" in msg.split("last log lines:")[1]  # the actor's own log, read on its node
 
 
+@pytest.mark.slow  # starts Ray (about 9 s); make test keeps the config checks above
 def test_close_leaves_no_ray_process(pool_and_batch) -> None:
     _, pool, _, (before, tree) = pool_and_batch
     assert {"raylet", "gcs_server"} <= _ray_processes(tree), tree
@@ -224,7 +228,8 @@ def _start_run(tmp_path: Path) -> tuple[subprocess.Popen, dict[int, str], str]:
     return p, tree, session
 
 
-@pytest.mark.parametrize("how", ["ctrl-c", pytest.param("sigterm", marks=pytest.mark.slow)])
+@pytest.mark.slow  # a whole run in Ray actors
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
 def test_ctrl_c_stops_every_ray_process(tmp_path: Path, how: str) -> None:
     p, tree, session = _start_run(tmp_path)
     assert {"raylet", "gcs_server"} <= _ray_processes(tree), tree

@@ -130,6 +130,7 @@ def test_shards_and_parts_keep_a_samples_copies_together(n: int, rows: int, unit
         assert [s.size for s in shards] == [s.size for s in shard_rows(n, rows)]
 
 
+@pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_a_robust_run_meets_its_worlds_and_repeats(tmp_path: Path) -> None:
     args = ("ce.n_envs=8", "ce.n_elite=2", "ce.iterations=1", "ce.replicas=2", "seed=2", "logging.rerun=false",
             "logging.progress=false", "controller.max_time_s=8")
