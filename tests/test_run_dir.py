@@ -95,6 +95,20 @@ def _result(**kw) -> ResultDoc:
     return ResultDoc(**base)
 
 
+def test_a_pruned_runs_finished_share_is_beside_the_share_of_all_rows() -> None:
+    """With ce.prune a stopped row counts as failed in success_per_iter; finished_success_per_iter
+    is the share of the rows that ran to their end, derived from the counts and never read back."""
+    doc = _result(n_envs_per_iter=[10, 10, 4], n_feasible_per_iter=[2, 3, 0], n_stopped_per_iter=[5, 0, 4],
+                  success_per_iter=[0.2, 0.3, 0.0], iterations_done=3)
+    j = strict(doc.to_json())
+    assert j["finished_success_per_iter"] == [0.4, 0.3, None] and j["success_per_iter"] == [0.2, 0.3, 0.0]
+    back = ResultDoc.from_json(j)
+    assert "finished_success_per_iter" not in back.extra  # derived, not stored twice
+    back.n_feasible_per_iter = [4, 3, 0]
+    assert back.to_json()["finished_success_per_iter"] == [0.8, 0.3, None]
+    assert "finished_success_per_iter" not in _result().to_json()  # pruning off: no such key
+
+
 def test_result_doc_round_trip() -> None:
     doc = _result()
     j = strict(doc.to_json())

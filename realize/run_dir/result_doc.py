@@ -22,7 +22,9 @@ source}), ``plan``, ``config``, ``versions``, ``run_dir``, ``files``, ``segments
 ``resumed_from_iteration``, ``backend``, ``n_envs`` (the scene's copies), ``setup_time_s``, ``workers``,
 ``warm_start`` (null, or the earlier run it started from: ``realize.search.warm_start``),
 ``n_stopped_per_iter`` (only with ``ce.prune``: rows stopped as they could not be an elite, which
-``success_per_iter`` counts as not succeeded), ``n_screened_per_iter`` (only with ``ce.screen``: draws
+``success_per_iter`` counts as not succeeded), ``finished_success_per_iter`` (only with
+``ce.prune``: the share of the rows that ran to their end that ended feasible, derived from the
+counts and never read back), ``n_screened_per_iter`` (only with ``ce.screen``: draws
 rejected before simulation and drawn again, spent but not simulated); top-k runs add ``top_k``, ``n_candidates``,
 ``leader``, ``winner``, ``budget``, ``spent_iterations``, ``spent_samples``, ``halving_round``, ``candidates`` (with ``history``).
 What it doesn't: build a document from a search (``realize.run_dir.build``) or touch files
@@ -222,7 +224,8 @@ class ResultDoc:
             "iteration_best_cost_per_iter": encode_floats(self.iteration_best_cost_per_iter),
             "n_envs_per_iter": list(self.n_envs_per_iter),
             "n_feasible_per_iter": list(self.n_feasible_per_iter),
-            **({} if self.n_stopped_per_iter is None else {"n_stopped_per_iter": list(self.n_stopped_per_iter)}),
+            **({} if self.n_stopped_per_iter is None else {"n_stopped_per_iter": list(self.n_stopped_per_iter),
+                                                           "finished_success_per_iter": self.finished_success_per_iter()}),
             **({} if self.n_screened_per_iter is None else {"n_screened_per_iter": list(self.n_screened_per_iter)}),
             "elite_per_iter": [e.to_json() for e in self.elite_per_iter],
             "iteration_time_s": encode_floats(self.iteration_time_s),
@@ -250,6 +253,16 @@ class ResultDoc:
         doc.update(json_safe(self.extra))
         return doc
 
+    def finished_success_per_iter(self) -> list[float | None]:
+        """``ce.prune``: per iteration, the share of the rows that were not stopped that ended
+        feasible (None where every row was stopped). ``success_per_iter`` counts a stopped row as
+        failed, so with pruning it stays low while the search improves; this one does not."""
+        stopped = self.n_stopped_per_iter or [0] * len(self.n_envs_per_iter)
+        out: list[float | None] = []
+        for n, k, s in zip(self.n_envs_per_iter, self.n_feasible_per_iter, stopped):
+            out.append(k / (n - s) if n > s else None)
+        return out
+
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ResultDoc:
         """A ``ResultDoc`` from ``result.json``'s object; ``ValueError``/``KeyError``/``TypeError``
@@ -257,7 +270,8 @@ class ResultDoc:
         d = {_OLD_KEYS.get(k, k): v for k, v in d.items()}
         task = d.get("task") if isinstance(d.get("task"), Mapping) else {}
         cfg = d.get("config")
-        known = {f for f in cls.__dataclass_fields__} | {"interrupted", "task", "files"} | set(_HALVING_KEYS)
+        known = ({f for f in cls.__dataclass_fields__} | {"interrupted", "task", "files", "finished_success_per_iter"}
+                 | set(_HALVING_KEYS))
         best_params = d.get("best_params")
         return cls(
             status=None if d.get("status") is None else str(d["status"]),
