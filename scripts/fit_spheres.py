@@ -269,7 +269,8 @@ def main(argv: list[str] | None = None) -> int:
         "--count, else those of the file it replaced):",
         f"  .venv/bin/python {cmd}",
     ]
-    write_spheres(out, robot, fitted, header)
+    without = [l for l in collision_links(urdf) if l not in links]  # --links: the rest is left to neighbours
+    write_spheres(out, robot, fitted, header, without_spheres=without)
     print(f"wrote {len(fitted)} spheres to {where}")
 
     if args.compare:

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from realize.robot.spec import load_robot_spec
-from realize.robot.sphere_file import load_spheres
+from realize.robot.spec import known_robots, load_robot_spec
+from realize.robot.sphere_file import links_without_spheres, load_spheres
 from realize.robot.sphere_fit import Sphere, collision_links, coverage, fit_spheres, link_geometry
 from realize.robot.urdf import source_urdf
 
@@ -70,9 +70,6 @@ SHAPES_URDF = """<?xml version="1.0"?>
 """
 
 # Fetch links that carry no spheres of their own (see the module docstring).
-BORROWED = {"fetch_omni": {"r_wheel_link", "l_wheel_link", "head_tilt_link", "bellows_link2", "estop_link",
-                           "laser_link"},
-            "mobile_panda": set(), "panda": set()}
 
 
 @pytest.fixture(scope="module")
@@ -121,14 +118,15 @@ def test_script_writes_file_and_floor_rule(shapes_urdf: Path, tmp_path: Path, ca
     assert [s.check_floor for s in spheres] == [False] * 3 + [True]  # the top leaves the floor as the lift rises
 
 
-@pytest.mark.parametrize("robot", ["fetch_omni", "mobile_panda", "panda"])
+@pytest.mark.parametrize("robot", known_robots())  # every file of configs/robot/, none listed by hand
 def test_sphere_file_covers_collision_geometry(robot: str, capsys: pytest.CaptureFixture) -> None:
     spec = load_robot_spec(robot)
     urdf = source_urdf(spec.urdf)
     spheres = load_spheres(spec.spheres_file)
     links = collision_links(urdf)
     assert {s.link for s in spheres} <= set(links), "spheres on links without collision geometry"
-    assert set(links) - {s.link for s in spheres} == BORROWED[robot]
+    # the links the sphere file leaves to a neighbour's spheres, and no other
+    assert set(links) - {s.link for s in spheres} == set(links_without_spheres(spec.spheres_file))
     rows = []
     for link in links:
         own = [Sphere(s.offset, s.radius) for s in spheres if s.link == link]
@@ -142,3 +140,19 @@ def test_sphere_file_covers_collision_geometry(robot: str, capsys: pytest.Captur
               f"{100 * min(c.share_inside for _, c in rows):.2f} %; largest overshoot "
               f"{1000 * worst[1].overshoot:.0f} mm ({worst[0]})")
     assert not low, f"{robot}: links under 99 % covered by their own spheres: {low}"
+
+
+def test_links_left_without_spheres_are_data_of_the_sphere_file(tmp_path: Path) -> None:
+    """A sphere file says which collision links its spheres leave to a neighbour's (Fetch's wheels
+    inside the base's sphere), so the coverage check above names no robot; written and read back."""
+    from realize.config import ConfigError
+    from realize.robot.sphere_file import SphereSpec, write_spheres
+
+    path = tmp_path / "arm.yaml"
+    write_spheres(path, "arm", [SphereSpec("a", "link_a", (0.0, 0.0, 0.1), 0.05)], without_spheres=["wheel"])
+    assert links_without_spheres(str(path)) == ("wheel",) and [s.link for s in load_spheres(str(path))] == ["link_a"]
+    write_spheres(path, "arm", [SphereSpec("a", "link_a", (0.0, 0.0, 0.1), 0.05)])
+    assert links_without_spheres(str(path)) == ()
+    path.write_text(path.read_text().replace("spheres:", "links_without_spheres: wheel\nspheres:", 1))
+    with pytest.raises(ConfigError, match=r"arm.yaml: links_without_spheres = 'wheel' is invalid"):
+        links_without_spheres(str(path))

@@ -2,8 +2,10 @@
 
 What it does: ``SphereSpec`` is one sphere rigidly attached to a link (centre offset in the link
 frame, radius, whether it is kept above the floor); ``load_spheres(name_or_path)`` reads a sphere
-file (``robot:`` and a ``spheres:`` list of ``{name, link, offset, radius, check_floor}``) and
-``write_spheres`` writes one. Bad entries are refused in one line naming the file and entry.
+file (``robot:`` and a ``spheres:`` list of ``{name, link, offset, radius, check_floor}``),
+``links_without_spheres`` its optional list of collision links left to their neighbours' spheres
+(a wheel inside the base's sphere; the robot checks hold every other link to its own spheres),
+and ``write_spheres`` writes one. Bad entries are refused in one line naming the file and entry.
 What it doesn't: fit spheres to meshes (``realize.robot.sphere_fit``) or place them by forward
 kinematics (``realize.robot.kinematics``).
 """
@@ -20,7 +22,7 @@ import yaml
 from realize.config import ConfigError
 from realize.paths import REPO_ROOT
 
-__all__ = ["SphereSpec", "SPHERE_DIR", "sphere_file_path", "load_spheres", "write_spheres"]
+__all__ = ["SphereSpec", "SPHERE_DIR", "sphere_file_path", "load_spheres", "links_without_spheres", "write_spheres"]
 
 SPHERE_DIR = Path(__file__).resolve().parent / "spheres"
 
@@ -47,14 +49,28 @@ def sphere_file_path(name_or_path: str) -> Path:
     return p if p.is_absolute() else REPO_ROOT / p
 
 
-def load_spheres(name_or_path: str) -> tuple[SphereSpec, ...]:
-    """The spheres of a sphere file (see the module docstring)."""
+def _read(name_or_path: str) -> tuple[Path, dict]:
     path = sphere_file_path(name_or_path)
     if not path.is_file():
         known = sorted(p.stem for p in SPHERE_DIR.glob("*.yaml"))
         raise ConfigError(f"robot.spheres_file = {name_or_path!r}: no file {path.name} (known: {known})")
     with open(path) as f:
         data = yaml.safe_load(f) or {}
+    return path, data
+
+
+def links_without_spheres(name_or_path: str) -> tuple[str, ...]:
+    """The file's ``links_without_spheres`` (collision links its spheres leave to a neighbour's)."""
+    path, data = _read(name_or_path)
+    names = data.get("links_without_spheres", []) if isinstance(data, dict) else []
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ConfigError(f"{path.name}: links_without_spheres = {names!r} is invalid: a list of link names")
+    return tuple(names)
+
+
+def load_spheres(name_or_path: str) -> tuple[SphereSpec, ...]:
+    """The spheres of a sphere file (see the module docstring)."""
+    path, data = _read(name_or_path)
     entries = data.get("spheres") if isinstance(data, dict) else None
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{path.name}: needs a non-empty 'spheres:' list")
@@ -79,9 +95,13 @@ def load_spheres(name_or_path: str) -> tuple[SphereSpec, ...]:
     return tuple(out)
 
 
-def write_spheres(path: Path, robot: str, spheres: Sequence[SphereSpec], header: Sequence[str] = ()) -> None:
-    """Write a sphere file that ``load_spheres`` reads back to the same numbers."""
-    lines = [f"# {h}" for h in header] + [f"robot: {robot}", "spheres:"]
+def write_spheres(path: Path, robot: str, spheres: Sequence[SphereSpec], header: Sequence[str] = (),
+                  without_spheres: Sequence[str] = ()) -> None:
+    """Write a sphere file that ``load_spheres`` (and ``links_without_spheres``) read back to the same numbers."""
+    lines = [f"# {h}" for h in header] + [f"robot: {robot}"]
+    if without_spheres:
+        lines.append(f"links_without_spheres: [{', '.join(without_spheres)}]")
+    lines.append("spheres:")
     for s in spheres:
         off = ", ".join(repr(float(v)) for v in s.offset)
         lines.append(f"  - {{name: {s.name}, link: {s.link}, offset: [{off}], radius: {float(s.radius)!r}, "
