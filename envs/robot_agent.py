@@ -9,8 +9,8 @@ spec (``realize.robot.spec``): a subclass of ``SpecAgent`` whose
   * only control mode, ``pd_joint_pos_base_vel``: base x, y, yaw joints velocity-driven in the
     world frame (an omnidirectional base; a fixed base has none: its root link is fixed where
     the task puts it), the upper joints position-driven with absolute targets
-    (per drive group), held joints (a head) held by their drive, the gripper fingers mimic
-    position-driven; no cameras (rendering for videos uses a scene camera);
+    (per drive group), held joints (a head) held by their drive, the gripper's one joint
+    position-driven (a one-sided jaw) or its fingers mimic position-driven; no cameras (rendering for videos uses a scene camera);
   * collision filtering: the spec's ``no_floor_links`` never touch the floor (``FLOOR_BIT``;
     the task sets it on the ground), ``ignore_pairs`` never touch each other, and
     ``sim.robot_collisions`` (``all`` | ``no_self`` | ``hand``) as ``set_robot_collisions`` says;
@@ -104,10 +104,14 @@ class SpecAgent(BaseAgent):
             mode[f"upper{i}"] = PDJointPosControllerConfig(list(d.joints), None, None, d.stiffness, d.damping,
                                                            d.force, normalize_action=False)
         g = s.gripper
-        mode["gripper"] = PDJointPosMimicControllerConfig(
-            list(g.joints), g.closed, g.open, g.stiffness, g.damping, g.force,
-            mimic={j: {"joint": g.joints[0]} for j in g.joints[1:]}, normalize_action=False,
-        )
+        if len(g.joints) == 1:  # one driven joint (a one-sided jaw): a plain position drive
+            mode["gripper"] = PDJointPosControllerConfig(list(g.joints), g.closed, g.open, g.stiffness, g.damping,
+                                                         g.force, normalize_action=False)
+        else:  # joints[0] driven, the others mimic it
+            mode["gripper"] = PDJointPosMimicControllerConfig(
+                list(g.joints), g.closed, g.open, g.stiffness, g.damping, g.force,
+                mimic={j: {"joint": g.joints[0]} for j in g.joints[1:]}, normalize_action=False,
+            )
         if s.held:
             h = s.held_drive
             mode["held"] = PDJointPosControllerConfig(list(s.held), None, None, h.stiffness, h.damping, h.force,

@@ -233,12 +233,14 @@ def read_sim(d: Any, where: str = "sim") -> SimSettings:
 
 
 def read_robot(d: Any, where: str = "robot") -> RobotSpec:
-    """The ``robot`` group -> ``RobotSpec`` (None: the default robot's config file)."""
+    """The ``robot`` group -> ``RobotSpec`` (None: the default robot's config file), its joint and
+    link names checked against its URDF."""
     from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
+    from realize.robot.urdf_names import check_urdf_names
 
-    if d is None:
-        return load_robot_spec(DEFAULT_ROBOT)
-    return RobotSpec.from_mapping(as_mapping(d, where), where)
+    spec = load_robot_spec(DEFAULT_ROBOT) if d is None else RobotSpec.from_mapping(as_mapping(d, where), where)
+    check_urdf_names(spec, where)  # a name the URDF lacks: one line now, not a KeyError from the agent build
+    return spec
 
 
 def resolve_placement(device: str, sim: SimSettings, ce: CEConfig) -> Placement:

@@ -108,7 +108,8 @@ class UpperSpec(Settings):
 
 @dataclass
 class GripperSpec(Settings):
-    """A parallel gripper: ``joints[0]`` is driven, the others mimic it (``mimic``)."""
+    """A gripper's driven joints: one (driven alone: a one-sided jaw against a fixed one) or
+    several (``joints[0]`` driven, the others mimic it: a parallel gripper)."""
 
     joints: tuple[str, ...] = ()
     finger_links: tuple[str, str] = ("", "")  # whose contact forces on an object mean "holding"

@@ -1,0 +1,59 @@
+"""A robot config's joint and link names against its URDF, before anything is built.
+
+What it does: ``check_urdf_names(spec, where)`` reads the spec's URDF (``robot.urdf``; the
+XML only, no meshes) and refuses, in one ``ConfigError`` line naming the key, a joint the spec
+drives or holds that the URDF does not have as a movable joint (``base.joints``,
+``upper.joints``, ``gripper.joints``, ``held``, ``rest``) and a link it names that the URDF does
+not have (``base.link``, ``tcp.link``, ``gripper.finger_links``, ``collision.*``). Without it, a
+misspelt finger link surfaced as a bare ``KeyError`` from inside ManiSkill's agent build.
+What it doesn't: check geometry, limits or whether the simulated robot behaves (the agent build
+and the scene's own check of the driven joints do), or read the sphere file.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable
+
+from realize.config import ConfigError, did_you_mean
+from realize.robot.spec import RobotSpec
+from realize.robot.urdf import source_urdf
+
+__all__ = ["urdf_names", "check_urdf_names"]
+
+
+def urdf_names(path: str) -> tuple[set[str], set[str]]:
+    """The movable joints and the links of a URDF file."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        raise ConfigError(f"robot.urdf = {path!r}: not a URDF ({e})") from None
+    joints = {j.get("name", "") for j in root.findall("joint") if j.get("type", "fixed") != "fixed"}
+    links = {link.get("name", "") for link in root.findall("link")}
+    return joints, links
+
+
+def _refuse(key: str, kind: str, names: Iterable[str], known: set[str], urdf: str) -> None:
+    for name in names:
+        if name not in known:
+            raise ConfigError(f"{key}: {kind} {name!r} is not in {urdf}{did_you_mean(name, sorted(known))}; "
+                              f"its {kind}s: {', '.join(sorted(known))}")
+
+
+def check_urdf_names(spec: RobotSpec, where: str = "robot") -> None:
+    """Refuse a joint or link name of ``spec`` that its URDF lacks (module docstring)."""
+    path = source_urdf(spec.urdf)
+    joints, links = urdf_names(str(path))
+    name = path.name
+    for key, names in ((f"{where}.base.joints", spec.base.joints), (f"{where}.upper.joints", spec.upper.joints),
+                       (f"{where}.gripper.joints", spec.gripper.joints), (f"{where}.held", spec.held),
+                       (f"{where}.rest", spec.rest)):
+        _refuse(key, "movable joint", names, joints, name)
+    c = spec.collision
+    for key, names in ((f"{where}.base.link", [spec.base.link]), (f"{where}.tcp.link", [spec.tcp.link]),
+                       (f"{where}.gripper.finger_links", spec.gripper.finger_links),
+                       (f"{where}.collision.no_floor_links", c.no_floor_links),
+                       (f"{where}.collision.hand_links", c.hand_links),
+                       (f"{where}.collision.lean_drop_links", c.lean_drop_links),
+                       (f"{where}.collision.ignore_pairs", [n for pair in c.ignore_pairs for n in pair])):
+        _refuse(key, "link", names, links, name)
