@@ -51,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--task-camera", action="store_true", help="use the task's own render camera pose")
     ap.add_argument("--overview", action="store_true", help="a fixed high view of the whole world from -y")
     ap.add_argument("--hold", type=float, default=1.0, help="seconds to hold the last frame")
-    ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
+    ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default=None,
+                    help="simulator backend (default: the run's own sim.backend)")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
     ap.add_argument("--state-at", type=int, default=None, metavar="K",
                     help="capture the scene state when action K (0-based) begins")

@@ -76,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
                          "(default: the run's validation.min_success)")
     ap.add_argument("--nominal", action="store_true",
                     help="validate the search's nominal best_z, not the plan the run's validation returned")
-    ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default="cpu")
+    ap.add_argument("--backend", choices=("cpu", "gpu", "auto"), default=None,
+                    help="simulator backend (default: the run's own sim.backend)")
     ap.add_argument("--dry-run", action="store_true", help="report only, leave result.json unchanged")
     ap.add_argument("--json", action="store_true", help="print the report as JSON")
     args = ap.parse_args(argv)

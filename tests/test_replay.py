@@ -68,6 +68,23 @@ def test_load_run_and_spec(run_dir: Path, direct_cost: float) -> None:
     assert spec.sim.backend == "cpu" and spec.task.layout.dim == len(FEASIBLE_Z)
 
 
+def test_replay_keeps_the_runs_backend_unless_told(run_dir: Path) -> None:
+    """Replay, validation and the run's own candidate validation simulate on the backend the run's
+    config names; they used to put every run on the CPU silently. A run made for the GPU is then
+    refused on a machine without one (its config's device), and backend="cpu" says so on purpose."""
+    import dataclasses
+
+    run = saved_plan(run_dir)
+    gpu = dataclasses.replace(run, config={**run.config, "device": "cuda",
+                                           "sim": {**run.config["sim"], "backend": "gpu"}})
+    if not torch.cuda.is_available():
+        with pytest.raises(ReplayError, match="cuda|CUDA|GPU"):
+            build_replay_spec(gpu)
+    assert build_replay_spec(gpu, "cpu").sim.backend == "cpu"
+    with pytest.raises(ReplayError, match="backend = 'tpu' is invalid"):
+        build_replay_spec(run, "tpu")
+
+
 def test_bad_run_dirs(tmp_path: Path) -> None:
     with pytest.raises(ReplayError, match="not found"):
         saved_plan(tmp_path)

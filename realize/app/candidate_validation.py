@@ -120,7 +120,7 @@ def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndar
 
 def validate_candidates(run_dir: str | Path, candidates: int | None = None, replicas: int | None = None, *,
                         min_success: float | None = None, iterations: int | None = None, seed: int | None = None,
-                        perturbation: Perturbation | None = None, backend: str = "cpu",
+                        perturbation: Perturbation | None = None, backend: str | None = None,
                         track_objects: bool | None = None, write: bool = True,
                         **overrides: Any) -> CandidatesReport:
     """Validate the run's ``candidates`` cheapest distinct feasible plans, ``replicas`` each

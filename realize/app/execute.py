@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from realize.app.execution_records import ExecutionSummary, ReplanRecord, WorldLog
-from realize.app.executor import Executor
+from realize.app.executor import EXECUTION_BACKEND, Executor
 from realize.config import ConfigError
 from realize.execution.disturbances import draw, read_disturbances
 from realize.execution.settings import ExecuteSettings
@@ -68,7 +68,7 @@ def execute_world(run_dir: str | Path, settings: ExecuteSettings, k: int, *, clo
 
     run = saved_plan(run_dir)
     choice = returned_z(run)
-    spec = build_replay_spec(dataclasses.replace(run, best_z=choice.z))
+    spec = build_replay_spec(dataclasses.replace(run, best_z=choice.z), EXECUTION_BACKEND)
     disturbances = read_disturbances(settings.disturbances, spec.geometry, [str(a) for a in spec.task.plan])
     seed = settings.seed * SEED_STRIDE + k
     scheduled = draw(disturbances, np.random.default_rng([settings.seed, k]))
@@ -95,7 +95,7 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
 
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
-    spec = build_replay_spec(run)
+    spec = build_replay_spec(run, EXECUTION_BACKEND)
     read_disturbances(settings.disturbances, spec.geometry, [str(a) for a in spec.task.plan])  # before simulating
     if not (open_loop or closed_loop):
         raise ConfigError("execute: neither open nor closed loop asked for")

@@ -30,7 +30,11 @@ from realize.execution.schedule import Schedule
 from realize.execution.settings import ExecuteSettings
 from realize.execution.world import ExecutionWorld, Observation, geometry_changes
 
-__all__ = ["Executor"]
+__all__ = ["Executor", "EXECUTION_BACKEND"]
+
+# an executed world is one copy restored and disturbed through the CPU backend's setters (the GPU
+# backend's restore has never run), whatever backend the run searched on
+EXECUTION_BACKEND = "cpu"
 
 log = logging.getLogger("realize")
 
@@ -276,7 +280,7 @@ class Executor:
                  f"{res.cost:.0f}" if res.feasible else "none")
         if not res.feasible:
             return rec, None
-        rspec = build_replay_spec(saved_plan(res.run_dir))
+        rspec = build_replay_spec(saved_plan(res.run_dir), EXECUTION_BACKEND)
         whole = self.spec.task.describe()
         offset = res.from_action if rspec.config.get("task", {}).get("plan") == self.run.config["task"].get("plan") \
             and whole.endswith(rspec.task.describe()) else None

@@ -132,13 +132,15 @@ def returned_z(run: BestPlan, nominal: bool = False) -> PlanChoice:
                       f"{v.get('reason', '?')})")
 
 
-def build_replay_spec(run: BestPlan, backend: str = "cpu") -> RunSpec:
-    """The run's ``RunSpec`` with the simulator backend forced to ``backend`` (cpu | gpu | auto)."""
-    if backend not in ("cpu", "gpu", "auto"):
-        raise ReplayError(f"backend = {backend!r} is invalid: allowed 'cpu', 'gpu', 'auto'")
+def build_replay_spec(run: BestPlan, backend: str | None = None) -> RunSpec:
+    """The run's ``RunSpec``, on the simulator backend the run's config names (``sim.backend`` and
+    ``device``, as the run resolved them), or with ``backend`` (cpu | gpu | auto) forced."""
+    if backend not in (None, "cpu", "gpu", "auto"):
+        raise ReplayError(f"backend = {backend!r} is invalid: allowed 'cpu', 'gpu', 'auto' (None: the run's own)")
     cfg = json.loads(json.dumps(run.config))  # deep copy of plain data
-    cfg["sim"] = dict(cfg.get("sim") or {}, backend=backend)
-    cfg["device"] = {"cpu": "cpu", "gpu": "cuda"}.get(backend, "auto")
+    if backend is not None:
+        cfg["sim"] = dict(cfg.get("sim") or {}, backend=backend)
+        cfg["device"] = {"cpu": "cpu", "gpu": "cuda"}.get(backend, "auto")
     cfg["resume"] = None
     try:
         spec = build_run_spec(cfg)
@@ -214,7 +216,7 @@ class ReplayReport:
 
 def replay(run_dir: str | Path, video: str | Path | None = None, *, fps: float = 20.0, every: int = 2,
            width: int | None = 960, height: int | None = 720, eye: Sequence[float] | None = None,
-           target: Sequence[float] | None = None, task_camera: bool = False, backend: str = "cpu",
+           target: Sequence[float] | None = None, task_camera: bool = False, backend: str | None = None,
            hold_s: float = 1.0, state_at: int | None = None, state_out: str | Path | None = None,
            exact: bool = False, overview: bool = False, nominal: bool = False) -> ReplayReport:
     """Re-simulate the run's plan in one copy; with ``video`` write an MP4 of it.

@@ -65,7 +65,7 @@ class ValidationReport:
 
 
 def validate(run_dir: str | Path, replicas: int | None = None, seed: int | None = None, *,
-             perturbation: Perturbation | None = None, backend: str = "cpu", write: bool = True,
+             perturbation: Perturbation | None = None, backend: str | None = None, write: bool = True,
              track_objects: bool | None = None, nominal: bool = False, **overrides: Any) -> ValidationReport:
     """Re-simulate the plan the run returns (``realize.app.replay.returned_z``: its candidate
     validation's returned plan, else ``best_z``; ``nominal``: ``best_z``) ``replicas`` times at
@@ -130,7 +130,7 @@ def validation_worlds(model: Perturbation, objects: Any, replicas: int, seed: in
     return draw_worlds(model, objects, replicas + 1, seed, nominal_first=True)
 
 
-def replica_spec(run: Any, backend: str, perturbation: Perturbation | None, track_objects: bool | None,
+def replica_spec(run: Any, backend: str | None, perturbation: Perturbation | None, track_objects: bool | None,
                  overrides: dict[str, Any]) -> tuple[Any, Perturbation]:
     """The run's replay spec (``track_objects`` overriding its controller's) and the perturbation
     model (``perturbation`` or the run task's, with ``overrides`` of its fields)."""
