@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -123,21 +124,46 @@ def _settings_classes() -> list[type]:
     return out
 
 
+def _names_code_uses(path: Path) -> set[str]:
+    """The names a module's code (not its docstrings or comments) uses: attributes (``x.key``),
+    string constants (``d["key"]``, ``getattr(x, "key")``) and keyword arguments (``f(key=...)``)."""
+    import ast
+
+    tree = ast.parse(path.read_text())
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                  and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute):
+            out.add(node.attr)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+            out.add(node.value)
+        elif isinstance(node, ast.keyword) and node.arg:
+            out.add(node.arg)
+    return out
+
+
 def test_every_config_key_is_read_somewhere() -> None:
-    """A settings field that no module reads would be a key that changes nothing: each one is
-    named (``.key`` or ``"key"``) somewhere in ``realize/`` or ``envs/`` (unknown keys are refused
-    by the readers themselves)."""
+    """A settings field that no code reads would be a key that changes nothing: each one is used
+    by the code of ``realize/`` or ``envs/`` (an attribute, a string key, a keyword argument; a
+    docstring or a comment that names it does not count), or by a config's interpolation
+    (``${ce.batch_scale}`` in configs/). Unknown keys are refused by the readers themselves."""
     import re
 
     from helpers import REPO
 
-    sources = [p.read_text() for d in ("realize", "envs") for p in (REPO / d).rglob("*.py")]
+    used: set[str] = set()
+    for d in ("realize", "envs"):
+        for p in (REPO / d).rglob("*.py"):
+            used |= _names_code_uses(p)
+    interpolated = {m.rsplit(".", 1)[-1] for p in (REPO / "configs").rglob("*.yaml")
+                    for m in re.findall(r"\$\{[^}:]*?([\w.]+)\}", p.read_text())}
     unread = []
     for cls in _settings_classes():
         if not cls.__module__.startswith(("realize", "envs")):
             continue  # a test's own settings class
         for f in dataclasses.fields(cls):
-            pattern = re.compile(rf"\.{f.name}\b|[\"']{f.name}[\"']")
-            if not any(pattern.search(s) for s in sources):
+            if f.name not in used and f.name not in interpolated:
                 unread.append(f"{cls.__name__}.{f.name}")
     assert not unread, f"config keys nothing reads: {unread}"

@@ -74,7 +74,7 @@ def test_remaining_actions_put_the_held_cube_on_table2(torch_single_thread: None
 @pytest.mark.slow
 def test_restored_rollouts_are_history_free(torch_single_thread: None) -> None:
     """A rollout from a restored state gives the same cost whatever the scene simulated before
-    (PhysX keeps the robots' self-contact caches across resets; the restore flushes them)."""
+    (every reset starts a new PhysX system: nothing PhysX kept from before survives it)."""
     held = load_state(FIXTURE)
     scene, (realizer,) = open_realization(_spec(2, held), n_envs=2)
     Z = torch.tensor([REST_Z, REST_Z], dtype=torch.float64)
