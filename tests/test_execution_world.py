@@ -78,6 +78,22 @@ def test_bad_disturbances_are_refused_in_one_line_before_any_simulation(spec, no
         assert n in msg, (n, msg)
 
 
+def test_a_preset_writes_no_default_twice() -> None:
+    """A preset holds its disturbances and what it changes; a key at ExecuteSettings' default is
+    written once, in realize/execution/settings.py (the five presets used to repeat six keys)."""
+    import dataclasses
+
+    import yaml
+
+    from realize.execution.settings import PRESET_DIR
+
+    defaults = dataclasses.asdict(ExecuteSettings())
+    for name in presets():
+        raw = yaml.safe_load((PRESET_DIR / f"{name}.yaml").read_text()) or {}
+        again = sorted(k for k, v in raw.items() if k != "disturbances" and defaults.get(k) == v)
+        assert not again, f"configs/execute/{name}.yaml repeats the default of {again}"
+
+
 def test_presets_read_against_the_seed_task(spec, no_sim) -> None:
     assert {"none", "cube_moved", "table_moved", "knocked_out", "obstacle"} <= set(presets())
     kinds = {}
