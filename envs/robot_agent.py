@@ -10,7 +10,8 @@ spec (``realize.robot.spec``): a subclass of ``SpecAgent`` whose
     world frame (an omnidirectional base; a fixed base has none: its root link is fixed where
     the task puts it), the upper joints position-driven with absolute targets
     (per drive group), held joints (a head) held by their drive, the gripper's one joint
-    position-driven (a one-sided jaw) or its fingers mimic position-driven; no cameras (rendering for videos uses a scene camera);
+    position-driven (a one-sided jaw) or its fingers mimic position-driven; no cameras
+    (rendering for videos uses a scene camera);
   * collision filtering: the spec's ``no_floor_links`` never touch the floor (``FLOOR_BIT``;
     the task sets it on the ground), ``ignore_pairs`` never touch each other, and
     ``sim.robot_collisions`` (``all`` | ``no_self`` | ``hand``) as ``set_robot_collisions`` says;

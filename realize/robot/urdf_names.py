@@ -12,25 +12,19 @@ and the scene's own check of the driven joints do), or read the sphere file.
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from collections.abc import Iterable
 
 from realize.config import ConfigError, did_you_mean
 from realize.robot.spec import RobotSpec
-from realize.robot.urdf import source_urdf
+from realize.robot.urdf import parse_urdf_joints, source_urdf
 
 __all__ = ["urdf_names", "check_urdf_names"]
 
 
 def urdf_names(path: str) -> tuple[set[str], set[str]]:
-    """The movable joints and the links of a URDF file."""
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as e:
-        raise ConfigError(f"robot.urdf = {path!r}: not a URDF ({e})") from None
-    joints = {j.get("name", "") for j in root.findall("joint") if j.get("type", "fixed") != "fixed"}
-    links = {link.get("name", "") for link in root.findall("link")}
-    return joints, links
+    """The movable joints and the links (every joint's parent and child) of a URDF file."""
+    joints = parse_urdf_joints(path).values()
+    return {j.name for j in joints if j.type != "fixed"}, {n for j in joints for n in (j.parent, j.child)}
 
 
 def _refuse(key: str, kind: str, names: Iterable[str], known: set[str], urdf: str) -> None:

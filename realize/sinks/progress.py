@@ -48,10 +48,11 @@ class ProgressSink:
         else:
             where = "" if c is None else f"candidate {c} (round {it.report.round}), "
         cost = f"{rec.best_cost:.0f}" if math.isfinite(rec.best_cost) else "-"
-        finished = rec.n_envs - (rec.n_stopped or 0)
-        stopped = (f" of all, {rec.n_feasible / finished:.0%} of the {finished} that finished ({rec.n_stopped} "
-                   f"stopped: could not be an elite)" if rec.n_stopped and finished else
-                   f" ({rec.n_stopped} stopped: could not be an elite)" if rec.n_stopped else "")
+        stopped = ""
+        if rec.n_stopped:  # ce.prune: the share among the rows that finished too
+            finished = rec.n_envs - rec.n_stopped
+            share = f" of all, {rec.n_feasible / finished:.0%} of the {finished} that finished" if finished else ""
+            stopped = f"{share} ({rec.n_stopped} stopped: could not be an elite)"
         screened = f", {rec.n_screened} screened out" if rec.n_screened else ""
         self.bar.set_postfix_str(f"{where}success {rec.success_share:.0%}{stopped}{screened}, best cost {cost}")
         self.bar.update(1)
