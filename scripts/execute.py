@@ -2,7 +2,7 @@
 
 Usage: python scripts/execute.py RUN_DIR [--disturbance FAMILY|FILE.yaml] [--worlds W] [--seed S]
             [--max-replans N] [--open-only | --closed-only] [--n-envs N] [--iterations T]
-            [--video] [--no-rerun] [--out DIR] [--json]
+            [--video] [--no-rerun] [--out DIR] [--json] [--export ros2,lerobot] [--accel-limit A]
 
 FAMILY is a preset of configs/execute/ (none, cube_moved, table_moved, knocked_out, obstacle) or a
 YAML file of the same keys; --worlds, --seed and --max-replans override it. Each world is its own
@@ -48,16 +48,25 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-rerun", action="store_true", help="no .rrd per world")
     p.add_argument("--out", default=None, help="output directory (default RUN_DIR/execution/FAMILY)")
     p.add_argument("--json", action="store_true", help="print summary.json")
+    p.add_argument("--export", default="", help="also write each world as ros2 (an MCAP bag) and/or lerobot (a "
+                   "LeRobot dataset per mode), comma-separated (docs/execution_format.md)")
+    p.add_argument("--accel-limit", type=float, default=None,
+                   help="the exported arm trajectories' acceleration limit, rad/s^2 (m/s^2 prismatic), every joint "
+                        "(default: realize.execution.time_param.DEFAULT_ACCELERATION_LIMIT)")
     a = p.parse_args(argv)
 
     from realize.app.execute import execute
     from realize.config import ConfigError
+    from realize.execution.export import DEFAULT_ACCELERATION_LIMIT, ExportOptions, export_formats
     from realize.execution.settings import load_preset
 
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     try:
         if not (Path(a.run_dir) / "result.json").is_file():
             raise ConfigError(f"{a.run_dir}: not a realize run directory (no result.json)")
+        formats = export_formats(a.export)  # a bad name is refused before anything runs
+        accel = DEFAULT_ACCELERATION_LIMIT if a.accel_limit is None else a.accel_limit
+        ExportOptions(acceleration_limit=accel)
         settings = load_preset(a.disturbance)
         for key in ("worlds", "seed", "max_replans"):
             v = getattr(a, key)
@@ -69,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
         budget = ReplanBudget(**kw)
         name = Path(a.disturbance).stem
         s = execute(a.run_dir, settings, name=name, open_loop=not a.closed_only, closed_loop=not a.open_only,
-                    out=a.out, budget=budget, rerun=not a.no_rerun, video=a.video)
+                    out=a.out, budget=budget, rerun=not a.no_rerun, video=a.video, export=formats,
+                    export_acceleration=accel)
     except ConfigError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -39,6 +39,7 @@ import json
 import logging
 import time
 from dataclasses import asdict
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,7 @@ from realize.app.execution_records import ExecutionSummary, ReplanRecord, WorldL
 from realize.app.executor import EXECUTION_BACKEND, Executor
 from realize.config import ConfigError
 from realize.execution.disturbances import draw, read_disturbances
+from realize.execution.export import DEFAULT_ACCELERATION_LIMIT, ExportOptions, export_formats, export_world
 from realize.execution.settings import ExecuteSettings
 
 __all__ = ["execute", "execute_world", "ExecutionSummary", "WorldLog", "ReplanRecord", "EXECUTION_DIR"]
@@ -85,11 +87,14 @@ def execute_world(run_dir: str | Path, settings: ExecuteSettings, k: int, *, clo
 
 def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None = None, worlds: int | None = None,
             open_loop: bool = True, closed_loop: bool = True, out: str | Path | None = None, budget: Any = None,
-            rerun: bool = True, progress: bool = True, video: bool = False) -> ExecutionSummary:
+            rerun: bool = True, progress: bool = True, video: bool = False, export: str | Sequence[str] = (),
+            export_acceleration: float = DEFAULT_ACCELERATION_LIMIT) -> ExecutionSummary:
     """The study of module docstring: ``worlds`` (default ``settings.worlds``) worlds, each open
     loop and/or closed loop, into ``out`` (default ``<run>/execution/<name>``). Every world's
     files are written as it ends (a killed study keeps what it has); ``summary.json`` after
-    each world. Bad disturbances are refused before anything is simulated."""
+    each world. Bad disturbances are refused before anything is simulated. ``export``: formats
+    (``ros2``, ``lerobot``: ``realize.execution.export``) each world is also written in, after its
+    files, with ``export_acceleration`` the arm's acceleration limit; bad names are refused first."""
     from realize.app.planner import Planner, ReplanBudget
     from realize.app.replay import build_replay_spec, saved_plan
 
@@ -97,6 +102,8 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
     run = saved_plan(run_dir)
     spec = build_replay_spec(run, EXECUTION_BACKEND)
     read_disturbances(settings.disturbances, spec.geometry, [str(a) for a in spec.task.plan])  # before simulating
+    formats = export_formats(export)
+    export_options = ExportOptions.for_robot(spec.robot, export_acceleration) if formats else None
     if not (open_loop or closed_loop):
         raise ConfigError("execute: neither open nor closed loop asked for")
     n = settings.worlds if worlds is None else int(worlds)
@@ -137,6 +144,10 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
                 files += [f"{stem}.json", f"{stem}.npz"] + ([f"{stem}.mp4"] if video else [])
                 if rec is not None:
                     files.append(f"{stem}.rrd")
+                if formats:
+                    exported = export_world(where / f"{stem}.npz", where / f"{stem}.json", where, formats, spec.robot,
+                                            options=export_options)
+                    files += [f for f in exported.files if f not in files]
                 summary = _summary(run_dir, label, settings, n, logs, files, time.perf_counter() - t0)
                 (where / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
                 if bar is not None:
