@@ -1,7 +1,8 @@
 """Carry a run's returned plan out in changing worlds, open loop beside closed loop (watch and replan).
 
 Usage: python scripts/execute.py RUN_DIR [--disturbance FAMILY|FILE.yaml] [--worlds W] [--seed S]
-            [--max-replans N] [--open-only | --closed-only] [--n-envs N] [--iterations T]
+            [--max-replans N] [--noise PRESET] [--think measured|frozen|STEPS] [--check-copies K]
+            [--open-only | --closed-only] [--n-envs N] [--iterations T]
             [--video] [--no-rerun] [--out DIR] [--json] [--export ros2,lerobot] [--accel-limit A]
 
 FAMILY is a preset of configs/execute/ (none, cube_moved, table_moved, knocked_out, obstacle) or a
@@ -35,6 +36,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--worlds", type=int, default=None, help="worlds (default: the preset's)")
     p.add_argument("--seed", type=int, default=None, help="study seed (default: the preset's)")
     p.add_argument("--max-replans", type=int, default=None)
+    p.add_argument("--noise", default=None,
+                   help="observation model: a preset of configs/noise/ (none, realistic) or a YAML file (default: the "
+                        "family's, else none)")
+    p.add_argument("--think", default=None,
+                   help="the world while the planner thinks: measured (its wall time), frozen, or a number of control "
+                        "steps (fixed: a study repeats bit for bit) (default: measured)")
+    p.add_argument("--check-copies", type=int, default=None,
+                   help="copies of the check before a repair (0: none; default 8)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--open-only", action="store_true", help="no replanning")
     mode.add_argument("--closed-only", action="store_true", help="no open-loop baseline")
@@ -58,6 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     from realize.app.execute import execute
     from realize.config import ConfigError
     from realize.execution.export import DEFAULT_ACCELERATION_LIMIT, ExportOptions, export_formats
+    from realize.execution.perception import load_noise
     from realize.execution.settings import load_preset
 
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
@@ -68,10 +78,15 @@ def main(argv: list[str] | None = None) -> int:
         accel = DEFAULT_ACCELERATION_LIMIT if a.accel_limit is None else a.accel_limit
         ExportOptions(acceleration_limit=accel)
         settings = load_preset(a.disturbance)
-        for key in ("worlds", "seed", "max_replans"):
-            v = getattr(a, key)
-            if v is not None:
-                settings = type(settings).from_mapping({**dataclasses.asdict(settings), key: v}, "execute")
+        changed = {key: getattr(a, key) for key in ("worlds", "seed", "max_replans") if getattr(a, key) is not None}
+        if a.noise is not None:
+            changed["noise"] = dataclasses.asdict(load_noise(a.noise))
+        if a.think is not None:
+            changed["think"] = int(a.think) if a.think.lstrip("-").isdigit() else a.think
+        if a.check_copies is not None:
+            changed["precheck"] = {**dataclasses.asdict(settings.precheck), "copies": a.check_copies}
+        if changed:
+            settings = type(settings).from_mapping({**dataclasses.asdict(settings), **changed}, "execute")
         kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations)) if v is not None}
         if a.n_envs is not None:
             kw["n_elite"] = ReplanBudget.elites_for(a.n_envs)
@@ -91,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{name}: {s.worlds} worlds; open loop {s.open_successes if s.open_successes is not None else '-'}"
           f"/{s.worlds}; closed loop {s.closed_successes if s.closed_successes is not None else '-'}/{s.worlds}; "
           f"replans per world {s.replans}; replan wall time median {fmt(med)}, p95 {fmt(p95)}; "
-          f"replans in worlds open loop got right: {sum(s.replans_with_open_success)}")
+          f"needless replans {s.needless_replans}, harmful {s.harmful_replans}; checks {s.checks} "
+          f"({s.checks_gone_on} went on); world time lost to thinking {sum(s.hold_s):.1f} s")
     print(f"files: {Path(a.out) if a.out else Path(a.run_dir) / 'execution' / name}/summary.json")
     return 0
 

@@ -9,6 +9,7 @@ one world with small replans (8 copies, 2 elites, at most 2 iterations, one work
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import subprocess
@@ -22,6 +23,7 @@ from helpers import REPO, doc_block
 from realize.app.execute import WorldLog, execute, execute_world
 from realize.app.planner import Planner, ReplanBudget
 from realize.config import ConfigError
+from realize.execution.perception import load_noise
 from realize.execution.settings import ExecuteSettings
 from realize.execution.trajectory import read_trajectory
 from test_planner import write_known_run
@@ -34,8 +36,11 @@ TABLE_MOVED = {"trigger": {"action": 2, "delay_s": 1.0}, "move_table": {"table":
 KNOCKED = {"trigger": {"action": 2, "delay_s": 0.1}, "knock_out": {"object": "cube"}}
 
 
-def settings(*disturbances: dict) -> ExecuteSettings:
-    return ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 3, "disturbances": list(disturbances)})
+def settings(*disturbances: dict, **keys: object) -> ExecuteSettings:
+    """One world; the world runs on for a fixed 40 control steps (2 s) while the planner thinks,
+    so that a study repeats bit for bit."""
+    return ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 3, "think": 40,
+                                         "disturbances": list(disturbances), **keys})
 
 
 @pytest.fixture(scope="module")
@@ -46,8 +51,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def table_study(run: Path):
     """Open and closed loop in one world where table 2 moves mid-transport."""
-    summary = execute(run, settings(TABLE_MOVED), name="table", worlds=1, budget=BUDGET, rerun=False,
-                      progress=False)
+    summary = execute(run, settings(TABLE_MOVED, precheck={"copies": 0}), name="table", worlds=1, budget=BUDGET,
+                      rerun=False, progress=False)
     return summary, run / "execution" / "table"
 
 
@@ -111,7 +116,7 @@ def test_the_docs_trajectory_example_runs(table_study) -> None:
 def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp_path: Path) -> None:
     """A second execution of the closed-loop world (a new planner) repeats the study's, bit for bit."""
     _, where = table_study
-    wl = _world(run, settings(TABLE_MOVED), tmp_path, trajectory=tmp_path / "again.npz")
+    wl = _world(run, settings(TABLE_MOVED, precheck={"copies": 0}), tmp_path, trajectory=tmp_path / "again.npz")
     first = _log(where, "closed")
     assert (wl.steps, wl.success, wl.final_plan) == (first["steps"], first["success"], first["final_plan"])
     assert [(a.index, a.text, a.begin_step, a.end_step, a.outcome) for a in wl.actions] == \
@@ -125,6 +130,43 @@ def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp
                  "action_boundaries"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert a.joint_names == b.joint_names and a.action_text == b.action_text
+
+
+def test_a_check_lets_the_plan_go_on_where_it_still_reaches_the_goal(run: Path, tmp_path: Path) -> None:
+    """The same moved table, checked before a repair: the remaining plan, simulated from the
+    state with the table where it stands now, still reaches the goal in the check's copies (the
+    place region is framed by the table), so the plan goes on unchanged, no replan, and reaches
+    the goal in the world, where the open loop (blind to the move) misses it."""
+    s = settings(TABLE_MOVED)
+    wl = _world(run, s, tmp_path)
+    assert wl.success, wl.failure
+    assert wl.replans == [] and len(wl.checks) == 1
+    chk = wl.checks[0]
+    assert chk["go_on"] and chk["successes"] >= s.precheck.min_success * chk["copies"] and chk["action"] == 2
+    assert chk["hold_steps"] == 40 and wl.hold_steps == 40  # the world ran on while it checked
+    assert [a.text for a in wl.actions].count("move_to(Table2)") == 2  # interrupted, then the same action again
+
+
+def test_realistic_noise_alone_asks_for_no_repair_and_repeats_bit_for_bit(run: Path, tmp_path: Path) -> None:
+    """No disturbance, the realistic observation model (3 mm, 2.5 deg, 1 cm drift, 100 ms late, 5 %
+    lost): the monitor, deciding from the filtered belief, finds no deviation, and the world
+    reaches the goal. With a moved table under the same noise, the same seed gives the same
+    trajectory twice (the sensor's draws are seeded, the latency and the hold are in control
+    steps)."""
+    s = ExecuteSettings.from_mapping(
+        {**dataclasses.asdict(settings()), "noise": dataclasses.asdict(load_noise("realistic"))})
+    a = _world(run, s, tmp_path / "a")
+    assert a.success, a.failure
+    assert a.deviations == [] and a.replans == [] and a.checks == []
+    # a moved table under the same noise, twice: a check, a hold of 40 steps, the same bits
+    moved = dataclasses.replace(s, disturbances=[TABLE_MOVED])
+    b = _world(run, moved, tmp_path / "b", trajectory=tmp_path / "b.npz")
+    c = _world(run, moved, tmp_path / "c", trajectory=tmp_path / "c.npz")
+    assert b.success and len(b.checks) >= 1 and b.hold_steps >= 40
+    tb, tc = read_trajectory(tmp_path / "b.npz"), read_trajectory(tmp_path / "c.npz")
+    assert len(tb) == len(tc) > 0 and np.array_equal(tb.joint_targets, tc.joint_targets)
+    assert np.array_equal(tb.base_velocity, tc.base_velocity) and b.steps == c.steps
+    assert [x["successes"] for x in b.checks] == [x["successes"] for x in c.checks]
 
 
 # ------------------------------------------------------------------------------ a knocked-out cube

@@ -20,8 +20,8 @@ from realize.execution.disturbances import (AddBox, KnockOut, MoveObject, MoveTa
 from realize.execution.monitor import KINDS, Deviation, check, expectation, held_by_plan
 from realize.execution.settings import ExecuteSettings, Tolerance, load_preset, presets
 from realize.execution.trajectory import TRAJECTORY_FORMAT, TrajectoryLog, read_trajectory
-from realize.execution.world import (BoxSeen, ExecutionWorld, Observation, TablePose, apply_geometry_updates,
-                                     geometry_changes, geometry_updates)
+from realize.execution.layout_updates import apply_geometry_updates, geometry_changes, geometry_now, geometry_updates
+from realize.execution.world import BoxSeen, ExecutionWorld, Observation, TablePose
 from realize.world.geometry import build_geometry
 from realize.world.state import ObjectPose, SceneState, load_state
 
@@ -224,7 +224,7 @@ def test_observed_changes_become_a_belief_the_run_config_accepts(spec) -> None:
         w.apply(box)
         obs = w.observe()
         base = obs.state.base
-        now = w.geometry_now()
+        now = geometry_now(w)
     assert obs.tables["table2"] == TablePose(0.1, -1.5, 0.0)
     (seen,) = obs.boxes
     assert seen.center == pytest.approx(((base[0] + 0.1) / 2, (base[1] - 1.5) / 2), abs=1e-6)  # table 2 where it is now

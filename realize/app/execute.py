@@ -52,7 +52,7 @@ from realize.execution.disturbances import draw, read_disturbances
 from realize.execution.export import DEFAULT_ACCELERATION_LIMIT, ExportOptions, export_formats, export_world
 from realize.execution.settings import ExecuteSettings
 
-__all__ = ["execute", "execute_world", "ExecutionSummary", "WorldLog", "ReplanRecord", "EXECUTION_DIR"]
+__all__ = ["execute", "execute_world", "judge_replans", "ExecutionSummary", "WorldLog", "ReplanRecord", "EXECUTION_DIR"]
 
 log = logging.getLogger("realize")
 
@@ -140,6 +140,7 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
                     if rec is not None:
                         rec.close()
                 logs[mode].append(wl)
+                judge_replans(wl, next((o for o in logs["open"] if o.world == k), None))
                 (where / f"{stem}.json").write_text(json.dumps(wl.to_dict(), indent=2, default=str) + "\n")
                 files += [f"{stem}.json", f"{stem}.npz"] + ([f"{stem}.mp4"] if video else [])
                 if rec is not None:
@@ -164,6 +165,16 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
     return out_summary
 
 
+def judge_replans(closed: WorldLog, opened: WorldLog | None) -> None:
+    """Each replan's verdict once the world has played out both ways (``ReplanRecord.verdict``):
+    ``needless`` where the open loop reached the goal in the same world, ``harmful`` where it
+    did and the closed loop did not, else ``needed``. Nothing without an open-loop run."""
+    if opened is None or closed.mode != "closed":
+        return
+    for r in closed.replans:
+        r.verdict = ("harmful" if not closed.success else "needless") if opened.success else "needed"
+
+
 def _summary(run_dir: Any, label: str, settings: ExecuteSettings, n: int, logs: dict[str, list[WorldLog]],
              files: list[str], wall: float) -> ExecutionSummary:
     closed, opened = logs["closed"], logs["open"]
@@ -178,4 +189,8 @@ def _summary(run_dir: Any, label: str, settings: ExecuteSettings, n: int, logs: 
         replan_s=[r.wall_s for w in closed for r in w.replans],
         replan_kinds=[r.kind for w in closed for r in w.replans],
         replans_with_open_success=[len(w.replans) for w in closed if w.world in open_ok],
-        pause_s=[w.pause_s for w in closed], wall_time_s=wall, settings=asdict(settings), files=list(files))
+        pause_s=[w.pause_s for w in closed], wall_time_s=wall,
+        needless_replans=sum(r.verdict in ("needless", "harmful") for w in closed for r in w.replans) if opened else None,
+        harmful_replans=sum(r.verdict == "harmful" for w in closed for r in w.replans) if opened else None,
+        checks=sum(len(w.checks) for w in closed), checks_gone_on=sum(c["go_on"] for w in closed for c in w.checks),
+        hold_s=[w.hold_s for w in closed], settings=asdict(settings), files=list(files))

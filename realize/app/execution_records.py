@@ -34,6 +34,10 @@ class ReplanRecord:
     scene: str  # built | kept: the planner's workers
     changes: list[str]
     timings: dict[str, float] = field(default_factory=dict)
+    hold_steps: int = 0  # control steps the world ran on while the robot held for it (execute.think)
+    # after the world played out: needless (the open loop reached the goal in this world) or
+    # needed; harmful too where the open loop reached it and the closed loop did not ("": no open loop run)
+    verdict: str = ""
 
 
 @dataclass
@@ -59,7 +63,9 @@ class WorldLog:
     failure: str = ""
     steps: int = 0
     control_time_s: float = 0.0
-    pause_s: float = 0.0  # the robot held still while the planner thought
+    pause_s: float = 0.0  # wall time the planner thought (checks and replans)
+    hold_steps: int = 0  # control steps the world ran on while the robot held for the planner
+    hold_s: float = 0.0  # the same in control time: world time lost to thinking
     wall_s: float = 0.0
     plan: str = ""  # the plan it started with
     final_plan: str = ""  # the plan it ended with
@@ -67,6 +73,7 @@ class WorldLog:
     deviations: list[dict[str, Any]] = field(default_factory=list)
     actions: list[ActionRecord] = field(default_factory=list)
     replans: list[ReplanRecord] = field(default_factory=list)
+    checks: list[dict[str, Any]] = field(default_factory=list)  # checks before a repair (realize.execution.precheck)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -88,11 +95,18 @@ class ExecutionSummary:
     replan_s: list[float]  # every replan's wall time
     replan_kinds: list[str]
     replans_with_open_success: list[int]  # replans in worlds that open loop got right (a control's check)
-    pause_s: list[float]
+    pause_s: list[float]  # per closed-loop world: the planner's thinking (wall time)
     wall_time_s: float
     settings: dict[str, Any]
     files: list[str]
     planner_start_s: float = 0.0  # opening the replans' workers, before the first world
+    # replans whose world the open loop got right (needless), and those of them after which the closed loop
+    # failed (harmful): ReplanRecord.verdict; None where no open loop ran
+    needless_replans: int | None = None
+    harmful_replans: int | None = None
+    checks: int = 0  # checks before a repair (execute.precheck)
+    checks_gone_on: int = 0  # of them, how many let the plan go on unchanged
+    hold_s: list[float] = field(default_factory=list)  # per closed-loop world: world time lost to thinking
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

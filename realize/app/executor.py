@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,19 +23,19 @@ from typing import Any
 
 import torch
 
-from realize.app.execution_records import ActionRecord, ReplanRecord, WorldLog
-from realize.config import ConfigError
+from realize.app.execution_records import ActionRecord, WorldLog
+from realize.app.repair import EXECUTION_BACKEND, Segment, go_on, repair
 from realize.execution.disturbances import Scheduled
 from realize.execution.monitor import Deviation, check, expectation
+from realize.execution.perception import Belief, Sensor
+from realize.execution.precheck import Precheck
 from realize.execution.schedule import Schedule
 from realize.execution.settings import ExecuteSettings
-from realize.execution.world import ExecutionWorld, Observation, geometry_changes
+from realize.execution.world import ExecutionWorld, Observation
 
 __all__ = ["Executor", "EXECUTION_BACKEND"]
 
-# an executed world is one copy restored and disturbed through the CPU backend's setters (the GPU
-# backend's restore has never run), whatever backend the run searched on
-EXECUTION_BACKEND = "cpu"
+HOLD_TEXT = "hold"  # the trajectory's action text while the robot holds for the planner
 
 log = logging.getLogger("realize")
 
@@ -51,16 +52,6 @@ def _params_of(task: Any, z: Sequence[float], a: int) -> dict[str, list[float]]:
     zz = torch.tensor([list(z)], dtype=torch.float64)
     split = task.layout.split(zz)
     return {p: [float(v) for v in split[p][0].tolist()] for p in task.plan[a].params if p in split}
-
-
-class _Segment:
-    """One stretch of execution: a plan (``task``, ``z``) run from ``start`` in the world, with
-    the disturbances due and (closed loop) the monitor; ``offset``: the original plan's index of
-    the task's action 0 (None: a re-sequenced plan, whose actions the triggers do not name)."""
-
-    def __init__(self, task: Any, z: Sequence[float], start: Any, belief: Any, offset: int | None) -> None:
-        self.task, self.z, self.start, self.belief, self.offset = task, list(z), start, belief, offset
-        self.action = 0
 
 
 class Executor:
@@ -84,22 +75,52 @@ class Executor:
             self.video.attach(self.world.scene)
         self.schedule = Schedule(scheduled, self.world.scene.control_dt)
         self.log = WorldLog(world=k, seed=world_seed, mode="closed" if closed else "open", plan=spec.task.describe())
-        self.base_step = 0  # world timeline steps before the current segment
-        self.seg: _Segment | None = None
+        self.seg: Segment | None = None
         self.recorder = recorder
         from realize.execution.trajectory import TrajectoryLog
 
         self.traj = TrajectoryLog(spec.sim.control_freq)  # what a robot's driver would follow
+        self.clock = 0  # control steps of the world's timeline (segments and holds)
+        self.holding = False  # the robot holds while the planner thinks: no monitor
+        noise = settings.noise
+        self.sensor = None if noise.off or not closed else Sensor(noise, self.world.scene.control_dt, world_seed)
+        self.belief = None if noise.off or not closed else Belief(noise)
+        self.precheck = Precheck(spec, settings.precheck, world_seed) if closed and settings.precheck.copies else None
         self.world.scene.add_step_hook(self._on_step)
 
     # ------------------------------------------------------------------ hooks
-    def _now(self) -> int:
-        return self.base_step + self.world.scene.step_count
+    def now(self) -> int:
+        """The world's control step (segments and holds)."""
+        return self.clock
+
+    def _observe(self) -> Observation:
+        """What the robot decides from: the world itself (no noise) or its filtered belief."""
+        truth = self.world.observe()
+        if self.belief is None:
+            return truth
+        return self.belief.observation(dataclasses.replace(truth, step=self.now()))
+
+    def _sense(self, step0: bool = False) -> None:
+        if self.sensor is None or self.belief is None:
+            return
+        now = self.now()
+        if step0:  # the robot looks before it moves: the first reading needs no wait
+            if self.belief.readings == 0:
+                r = self.sensor.read(dataclasses.replace(self.world.observe(), step=now))
+                while r is None:  # a dropped first look: look again
+                    r = self.sensor.read(dataclasses.replace(self.world.observe(), step=now))
+                self.sensor.deliver(now + self.sensor.latency_steps)
+                self.belief.update(r)
+            return
+        if now % self.settings.noise.every == 0:
+            self.sensor.read(dataclasses.replace(self.world.observe(), step=now))
+        for r in self.sensor.deliver(now):
+            self.belief.update(r)
 
     def _on_action(self, a: int, rows: torch.Tensor) -> None:
         if not bool((rows == 0).any()) or self.seg is None:
             return
-        seg, now = self.seg, self._now()
+        seg, now = self.seg, self.now()
         if self.log.actions and self.log.actions[-1].outcome == "running":
             self.log.actions[-1].outcome, self.log.actions[-1].end_step = "done", now
         seg.action = a
@@ -110,9 +131,14 @@ class Executor:
             self._monitor(done_action=a - 1)
 
     def _on_step(self, step: int) -> None:
-        if self.seg is None or step == 0:
+        if self.seg is None:
             return
-        scene, now = self.world.scene, self._now()
+        if step == 0:
+            self._sense(step0=True)
+            return
+        self.clock += 1
+        scene, now = self.world.scene, self.now()
+        self._sense()
         self._record()
         for s in self.schedule.due(now, held=self.world.held()):
             text = self.world.apply(s)
@@ -123,7 +149,7 @@ class Executor:
                 self.recorder.event(now, f"disturbance: {text}")
         if self.recorder is not None:
             self.recorder.step(now, scene)
-        if self.closed and step % self.settings.monitor_every == 0:
+        if self.closed and not self.holding and step % self.settings.monitor_every == 0:
             self._monitor()
 
     def _record(self) -> None:
@@ -131,22 +157,25 @@ class Executor:
         assert seg is not None
         base, arm, grip = scene.commanded_targets()
         a = seg.action
-        text = str(seg.task.plan[a]) if a < len(seg.task.plan) else ""
-        self.traj.append(self._now(), len(self.log.actions) - 1, text, dict(zip(scene.robot.upper.joints, arm[0].tolist())),
+        text = HOLD_TEXT if self.holding else str(seg.task.plan[a]) if a < len(seg.task.plan) else ""
+        self.traj.append(self.now(), len(self.log.actions) - 1, text, dict(zip(scene.robot.upper.joints, arm[0].tolist())),
                          base[0].tolist(), bool(grip[0]))
 
     def _monitor(self, done_action: int | None = None) -> None:
         seg = self.seg
         assert seg is not None
-        obs = self.world.observe()
-        a = seg.action if done_action is None else done_action
-        start_held = None if seg.start is None else seg.start.held
-        objects_at = None if seg.start is None else {n: tuple(p.position[:2]) for n, p in seg.start.objects.items()}
-        exp = expectation(seg.task, seg.belief, a, done=done_action is not None, start_held=start_held,
-                          objects_at=objects_at)
-        devs = check(obs, exp, self.settings.tolerance)
+        obs = self._observe()
+        devs = self._deviations(seg, obs, seg.action if done_action is None else done_action, done_action is not None)
         if devs:
             raise _Stop(devs, obs)
+
+    def _deviations(self, seg: Segment, obs: Observation, a: int, done: bool) -> list[Deviation]:
+        """The monitor's checks of ``obs`` against what ``seg``'s plan expects during action
+        ``a`` (``done``: at its end)."""
+        start_held = None if seg.start is None else seg.start.held
+        objects_at = None if seg.start is None else {n: tuple(p.position[:2]) for n, p in seg.start.objects.items()}
+        exp = expectation(seg.task, seg.belief, a, done=done, start_held=start_held, objects_at=objects_at)
+        return check(obs, exp, self.settings.tolerance)
 
     # ------------------------------------------------------------------ the loop
     def run_world(self, z: Sequence[float]) -> WorldLog:
@@ -154,43 +183,27 @@ class Executor:
 
         t0 = time.perf_counter()
         spec, s = self.spec, self.settings
-        seg = _Segment(spec.task, z, None, spec.geometry, 0)
+        dt = self.world.scene.control_dt
+        seg = Segment(spec.task, z, None, spec.geometry, 0)
         source: Any = self.run.run_dir
+        handed: Any = None  # the world's own state where a repaired plan takes over (None: its start)
+        pending: tuple[list[str], Observation, int] | None = None  # a deviation found at a hand-over
         while True:
             self.seg = seg
-            realizer = PlanRealizer(seg.task, self.world.scene, spec.rollout, seed=spec.seed, start=seg.start,
-                                    geometry=seg.belief)
-            realizer.action_hook = self._on_action
-            stop: _Stop | None = None
-            res = None
-            try:
-                res = realizer.rollout(torch.tensor([seg.z], dtype=torch.float64))
-            except _Stop as e:
-                stop = e
-            now = self._now()
-            self.base_step = now
-            last = self.log.actions[-1] if self.log.actions else None
-            if stop is None:
-                assert res is not None
-                if last is not None and last.outcome == "running":
-                    last.end_step = now
-                    last.outcome = "done" if bool(res.action_success[0, last.index]) else f"failed: {res.failure[0]}"
-                done = bool(res.action_success[0].all())
-                if done and self._goal_holds(seg):
+            if pending is None:
+                realizer = PlanRealizer(seg.task, self.world.scene, spec.rollout, seed=spec.seed, start=handed,
+                                        geometry=seg.belief)
+                realizer.action_hook = self._on_action
+                reasons, obs, a_fail, done = self._segment(seg, realizer)
+                if done:
                     self.log.success = True
                     break
-                failure = str(res.failure[0]) or "goal not reached (in the world as it is)"
-                reasons = [f"action_failed: {failure}"]
-                obs = self.world.observe()
-                a_fail = _failed_action(failure, seg.action)
             else:
-                reasons = [str(d) for d in stop.deviations]
-                obs = stop.obs
-                a_fail = seg.action
-                if last is not None and last.outcome == "running":
-                    last.end_step, last.outcome = now, "interrupted: " + reasons[0]
+                reasons, obs, a_fail = pending
+                pending = None
+            now = self.now()
             self.log.deviations.append({"step": now, "action": a_fail, "what": reasons})
-            elapsed = now * self.world.scene.control_dt + self.log.pause_s
+            elapsed = now * dt + (self.log.pause_s if s.think == "frozen" else 0.0)
             if not self.closed:
                 self.log.failure = reasons[0]
                 break
@@ -200,93 +213,106 @@ class Executor:
             if elapsed >= s.time_limit_s:
                 self.log.failure = f"{reasons[0]} (time limit {s.time_limit_s:g} s reached)"
                 break
-            rec, seg_new = self._repair(seg, source, obs, a_fail, reasons)
-            self.log.replans.append(rec)
-            self.log.pause_s += rec.wall_s
-            if self.recorder is not None:
-                self.recorder.event(now, f"replan ({rec.kind}) from action {rec.from_action}: {rec.plan} "
-                                         f"cost {rec.cost}, {rec.wall_s:.1f} s")
+            seg_new, think_s = go_on(self, seg, obs, a_fail, reasons)
             if seg_new is None:
-                self.log.failure = f"{reasons[0]}; the {rec.kind} found no plan"
-                break
-            seg, source = seg_new, Path(rec.run_dir)
-        self.log.steps = self.base_step
-        self.log.control_time_s = self.base_step * self.world.scene.control_dt
+                rec, seg_new = repair(self, seg, source, obs, a_fail, reasons)
+                rec.wall_s += think_s  # the check was thinking too
+                self.log.replans.append(rec)
+                think_s = rec.wall_s
+                if self.recorder is not None:
+                    self.recorder.event(now, f"replan ({rec.kind}) from action {rec.from_action}: {rec.plan} "
+                                             f"cost {rec.cost}, {rec.wall_s:.1f} s")
+                if seg_new is None:
+                    self.log.pause_s += think_s
+                    self.log.failure = f"{reasons[0]}; the {rec.kind} found no plan"
+                    break
+                source = Path(rec.run_dir)
+                rec.hold_steps = self._hold(think_s)
+            else:
+                self.log.checks[-1]["hold_steps"] = self._hold(think_s)
+            self.log.pause_s += think_s
+            seg = seg_new
+            handed = self.world.scene.capture_state(0, source=f"execution world seed {self.world.seed}, step "
+                                                              f"{self.now()}")
+            # the plan takes over from the world as it is now: what it assumed may be stale
+            self.seg = seg
+            obs = self._observe()
+            devs = self._deviations(seg, obs, 0, False)
+            if devs:
+                pending = ([f"at hand-over: {d}" for d in devs], obs, 0)
+        self.log.steps = self.now()
+        self.log.control_time_s = self.now() * dt
+        self.log.hold_s = self.log.hold_steps * dt
         self.log.final_plan = seg.task.describe()
         self.log.wall_s = time.perf_counter() - t0
         return self.log
 
-    def _goal_holds(self, seg: _Segment) -> bool:
+    def _segment(self, seg: Segment, realizer: Any) -> tuple[list[str], Observation, int, bool]:
+        """Run ``seg`` until it ends or deviates: (reasons, what the robot saw, the action to
+        repair from, reached the goal)."""
+        stop: _Stop | None = None
+        res = None
+        try:
+            res = realizer.rollout(torch.tensor([seg.z], dtype=torch.float64))
+        except _Stop as e:
+            stop = e
+        now = self.now()
+        last = self.log.actions[-1] if self.log.actions else None
+        if stop is None:
+            assert res is not None
+            if last is not None and last.outcome == "running":
+                last.end_step = now
+                last.outcome = "done" if bool(res.action_success[0, last.index]) else f"failed: {res.failure[0]}"
+            if bool(res.action_success[0].all()) and self._goal_holds(seg):
+                return [], self._observe(), seg.action, True
+            failure = str(res.failure[0]) or "goal not reached (in the world as it is)"
+            return [f"action_failed: {failure}"], self._observe(), _failed_action(failure, seg.action), False
+        reasons = [str(d) for d in stop.deviations]
+        if last is not None and last.outcome == "running":
+            last.end_step, last.outcome = now, "interrupted: " + reasons[0]
+        return reasons, stop.obs, seg.action, False
+
+    def _hold(self, think_s: float) -> int:
+        """The world while the planner thinks ``think_s`` (``settings.think``): the robot holds
+        (base stopped, arm where it is, gripper as it was) for that many control steps, and the
+        world goes on (disturbances fire, the sensor reads); returns the steps held."""
+        t = self.settings.think
+        dt = self.world.scene.control_dt
+        n = 0 if t == "frozen" else int(math.ceil(think_s / dt)) if t == "measured" else int(t)
+        if n == 0:
+            return 0
+        scene = self.world.scene
+        self.holding = True
+        try:
+            with torch.inference_mode():
+                scene.hold_still()
+                for _ in range(n):
+                    scene.step()
+        finally:
+            self.holding = False
+        self.log.hold_steps += n
+        return n
+
+    def moved_m(self) -> float | None:
+        """How far a believed table must be from the config to count as moved (None: exact)."""
+        return None if self.belief is None else self.settings.tolerance.table_m
+
+    def _goal_holds(self, seg: Segment) -> bool:
         """The task's goal in the world as it is (a moved table where it stands now), whatever
         the robot believed: the executor's verdict."""
+        from realize.execution.layout_updates import geometry_now
         from realize.tasks.goals import goal_reached
 
         scene = self.world.scene
         objects = scene.object_poses()[:, :, :3]
         speeds = scene.object_velocities()[:, :, :3].norm(dim=-1)
-        ok, _ = goal_reached(seg.task.goal, self.world.geometry_now(), seg.task.layout.regions, objects, speeds,
+        ok, _ = goal_reached(seg.task.goal, geometry_now(self.world), seg.task.layout.regions, objects, speeds,
                              scene.base_pose()[:, :2], self.spec.rollout.rest_speed, seg.task.frames)
         return bool(ok[0])
 
-    def _repair(self, seg: _Segment, source: Any, obs: Observation, a: int, reasons: list[str]
-                ) -> tuple[ReplanRecord, _Segment | None]:
-        """Re-parameterize (the remaining actions from the state) or re-sequence (a new plan)."""
-        from realize.app.replay import build_replay_spec, saved_plan
-        from realize.app.resequence import resequence_task
-        from realize.tasks.suffix import check_suffix_start, task_suffix
-
-        t0 = time.perf_counter()
-        state = obs.state
-        changes = geometry_changes(obs, self.spec.geometry_cfg)
-        kind = "re-parameterize"
-        if a >= seg.task.n_actions:  # every action done but the goal does not hold: a new sequence from here
-            kind = "re-sequence"
-        else:
-            try:
-                check_suffix_start(task_suffix(seg.task, a), state)
-            except ConfigError:
-                kind = "re-sequence"
-        rdir = self.out / "replans" / f"world-{self.k}-replan-{len(self.log.replans)}"
-        try:
-            task_cfg = None
-            if kind == "re-sequence":
-                from realize.execution.world import apply_geometry_updates, geometry_updates
-                from realize.world.geometry import build_geometry
-
-                now_geo = build_geometry(apply_geometry_updates(self.spec.geometry_cfg,
-                                                                geometry_updates(obs, self.spec.geometry_cfg)))
-                task_cfg = resequence_task(saved_plan(source).config["task"], now_geo, state, rdir)
-                if not task_cfg["plan"] and a >= seg.task.n_actions:
-                    # symbolically done, geometrically not (the base just outside the exit): the last action again
-                    kind, a, task_cfg = "re-parameterize", seg.task.n_actions - 1, None
-            if task_cfg is None:
-                src_cfg = saved_plan(source).config
-                base_k = 0 if src_cfg.get("replan") is None or src_cfg.get("replan_from") is None else \
-                    int(src_cfg["replan"]["action"] or 0)
-                res = self.planner.replan(state, base_k + a, changes, source=source, run_dir=rdir,
-                                          budget=self.budget, seed=self.spec.seed)
-            else:
-                res = self.planner.resequence(task_cfg, state, changes, source=source, run_dir=rdir,
-                                              budget=self.budget, seed=self.spec.seed)
-        except ConfigError as e:
-            wall = time.perf_counter() - t0
-            return ReplanRecord(kind, self._now(), a, reasons + [f"refused: {e}"], wall, False, None, "", str(rdir),
-                                "", changes), None
-        wall = time.perf_counter() - t0
-        rec = ReplanRecord(kind, self._now(), res.from_action, reasons, wall, res.feasible,
-                           res.cost if res.feasible else None, res.plan, str(res.run_dir), res.scene, changes,
-                           res.timings.to_dict())
-        log.info("world %d: %s from action %d in %.1f s: %s (cost %s)", self.k, kind, res.from_action, wall, res.plan,
-                 f"{res.cost:.0f}" if res.feasible else "none")
-        if not res.feasible:
-            return rec, None
-        rspec = build_replay_spec(saved_plan(res.run_dir), EXECUTION_BACKEND)
-        whole = self.spec.task.describe()
-        offset = res.from_action if rspec.config.get("task", {}).get("plan") == self.run.config["task"].get("plan") \
-            and whole.endswith(rspec.task.describe()) else None
-        return rec, _Segment(rspec.task, res.z, rspec.start, rspec.geometry, offset)
-
     def close(self) -> None:
+        if self.precheck is not None:
+            self.precheck.close()
         if self.video is not None:
             self.video.close(hold_s=1.0)
         self.world.close()

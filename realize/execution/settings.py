@@ -5,7 +5,11 @@ What it does: ``ExecuteSettings`` holds how many worlds to execute in (``worlds`
 ``monitor_every`` (control steps between the executor's checks), the ``tolerance`` of each
 check (``Tolerance``: object, table and base distances in m) and the raw ``disturbances`` list
 (checked against the scene and plan by ``realize.execution.disturbances.read_disturbances``
-once they are known). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
+once they are known), the observation model ``noise``
+(``realize.execution.perception.Noise``; all zero: the robot sees its world exactly), the check
+before a repair (``precheck``: ``PrecheckSettings``) and what the world does while the planner thinks
+(``think``: ``measured``, the replan's own wall time in control steps; ``frozen``, the world
+waits; or a number of control steps, fixed, so that a study repeats bit for bit). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
 key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file).
 What it doesn't: check disturbances against a scene (that needs the run's geometry and plan), or
 execute anything.
@@ -20,9 +24,10 @@ from typing import Any, ClassVar
 import yaml
 
 from realize.config import ConfigError, Settings, setting
+from realize.execution.perception import Noise
 from realize.paths import CONFIG_DIR
 
-__all__ = ["Tolerance", "ExecuteSettings", "PRESET_DIR", "presets", "load_preset"]
+__all__ = ["Tolerance", "PrecheckSettings", "ExecuteSettings", "PRESET_DIR", "presets", "load_preset"]
 
 PRESET_DIR = CONFIG_DIR / "execute"
 
@@ -44,6 +49,26 @@ class Tolerance(Settings):
 
 
 @dataclass
+class PrecheckSettings(Settings):
+    """Before a repair: the remaining plan simulated from the believed state in ``copies``
+    copies (the belief's objects scattered by ``scatter_m``, each copy's friction and mass
+    drawn from the task's perturbation model); it goes on unchanged where at least
+    ``min_success`` of them reach the goal. ``copies: 0``: no check (every deviation repairs)."""
+
+    config_key: ClassVar[str] = "execute.precheck"
+
+    copies: int = setting(8, ge=0)
+    min_success: float = setting(0.75, gt=0, le=1)
+    scatter_m: float = setting(0.01, ge=0)
+
+
+def _think(v: Any) -> str | None:
+    if v in ("measured", "frozen") or (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+        return None
+    return "must be measured, frozen or a number of control steps >= 0"
+
+
+@dataclass
 class ExecuteSettings(Settings):
     """One execution study (module docstring)."""
 
@@ -55,6 +80,9 @@ class ExecuteSettings(Settings):
     time_limit_s: float = setting(180.0, gt=0)
     monitor_every: int = setting(5, ge=1)  # control steps between checks (and at every action's end)
     tolerance: Tolerance = field(default_factory=Tolerance)
+    noise: Noise = field(default_factory=Noise)
+    precheck: PrecheckSettings = field(default_factory=PrecheckSettings)
+    think: Any = setting("measured", check=_think)  # the world while the planner thinks (module docstring)
     disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
 
 

@@ -14,20 +14,19 @@ disturbances needs is built in the PhysX scene when the world is built, parked o
 placed boxes stay where they are through ``scene.reset(state=...)`` (a restore moves dynamic
 bodies and the robot only); ``reset()`` puts the whole world back at its start.
 ``observe()`` returns an ``Observation``: the copy's ``SceneState``, every table's centre and
-yaw by name, and the boxes that appeared. ``geometry_updates`` / ``geometry_changes`` turn an
-observation into the changes of the planner's belief (the run's ``scene`` config): table
-centres and the new boxes as ``scene.walls`` entries, as plain values or Hydra override strings.
+yaw by name, and the boxes that appeared (``realize.execution.layout_updates`` turns an
+observation into changes of the planner's scene config).
 What it doesn't: decide when a disturbance fires (``Schedule``), run controllers or judge the
 plan (the executor, ``realize.execution.monitor``). The world's ``scene.geometry`` stays the
 belief it was built from: controllers run on a world see what the planner believes, not the
-moved tables (``geometry_now`` gives the world as it is).
+moved tables (``realize.execution.layout_updates.geometry_now`` gives the world as it is).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -38,7 +37,7 @@ from realize.config import ConfigError
 from realize.execution.disturbances import (BASE, AddBox, Effect, KnockOut, MoveObject, MoveTable, PushBase,
                                             Scheduled)
 from realize.tasks.worlds import SEARCH_STREAM, VALIDATION_STREAM, Worlds, draw_worlds
-from realize.world.geometry import Box, GeometryCfg, SceneGeometry, build_geometry
+from realize.world.geometry import Box, SceneGeometry
 from realize.world.state import SceneState
 
 if TYPE_CHECKING:
@@ -46,8 +45,7 @@ if TYPE_CHECKING:
 
 RunSpec = Any  # a run's spec (realize.app.run_config.RunSpec; the app layer sits above this one)
 
-__all__ = ["EXECUTION_STREAM", "TablePose", "BoxSeen", "Observation", "ExecutionWorld", "geometry_updates",
-           "geometry_changes", "apply_geometry_updates"]
+__all__ = ["EXECUTION_STREAM", "TablePose", "BoxSeen", "Observation", "ExecutionWorld"]
 
 EXECUTION_STREAM = 3  # draw_worlds stream of the executed worlds (search: 1, validation: 2)
 assert EXECUTION_STREAM not in (SEARCH_STREAM, VALIDATION_STREAM)
@@ -55,7 +53,6 @@ PARK_DEPTH = 10.0  # m below the floor where boxes wait
 PARK_OUTSIDE = 50.0  # m beyond the map's low corner, in x and y
 BOX_COLOR = (0.8, 0.3, 0.2, 1.0)
 ON_SURFACE = 0.01  # m: an object whose bottom is at least this high above a table's top - it rests on it
-_MOVED = 1e-6  # m: a table centre this close to its belief counts as unmoved
 
 
 @dataclass(frozen=True)
@@ -322,11 +319,6 @@ class ExecutionWorld:
         state = self.scene.capture_state(0, source=f"execution world seed {self.seed}, step {step}")
         return Observation(step, step * self.scene.control_dt, state, self.tables(), self.boxes())
 
-    def geometry_now(self) -> SceneGeometry:
-        """The world as it is (tables where they stand, the boxes as walls), as a geometry."""
-        return build_geometry(apply_geometry_updates(self.spec.geometry_cfg,
-                                                     geometry_updates(self.observe(), self.spec.geometry_cfg)))
-
     def close(self) -> None:
         self.scene.close()
 
@@ -335,65 +327,3 @@ class ExecutionWorld:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
-
-
-# ---------------------------------------------------------------------- belief updates
-def _cfg(belief: GeometryCfg | Mapping[str, Any]) -> GeometryCfg:
-    return belief if isinstance(belief, GeometryCfg) else GeometryCfg.from_mapping(belief)
-
-
-def _r(v: float) -> float:
-    return round(float(v), 6)
-
-
-def geometry_updates(observation: Observation, belief: GeometryCfg | Mapping[str, Any]) -> dict[str, Any]:
-    """What changes the belief (the run's ``scene`` config) into the observed world, as config
-    keys -> plain values: ``scene.tables.<i>.center`` for each moved table, and ``scene.walls``
-    (the belief's walls, then every observed box not among them) when a box appeared. Empty:
-    nothing to change. Table yaw is not a config key: a turned table is refused."""
-    cfg = _cfg(belief)
-    out: dict[str, Any] = {}
-    for i, t in enumerate(cfg.tables):
-        seen = observation.tables.get(t.name)
-        if seen is None:
-            continue
-        if abs(seen.yaw) > 1e-6:
-            raise ConfigError(f"table {t.name!r} turned by {seen.yaw:.3f} rad: scene.tables have no yaw")
-        if math.hypot(seen.x - t.center[0], seen.y - t.center[1]) > _MOVED:
-            out[f"scene.tables.{i}.center"] = [_r(seen.x), _r(seen.y)]
-    known = {w.name for w in cfg.walls}
-    new = [b for b in observation.boxes if b.name not in known]
-    if new:
-        walls = [{"name": w.name, "center": [_r(v) for v in w.center], "size": [_r(v) for v in w.size]}
-                 for w in cfg.walls]
-        walls += [{"name": b.name, "center": [_r(v) for v in b.center], "size": [_r(v) for v in b.size]} for b in new]
-        out["scene.walls"] = walls
-    return out
-
-
-def _hydra(v: Any) -> str:
-    if isinstance(v, Mapping):
-        return "{" + ",".join(f"{k}:{_hydra(x)}" for k, x in v.items()) + "}"
-    if isinstance(v, (list, tuple)):
-        return "[" + ",".join(_hydra(x) for x in v) + "]"
-    return repr(v) if isinstance(v, float) else str(v)
-
-
-def geometry_changes(observation: Observation, belief: GeometryCfg | Mapping[str, Any]) -> list[str]:
-    """``geometry_updates`` as Hydra override strings (``scene.tables.1.center=[0.1,-1.5]``,
-    ``scene.walls=[{name:obstacle,center:[-0.5,0.0],size:[0.5,0.5,0.5]}]``)."""
-    return [f"{k}={_hydra(v)}" for k, v in geometry_updates(observation, belief).items()]
-
-
-def apply_geometry_updates(belief: GeometryCfg | Mapping[str, Any], updates: Mapping[str, Any]) -> GeometryCfg:
-    """The belief with ``geometry_updates``' changes applied, checked as a ``GeometryCfg``."""
-    d = dataclasses.asdict(_cfg(belief))
-    for key, value in updates.items():
-        parts = key.split(".")
-        if parts[:2] == ["scene", "tables"] and len(parts) == 4:
-            d["tables"][int(parts[2])][parts[3]] = value
-        elif parts == ["scene", "walls"]:
-            d["walls"] = [dict(w) for w in value]
-        else:
-            raise ConfigError(f"geometry update {key!r} is not a table centre or scene.walls")
-    return GeometryCfg.from_mapping(d)
