@@ -161,12 +161,14 @@ def hand_world(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_the_bag_opens_with_the_mcap_reader_and_has_the_topics(hand_world: Path) -> None:
-    obs = [(0.5, {"cube": (1.0, 2.0, 0.8, 1.0, 0.0, 0.0, 0.0)}), (1.0, {"cube": (1.1, 2.0, 0.8, 1.0, 0.0, 0.0, 0.0)})]
+    obs = [(0.5, {"cube": (1.0, 2.0, 0.8, 1.0, 0.0, 0.0, 0.0)}),
+           (1.0, {"cube": (1.1, 2.0, 0.8, 1.0, 0.0, 0.0, 0.0), "2nd box": (0.0, 0.0, 0.1, 1.0, 0.0, 0.0, 0.0)})]
     res = export_world(hand_world / "world-0-open.npz", hand_world / "world-0-open.json", hand_world, ["ros2"], FETCH,
                        observations=obs)
     assert res.files == ["world-0-open.mcap"]
     channels, msgs = read_bag(hand_world / "world-0-open.mcap")
-    assert channels == {**TOPICS, "/realize/observed/cube": "geometry_msgs/msg/PoseStamped"}
+    assert channels == {**TOPICS, "/realize/observed/cube": "geometry_msgs/msg/PoseStamped",
+                        "/realize/observed/_2nd_box": "geometry_msgs/msg/PoseStamped"}  # a topic name's characters
     by = {t: [(ns, m) for tt, ns, m in msgs if tt == t] for t in channels}
     t = read_trajectory(hand_world / "world-0-open.npz")
     # the base: one Twist per control step at its control time, the command as executed

@@ -14,7 +14,7 @@ What it does: ``write_ros2_bag(path, trajectory, world, ...)`` writes one ``.mca
   * ``/realize/events`` ``std_msgs/msg/String``: JSON, one per action segment's start
     (``{"event": "action", ...}``), disturbance, deviation and replan of the world's log;
   * ``/realize/observed/<name>`` ``geometry_msgs/msg/PoseStamped`` (frame ``world``): the
-    optional observations ``(time_s, {name: (x, y, z, qw, qx, qy, qz)})``.
+    optional observations ``(time_s, {name: (x, y, z, qw, qx, qy, qz)})`` (``observed_topic``).
 Every message's bag time is the execution's control time (``t_s`` of its step) in nanoseconds.
 The bag is written as a rosbag2 directory and its one ``.mcap`` moved to ``path`` (a single
 file; ``ros2 bag play PATH -s mcap`` reads it).
@@ -26,6 +26,7 @@ or other held joints (the gripper command stands for the fingers).
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -39,7 +40,7 @@ from realize.execution.time_param import JointLimits, TimedSegment, timed_segmen
 from realize.execution.trajectory import Trajectory
 
 __all__ = ["ARM_TOPIC", "BASE_TOPIC", "GRIPPER_TOPIC", "EVENTS_TOPIC", "OBSERVED_PREFIX", "GRIPPER_COMMAND_MSG",
-           "TYPESTORE", "Observations", "GripperValues", "BagReport", "typestore", "write_ros2_bag"]
+           "TYPESTORE", "Observations", "observed_topic", "GripperValues", "BagReport", "typestore", "write_ros2_bag"]
 
 ARM_TOPIC = "/realize/arm/joint_trajectory"
 BASE_TOPIC = "/realize/base/cmd_vel"
@@ -85,6 +86,13 @@ def typestore() -> Any:
     store = get_typestore(getattr(Stores, TYPESTORE))
     store.register(get_types_from_msg(GRIPPER_COMMAND_MSG, "control_msgs/msg/GripperCommand"))
     return store
+
+
+def observed_topic(name: str) -> str:
+    """``/realize/observed/<name>``, characters a ROS 2 topic name cannot hold as ``_`` (and a
+    leading digit behind one)."""
+    token = re.sub(r"[^A-Za-z0-9_]", "_", name) or "_"
+    return OBSERVED_PREFIX + ("_" + token if token[0].isdigit() else token)
 
 
 def _ns(t_s: float) -> int:
@@ -162,7 +170,7 @@ def write_ros2_bag(path: str | Path, trajectory: Trajectory, world: Mapping[str,
             for t, poses in observations or ():
                 for name, p in poses.items():
                     x, y, z, qw, qx, qy, qz = (float(v) for v in p)
-                    put(OBSERVED_PREFIX + name, "geometry_msgs/msg/PoseStamped", float(t), PoseStamped(
+                    put(observed_topic(name), "geometry_msgs/msg/PoseStamped", float(t), PoseStamped(
                         header=Header(stamp=stamp(float(t)), frame_id="world"),
                         pose=Pose(position=Point(x=x, y=y, z=z), orientation=Quaternion(x=qx, y=qy, z=qz, w=qw))))
         mcaps = sorted(bag_dir.glob("*.mcap"))
