@@ -6,15 +6,16 @@ scalar (rad/s^2, m/s^2 for prismatic joints) is given for every joint
 (``DEFAULT_ACCELERATION_LIMIT``). ``parameterize(waypoints, limits)`` passes a joint path through
 toppra (a cubic spline through the waypoints on their chord length, then the time-optimal
 parameterization under the velocity and acceleration constraints, held at ``GRID_PER_WAYPOINT``
-grid points per waypoint) and returns a ``TimedPath``
-(samples of position and velocity against time). ``segment_pieces(trajectory, first, last)``
-cuts an executed action segment into pieces at the rows where the gripper command changes and
-where the arm starts or stops moving; ``timed_segment`` parameterizes every moving piece and,
+grid points per waypoint) and returns a ``TimedPath`` (samples of position and velocity
+against time). ``segment_pieces(targets, gripper)`` cuts an executed action segment's rows into
+pieces at the rows where the gripper command changes and where the arm starts or stops moving;
+``timed_segment`` parameterizes every moving piece and,
 where toppra's duration is shorter than the piece's executed duration, stretches its time
 uniformly (velocities then scale down by the stretch, accelerations by its square, so the
 limits still hold) so that each piece starts and ends when it did in the execution: the
 arm stays in step with the base and gripper commands of the same clock. A piece that toppra
-says needs longer than it had overruns (counted in ``TimedSegment.overrun_s``). Waypoints are
+says needs longer than it had overruns (counted in ``TimedSegment.overrun_s``); a segment
+where the arm does not move is one point at ``HOLD_DURATION_S``. Waypoints are
 the control-rate targets with repeats (closer than ``MIN_STEP``) dropped, at most
 ``MAX_WAYPOINTS`` per piece (evenly thinned, the ends kept).
 What it doesn't: write any file (``realize.execution.ros2_export``), check joint position limits
