@@ -17,7 +17,7 @@ What it does: ``write_ros2_bag(path, trajectory, world, ...)`` writes one ``.mca
     optional observations ``(time_s, {name: (x, y, z, qw, qx, qy, qz)})`` (``observed_topic``).
 Every message's bag time is the execution's control time (``t_s`` of its step) in nanoseconds.
 The bag is written as a rosbag2 directory and its one ``.mcap`` moved to ``path`` (a single
-file; ``ros2 bag play PATH -s mcap`` reads it).
+file, for ``ros2 bag play PATH -s mcap``; not played here: there is no ROS 2 install).
 What it doesn't: read bags back (tests use the ``mcap`` reader), convert the base command to
 the robot's frame (the executed yaw is not in the trajectory file), or export fingers, head
 or other held joints (the gripper command stands for the fingers).
