@@ -179,6 +179,24 @@ def test_knocked_out_cube_is_resequenced_with_a_second_grasp(run: Path, tmp_path
     assert wl.success, wl.failure
 
 
+# the cube knocked out of the hand 2 s into move_to(Table2), between the tables: it lands on the floor
+DROPPED = {"trigger": {"action": 2, "delay_s": 2.0}, "knock_out": {"object": "cube"}}
+
+
+def test_a_cube_on_the_floor_is_picked_up_again_and_reaches_the_goal(run: Path, tmp_path: Path) -> None:
+    """The re-sequence reads the cube on the floor as a site of its own, with a base region
+    around it, and the PDDL planner's new plan drives there, grasps it off the floor (the
+    fingers allowed down to it: controller.fabric.floor_exclude) and carries it to table 2."""
+    wl = _world(run, settings(DROPPED), tmp_path)
+    assert "onto floor" in wl.disturbances[0]["what"]
+    first = wl.replans[0]
+    assert first.kind == "re-sequence" and first.plan.startswith("move_to(Near_cube), grasp(cube"), first.plan
+    assert "controller.fabric.floor_exclude=true" in first.changes
+    assert wl.success, (wl.failure, [(r.kind, r.feasible, r.plan) for r in wl.replans])
+    grasps = [a for a in wl.actions if a.text.startswith("grasp(") and a.outcome == "done"]
+    assert len(grasps) == 2 and any(a.text == "move_to(Near_cube)" and a.outcome == "done" for a in wl.actions)
+
+
 # ------------------------------------------------------------------------------ refusals
 @pytest.mark.parametrize("entry, needles", [
     ({"trigger": {"action": 0}, "move_object": {"object": "ball", "dx": 0.1}}, ["'ball'", "cube"]),

@@ -24,7 +24,7 @@ from typing import Any
 import torch
 
 from realize.app.execution_records import ActionRecord, WorldLog
-from realize.app.repair import EXECUTION_BACKEND, Segment, go_on, repair
+from realize.app.repair import EXECUTION_BACKEND, Segment, go_on, repair, why_no_plan
 from realize.execution.disturbances import Scheduled
 from realize.execution.monitor import Deviation, check, expectation
 from realize.execution.perception import Belief, Sensor
@@ -82,6 +82,7 @@ class Executor:
         self.traj = TrajectoryLog(spec.sim.control_freq)  # what a robot's driver would follow
         self.clock = 0  # control steps of the world's timeline (segments and holds)
         self.holding = False  # the robot holds while the planner thinks: no monitor
+        self.tries = 0  # replans in a row that found no plan (the next one searches longer)
         noise = settings.noise
         self.sensor = None if noise.off or not closed else Sensor(noise, self.world.scene.control_dt, world_seed)
         self.belief = None if noise.off or not closed else Belief(noise)
@@ -191,8 +192,8 @@ class Executor:
         while True:
             self.seg = seg
             if pending is None:
-                realizer = PlanRealizer(seg.task, self.world.scene, spec.rollout, seed=spec.seed, start=handed,
-                                        geometry=seg.belief)
+                realizer = PlanRealizer(seg.task, self.world.scene, seg.rollout or spec.rollout, seed=spec.seed,
+                                        start=handed, geometry=seg.belief)
                 realizer.action_hook = self._on_action
                 reasons, obs, a_fail, done = self._segment(seg, realizer)
                 if done:
@@ -224,8 +225,15 @@ class Executor:
                                              f"cost {rec.cost}, {rec.wall_s:.1f} s")
                 if seg_new is None:
                     self.log.pause_s += think_s
-                    self.log.failure = f"{reasons[0]}; the {rec.kind} found no plan"
+                    rec.hold_steps = self._hold(think_s)
+                    refused = any(r.startswith("refused:") for r in rec.reason)
+                    if not refused and len(self.log.replans) < s.max_replans:  # again, with more iterations
+                        self.tries += 1
+                        pending = (reasons, self._observe(), a_fail)
+                        continue
+                    self.log.failure = f"{reasons[0]}; the {rec.kind} found no plan: {why_no_plan(rec, obs.state)}"
                     break
+                self.tries = 0
                 source = Path(rec.run_dir)
                 rec.hold_steps = self._hold(think_s)
             else:
@@ -292,6 +300,14 @@ class Executor:
             self.holding = False
         self.log.hold_steps += n
         return n
+
+    def replan_budget(self) -> Any:
+        """The next replan's budget: the study's, its iterations doubled for every try in a row
+        that found no plan."""
+        from realize.app.planner import ReplanBudget
+
+        b = self.budget or ReplanBudget()
+        return dataclasses.replace(b, iterations=b.iterations * 2 ** self.tries) if self.tries else b
 
     def moved_m(self) -> float | None:
         """How far a believed table must be from the config to count as moved (None: exact)."""

@@ -25,7 +25,7 @@ from realize.config import ConfigError
 from realize.execution.layout_updates import geometry_changes
 from realize.execution.world import Observation
 
-__all__ = ["Segment", "go_on", "repair", "EXECUTION_BACKEND"]
+__all__ = ["Segment", "go_on", "repair", "why_no_plan", "EXECUTION_BACKEND"]
 
 # an executed world is one copy restored and disturbed through the CPU backend's setters (the GPU
 # backend's restore has never run), whatever backend the run searched on
@@ -39,10 +39,13 @@ class Segment:
     due and (closed loop) the monitor; ``start``: the state the plan assumed at its start (the
     belief; None: the world's start); ``belief``: the map its controllers plan in; ``offset``: the
     original plan's index of the task's action 0 (None: a re-sequenced plan, whose actions the
-    triggers do not name)."""
+    triggers do not name); ``rollout``: the controller settings it was searched with (a replan's
+    own, e.g. a floor pick's; None: the run's)."""
 
-    def __init__(self, task: Any, z: Sequence[float], start: Any, belief: Any, offset: int | None) -> None:
+    def __init__(self, task: Any, z: Sequence[float], start: Any, belief: Any, offset: int | None,
+                 rollout: Any = None) -> None:
         self.task, self.z, self.start, self.belief, self.offset = task, list(z), start, belief, offset
+        self.rollout = rollout  # the controllers' settings the plan was searched with (None: the run's)
         self.action = 0
 
 
@@ -74,14 +77,14 @@ def go_on(ex: Any, seg: Segment, obs: Observation, a: int, reasons: list[str]) -
         return None, chk.wall_s
     z = [seg.z[c] for c in suffix_columns(seg.task, a)]
     offset = None if seg.offset is None else seg.offset + a
-    return Segment(suffix, z, obs.state, build_geometry(now_cfg), offset), chk.wall_s
+    return Segment(suffix, z, obs.state, build_geometry(now_cfg), offset, seg.rollout), chk.wall_s
 
 
 def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons: list[str]
            ) -> tuple[ReplanRecord, Segment | None]:
     """Re-parameterize (the remaining actions from the state) or re-sequence (a new plan)."""
     from realize.app.replay import build_replay_spec, saved_plan
-    from realize.app.resequence import resequence_task
+    from realize.app.resequence import floor_region, resequence_task
     from realize.tasks.suffix import check_suffix_start, task_suffix
 
     t0 = time.perf_counter()
@@ -104,7 +107,10 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
 
             now_geo = build_geometry(apply_geometry_updates(ex.spec.geometry_cfg,
                                                             geometry_updates(obs, ex.spec.geometry_cfg, ex.moved_m())))
-            task_cfg = resequence_task(saved_plan(source).config["task"], now_geo, state, rdir)
+            task_cfg = resequence_task(saved_plan(source).config["task"], now_geo, state, rdir,
+                                       pickup=dict(zip(("r_min", "r_max"), ex.settings.pickup_m)))
+            if any(floor_region(o) in (task_cfg.get("params") or {}) for o in state.objects):
+                changes = [*changes, "controller.fabric.floor_exclude=true"]  # the fingers reach the floor
             if not task_cfg["plan"] and a >= seg.task.n_actions:
                 # symbolically done, geometrically not (the base just outside the exit): the last action again
                 kind, a, task_cfg = "re-parameterize", seg.task.n_actions - 1, None
@@ -113,10 +119,10 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
             base_k = 0 if src_cfg.get("replan") is None or src_cfg.get("replan_from") is None else \
                 int(src_cfg["replan"]["action"] or 0)
             res = ex.planner.replan(state, base_k + a, changes, source=source, run_dir=rdir,
-                                      budget=ex.budget, seed=ex.spec.seed)
+                                      budget=ex.replan_budget(), seed=ex.spec.seed)
         else:
             res = ex.planner.resequence(task_cfg, state, changes, source=source, run_dir=rdir,
-                                          budget=ex.budget, seed=ex.spec.seed)
+                                          budget=ex.replan_budget(), seed=ex.spec.seed)
     except ConfigError as e:
         wall = time.perf_counter() - t0
         return ReplanRecord(kind, ex.now(), a, reasons + [f"refused: {e}"], wall, False, None, "", str(rdir),
@@ -133,4 +139,16 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     whole = ex.spec.task.describe()
     offset = res.from_action if rspec.config.get("task", {}).get("plan") == ex.run.config["task"].get("plan") \
         and whole.endswith(rspec.task.describe()) else None
-    return rec, Segment(rspec.task, res.z, rspec.start, rspec.geometry, offset)
+    return rec, Segment(rspec.task, res.z, rspec.start, rspec.geometry, offset, rspec.rollout)
+
+
+def why_no_plan(rec: ReplanRecord, state: Any) -> str:
+    """One line on why a repair found no plan: the planner's refusal, or the plan it tried and
+    found no realization of; objects lying on the floor are named with where they lie."""
+    refused = [r[len("refused: "):] for r in rec.reason if r.startswith("refused: ")]
+    text = refused[0][:300] if refused else f"no realization of {rec.plan or 'the plan'} reached the goal"
+    from realize.app.resequence import floor_region
+
+    floor = [f"{o} lies on the floor at ({p.position[0]:.2f}, {p.position[1]:.2f})"
+             for o, p in state.objects.items() if floor_region(o) in rec.plan]
+    return "; ".join([text, *floor])

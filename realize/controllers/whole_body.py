@@ -58,6 +58,9 @@ class WholeBodyConfig(Settings):
     collision_margin: float = setting(0.02, ge=0)  # m added to every sphere radius
     collision_exclude: tuple[str, ...] | None = None  # spheres without box leaves (None: the robot's fabric_exclude)
     floor: bool = True
+    # the spheres without box leaves lose their floor leaf too (a pick off the floor: the fingers must
+    # reach an object lying on it); off by default, a re-sequence that picks from the floor turns it on
+    floor_exclude: bool = False
     max_base_speed: float = setting(0.6, gt=0)  # m/s
     max_yaw_rate: float = setting(1.0, gt=0)  # rad/s
     max_joint_speed: float = setting(1.2, gt=0)  # rad/s, or m/s for a lift
@@ -145,6 +148,8 @@ class WholeBodyFabric:
         radii = self.kin.sphere_radii.to(device, dtype) + self.cfg.collision_margin
         box_ok = torch.tensor([s not in exclude for s in names], device=device)
         floor_ok = self.kin.sphere_floor_mask.to(device=device, dtype=torch.bool)
+        if self.cfg.floor_exclude:
+            floor_ok = floor_ok & box_ok
         self.distance = BoxDistance(box_ok, floor_ok)
         self.map = _PoseMap(self.kin, self.cfg.axis_length, radii)
         self.boxes = boxes_tensor(geometry, self.cfg.floor).to(device, dtype)

@@ -9,7 +9,9 @@ once they are known), the observation model ``noise``
 (``realize.execution.perception.Noise``; all zero: the robot sees its world exactly), the check
 before a repair (``precheck``: ``PrecheckSettings``) and what the world does while the planner thinks
 (``think``: ``measured``, the replan's own wall time in control steps; ``frozen``, the world
-waits; or a number of control steps, fixed, so that a study repeats bit for bit). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
+waits; or a number of control steps, fixed, so that a study repeats bit for bit), and
+``pickup_m``, the radii of the base annulus from which a re-sequence picks an object off the
+floor (``realize.app.resequence``). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
 key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file).
 What it doesn't: check disturbances against a scene (that needs the run's geometry and plan), or
 execute anything.
@@ -68,6 +70,12 @@ def _think(v: Any) -> str | None:
     return "must be measured, frozen or a number of control steps >= 0"
 
 
+def _pickup(v: Any) -> str | None:
+    ok = isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                               for x in v) and 0 < v[0] < v[1]
+    return None if ok else "must be [r_min, r_max] in m with 0 < r_min < r_max"
+
+
 @dataclass
 class ExecuteSettings(Settings):
     """One execution study (module docstring)."""
@@ -82,6 +90,7 @@ class ExecuteSettings(Settings):
     tolerance: Tolerance = field(default_factory=Tolerance)
     noise: Noise = field(default_factory=Noise)
     precheck: PrecheckSettings = field(default_factory=PrecheckSettings)
+    pickup_m: list[float] = setting(default_factory=lambda: [0.45, 0.75], check=_pickup)  # base annulus around an object on the floor
     think: Any = setting("measured", check=_think)  # the world while the planner thinks (module docstring)
     disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
 
