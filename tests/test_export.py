@@ -11,6 +11,7 @@ simulator's joint drives beside the executed targets (the TCP at each action's e
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import time
@@ -250,7 +251,7 @@ def executed_closed(executed):
 
     run = executed[0]
     moved = {"trigger": {"action": 2, "delay_s": 1.0}, "move_table": {"table": "table2", "dx": 0.0, "dy": -0.3}}
-    s = ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 3, "disturbances": [moved]})
+    s = ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 3, "think": 40, "disturbances": [moved]})
     budget = ReplanBudget(n_envs=8, n_elite=2, iterations=2, shard_rows=None, workers=1)
     summary = execute(run, s, name="closed", worlds=1, open_loop=False, rerun=False, progress=False, budget=budget,
                       export=("ros2",))
@@ -264,6 +265,20 @@ def test_execute_writes_the_bag_and_the_dataset(executed) -> None:
     channels, _ = read_bag(out / "world-0-open.mcap")
     assert channels == TOPICS
     assert json.loads((out / "lerobot" / "open" / "meta" / "info.json").read_text())["total_episodes"] == 1
+
+
+def test_a_closed_loop_bag_holds_what_the_monitor_saw(executed_closed) -> None:
+    """The executor hands what its monitor decided from to the bag: the base, the cube and both
+    tables as PoseStamped, one message per check, in time order; table 2's last pose is where
+    the disturbance moved it (30 cm in -y), the cube's first where the world started it."""
+    _, _, out, _, _ = executed_closed
+    channels, msgs = read_bag(out / "world-0-closed.mcap")
+    for name in ("base", "cube", "table1", "table2"):
+        assert channels[f"/realize/observed/{name}"] == "geometry_msgs/msg/PoseStamped", name
+    t2 = [(t, m) for topic, t, m in msgs if topic == "/realize/observed/table2"]
+    assert len(t2) > 10 and [t for t, _ in t2] == sorted(t for t, _ in t2)
+    first, last = t2[0][1].pose.position, t2[-1][1].pose.position  # type: ignore[attr-defined]
+    assert math.isclose(last.y - first.y, -0.3, abs_tol=1e-6) and math.isclose(last.x, first.x, abs_tol=1e-6)
 
 
 def _replay(world, rows: int, command) -> list[np.ndarray]:

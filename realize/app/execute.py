@@ -147,7 +147,7 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
                     files.append(f"{stem}.rrd")
                 if formats:
                     exported = export_world(where / f"{stem}.npz", where / f"{stem}.json", where, formats, spec.robot,
-                                            options=export_options)
+                                            options=export_options, observations=wl.observed or None)
                     files += [f for f in exported.files if f not in files]
                 summary = _summary(run_dir, label, settings, n, logs, files, time.perf_counter() - t0)
                 (where / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")

@@ -74,9 +74,14 @@ class WorldLog:
     actions: list[ActionRecord] = field(default_factory=list)
     replans: list[ReplanRecord] = field(default_factory=list)
     checks: list[dict[str, Any]] = field(default_factory=list)  # checks before a repair (realize.execution.precheck)
+    # what the monitor decided from, each check: (control time s, name -> x, y, z, qw, qx, qy, qz); the exports
+    # write it (a ROS 2 bag's observed poses), the JSON leaves it out
+    observed: list[tuple[float, dict[str, list[float]]]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        d.pop("observed")
+        return d
 
 
 @dataclass

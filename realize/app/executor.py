@@ -166,9 +166,20 @@ class Executor:
         seg = self.seg
         assert seg is not None
         obs = self._observe()
+        self._keep(obs)
         devs = self._deviations(seg, obs, seg.action if done_action is None else done_action, done_action is not None)
         if devs:
             raise _Stop(devs, obs)
+
+    def _keep(self, obs: Observation) -> None:
+        """What the monitor decided from, for the world's exports (``WorldLog.observed``): the
+        base (x, y, 0 and its heading), every object and table as poses (x, y, z, qw, qx, qy, qz)."""
+        s = obs.state
+        poses: dict[str, list[float]] = {"base": [s.base[0], s.base[1], 0.0, math.cos(s.base[2] / 2), 0.0, 0.0,
+                                                  math.sin(s.base[2] / 2)]}
+        poses.update({n: [*p.position, *p.quaternion] for n, p in s.objects.items()})
+        poses.update({n: [t.x, t.y, 0.0, math.cos(t.yaw / 2), 0.0, 0.0, math.sin(t.yaw / 2)] for n, t in obs.tables.items()})
+        self.log.observed.append((self.now() * self.world.scene.control_dt, poses))
 
     def _deviations(self, seg: Segment, obs: Observation, a: int, done: bool) -> list[Deviation]:
         """The monitor's checks of ``obs`` against what ``seg``'s plan expects during action
