@@ -100,6 +100,8 @@ def test_presets_read_against_the_seed_task(spec, no_sim) -> None:
     for name in presets():
         s = load_preset(name)
         assert isinstance(s, ExecuteSettings) and s.worlds >= 1 and s.monitor_every >= 1
+        if name in TOWER3_FAMILIES:  # robot=panda experiment=tower3's: test_tower3_families_read_...
+            continue
         kinds[name] = [d.kind for d in _read(spec, s.disturbances)]
     assert kinds["none"] == [] and kinds["cube_moved"] == ["move_object"] and kinds["table_moved"] == ["move_table"]
     assert kinds["knocked_out"] == ["knock_out"] and kinds["obstacle"] == ["add_box"]
@@ -107,6 +109,106 @@ def test_presets_read_against_the_seed_task(spec, no_sim) -> None:
         ExecuteSettings.from_mapping({"worlds": 2, "replans": 1})
     with pytest.raises(ConfigError, match="execute preset 'nope' is unknown"):
         load_preset("nope")
+
+
+# ------------------------------------------------------------------------------ knock_out's displacement
+TOWER3_FAMILIES = ("tower_knocked", "block_moved", "grasp_slip")  # families of robot=panda experiment=tower3
+TOWER3_PLAN = ["grasp(cube_b, CubeB_g)", "place(cube_b, CubeB_on_a)", "grasp(cube_c, CubeC_g)",
+               "place(cube_c, CubeC_on_b)"]
+
+
+@pytest.fixture(scope="module")
+def tower3_geometry():
+    from realize.world.geometry import GeometryCfg
+
+    return build_geometry(GeometryCfg.from_mapping(compose_config("robot=panda", "experiment=tower3")["scene"],
+                                                   "scene"))
+
+
+def test_tower3_families_read_against_the_tower3_scene(tower3_geometry, no_sim) -> None:
+    kinds = {n: read_disturbances(load_preset(n).disturbances, tower3_geometry, TOWER3_PLAN) for n in TOWER3_FAMILIES}
+    knocked, = kinds["tower_knocked"]
+    assert knocked.kind == "knock_out" and knocked.target == "cube_b" and knocked.trigger.action == 2
+    assert knocked.move is not None and knocked.move.distance == (0.08, 0.12)
+    moved, = kinds["block_moved"]
+    assert moved.kind == "move_object" and moved.trigger.action is not None and moved.trigger.action < 2
+    slip, = kinds["grasp_slip"]
+    assert slip.kind == "knock_out" and slip.move is None and slip.trigger.when == "held"
+    with pytest.raises(ConfigError, match="no object of that name"):
+        read_disturbances(load_preset("knocked_out").disturbances, tower3_geometry, TOWER3_PLAN)
+
+
+@pytest.mark.parametrize("keys, needles", [
+    ({"direction_deg": [0, 90]}, ["knock_out.direction_deg", "goes with distance"]),
+    ({"dx": 0.1, "distance": [0.1, 0.2]}, ["knock_out.dx = 0.1", "not both"]),
+    ({"distance": [-0.1, 0.1]}, ["knock_out.distance[0]", ">= 0"]),
+    ({"distance": [0.2, 0.1]}, ["knock_out.distance", "empty range"]),
+    ({"distance": 0.1}, ["knock_out.distance = 0.1", "list of 2 numbers"]),
+    ({"dx": "far"}, ["knock_out.dx = 'far'", "finite number"]),
+    ({"distance": [0.1, 0.2], "direction_deg": [90, 0]}, ["knock_out.direction_deg", "empty range"]),
+    ({"dz": 0.1}, ["unknown key(s) ['dz']"]),
+])
+def test_knock_out_displacement_keys_are_checked_in_one_line(spec, no_sim, keys, needles) -> None:
+    with pytest.raises(ConfigError) as ei:
+        _read(spec, [{"trigger": {"action": 2}, "knock_out": {"object": "cube", **keys}}])
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.startswith("disturbances[0]"), msg
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+def test_knock_out_displacement_is_read_and_drawn_per_world(spec) -> None:
+    plain, fixed, drawn, table = _read(spec, [
+        {"trigger": {"action": 2}, "knock_out": {"object": "cube"}},
+        {"trigger": {"action": 2}, "knock_out": {"object": "cube", "dx": 0.1, "dy": -0.05}},
+        {"trigger": {"action": 2}, "knock_out": {"object": "cube", "distance": [0.08, 0.12],
+                                                 "direction_deg": [180, 270]}},
+        {"trigger": {"action": 2}, "move_table": {"table": "table2", "distance": [0.2, 0.4]}}])
+    assert plain.move is None  # no displacement: today's effect, and nothing drawn for it
+    for seed in range(5):
+        a = draw([plain, fixed, drawn, table], np.random.default_rng(seed))
+        assert a[0].effect == KnockOut("cube") and a[1].effect == KnockOut("cube", 0.1, -0.05)
+        k = a[2].effect
+        assert isinstance(k, KnockOut) and 0.08 <= math.hypot(k.dx, k.dy) <= 0.12 and k.dx <= 1e-12 and k.dy <= 1e-12
+        # the plain knock_out draws no number: the table's draw is that of a list without it
+        assert draw([fixed, drawn, table], np.random.default_rng(seed))[2] == a[3]
+
+
+def test_knock_out_with_a_displacement_lands_beside_upright_at_rest(spec) -> None:
+    """The held cube knocked 12 cm sideways: it rests on table 1's top there, upright."""
+    with ExecutionWorld(spec, 0, perturb=False) as w:
+        w.scene.reset(state=load_state(FIXTURE))
+        before = w.observe().state.objects["cube"].position
+        line = w.apply(KnockOut("cube", 0.0, -0.12))
+        assert "out of the hand by (+0.000, -0.120) m onto table1" in line
+        for _ in range(20):
+            w.scene.step()
+        pose = w.observe().state.objects["cube"]
+        p, q = pose.position, pose.quaternion
+        assert p[2] == pytest.approx(TABLE_TOP + CUBE_HALF, abs=3e-3)
+        assert (p[0], p[1]) == pytest.approx((before[0], before[1] - 0.12), abs=0.01)
+        assert abs(q[1]) < 0.02 and abs(q[2]) < 0.02 and w.held() is None
+
+
+def test_a_knocked_block_lands_on_the_block_below_it() -> None:
+    """Three cubes (robot=panda experiment=tower3): cube_b knocked from 25 cm above the table to
+    over cube_a lands on cube_a's top; knocked on from there sideways by 10 cm, it lands on the
+    table, not inside anything."""
+    tower = build_run_spec(compose_config("robot=panda", "experiment=tower3"))
+    with ExecutionWorld(tower, 0, perturb=False) as w:
+        a = w.start_state().objects["cube_a"].position
+        w.scene.place_object("cube_b", torch.tensor([[a[0] + 0.1, a[1], 1.0]]))
+        assert "onto cube_a" in w.apply(KnockOut("cube_b", -0.1, 0.0))
+        for _ in range(20):
+            w.scene.step()
+        b = w.observe().state.objects["cube_b"].position
+        assert b == pytest.approx((a[0], a[1], a[2] + 0.045), abs=3e-3)
+        assert "onto table1" in w.apply(KnockOut("cube_b", 0.0, -0.1))
+        for _ in range(20):
+            w.scene.step()
+        s = w.observe().state.objects
+        assert s["cube_b"].position == pytest.approx((a[0], a[1] - 0.1, TABLE_TOP + CUBE_HALF), abs=3e-3)
+        assert s["cube_a"].position == pytest.approx(a, abs=2e-3)  # untouched
 
 
 def test_drawing_is_deterministic_per_seed(spec) -> None:

@@ -6,7 +6,8 @@ hand, so ``place`` has nothing to place), ``resequence_task(task_cfg, geometry, 
 derives the symbolic state of the observed world, writes the task's PDDL problem with that
 initial state (``resequence.pddl`` in ``out_dir``), solves it with the task's domain (Fast
 Downward, ``realize.tasks.pddl``) and returns the task mapping with the new plan (the same
-params, goal and final cost), ready for ``realize.app.planner.Planner.resequence``.
+params, goal and final cost; a blocks plan's params with the regions it needed made, below),
+ready for ``realize.app.planner.Planner.resequence``.
 
 The symbolic state (``symbolic_facts``), by the conventions of ``configs/pddl/`` (its domains
 name these predicates; a domain without them cannot be re-planned from a state, which is said
@@ -22,13 +23,39 @@ in one line):
     loc_floor_O)``, so any domain whose grasp takes an item from the site it is at picks it up
     from the floor; an object elsewhere (on another object, tipped on an edge) gets no ``item-at``;
 every other fact of the problem's ``:init`` (the static ones) is kept as written.
+
+A domain of the blocks conventions (``configs/pddl/blocks_domain.pddl``: its ``:predicates``
+name ``on``, ``ontable`` and ``clear``, and no ``item-at``) is read instead by
+``blocks_facts``, over the problem's objects typed ``block`` (scene objects) and ``table``:
+  * ``(on X S)`` for a block X resting on table S or on block S (its centre over S's top
+    footprint, its bottom within ``STACK_SLACK_M`` of S's top, S itself not in the hand), with
+    ``(ontable X)`` where S is a table;
+  * ``(clear S)`` for every block with nothing resting on it (the held one too) and every table
+    (the domain's tables are always clear);
+  * ``(holding X)`` for the held block, else ``(hand-empty)``;
+a block resting on nothing the domain can say (the floor, an object that is no block, tipped
+over an edge) gets no ``on`` fact: no plan can grasp it, and the planner's "unsolvable" comes
+with a line naming it. Where the planner finds no plan, it is asked again with a grasp region
+for every block and a place region for every (block, support) pair the problem lacks
+(``regions_resequence.pddl``). Where that one finds a plan, the regions it uses are made like
+the task's own (hemispheres, added to the task's params as ``Re_grasp_X`` and ``Re_X_on_S``): a
+grasp of X like a grasp region framed by its block, re-framed to X; X on block S like a place
+region of the task framed by the block it places on, re-framed to S at the same height above the
+two half heights; X on table S the same shape framed by S, centred over the first free one of
+the scene's own rest spots on S (X's own first; free: no other object within both radii and
+``SPOT_CLEARANCE_M``), e.g. a block stacked on a knocked-off one is set down where it started.
+Where one cannot be made (the task has no region to make it like, every spot is taken), the
+refusal names the regions the plan would need (one line).
 What it doesn't: simulate, or search the new plan's parameters (the planner does).
 """
 
 from __future__ import annotations
 
+import logging
+import math
 import re
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,9 +65,15 @@ from realize.config import ConfigError
 from realize.world.geometry import SceneGeometry
 from realize.world.state import SceneState
 
-__all__ = ["symbolic_facts", "resequence_task", "floor_site", "floor_region", "DYNAMIC_PREDICATES", "RESEQUENCE_PROBLEM"]
+__all__ = ["symbolic_facts", "blocks_facts", "domain_predicates", "is_blocks_domain", "resequence_task",
+           "floor_site", "floor_region", "DYNAMIC_PREDICATES", "BLOCKS_PREDICATES", "RESEQUENCE_PROBLEM"]
 
 DYNAMIC_PREDICATES = ("robot-at", "hand-empty", "holding", "item-at")
+BLOCKS_PREDICATES = ("on", "ontable", "clear", "holding", "hand-empty")  # the blocks domain's dynamic ones
+STACK_SLACK_M = 0.015  # blocks: a bottom within this of a support's top rests on it (less than half a block)
+SPOT_CLEARANCE_M = 0.02  # blocks: a spot to set a block down on a table keeps this clear of every other object
+
+log = logging.getLogger("realize")
 RESEQUENCE_PROBLEM = "resequence.pddl"
 BASE_SLACK_M = 0.25  # a base this far outside a base region still counts as parked there
 REST_SLACK_M = 0.05  # an object's bottom within this of a table's top rests on it
@@ -104,6 +137,239 @@ def symbolic_facts(state: SceneState, geometry: SceneGeometry, task: Any, static
     return facts
 
 
+def domain_predicates(domain: str | Path) -> set[str]:
+    """The predicate names (casefolded) the PDDL domain file ``domain`` declares."""
+    text = _strip_comments(Path(domain).read_text())
+    m = re.search(r"\(\s*:predicates\b", text, re.IGNORECASE)
+    if m is None:
+        return set()
+    depth, i = 0, m.start()
+    while i < len(text):
+        depth += text[i] == "("
+        depth -= text[i] == ")"
+        i += 1
+        if depth == 0:
+            break
+    return {n.casefold() for n in re.findall(r"\(\s*([^\s()?]+)", text[m.end():i])}
+
+
+def is_blocks_domain(predicates: set[str]) -> bool:
+    """Whether a domain with these predicates follows the blocks conventions (module docstring)."""
+    return {"on", "ontable", "clear"} <= predicates and "item-at" not in predicates
+
+
+def _typed_objects(text: str) -> dict[str, str]:
+    """The problem's ``:objects`` as {name: type} (``object`` where untyped), both casefolded."""
+    lo, hi = _block(text, ":objects")
+    body = re.sub(r"^\(\s*:objects", "", text[lo:hi - 1], flags=re.IGNORECASE).split()
+    out: dict[str, str] = {}
+    names: list[str] = []
+    i = 0
+    while i < len(body):
+        if body[i] == "-" and i + 1 < len(body):
+            out.update({n.casefold(): body[i + 1].casefold() for n in names})
+            names, i = [], i + 2
+            continue
+        names.append(body[i])
+        i += 1
+    out.update({n.casefold(): "object" for n in names})
+    return out
+
+
+def _rests_on(geometry: SceneGeometry, name: str, pose: Any, support: Any, support_pose: Any = None) -> bool:
+    """Whether object ``name`` at ``pose`` rests on ``support``: a table (``Box``), or an object
+    (``SceneObject``) at ``support_pose``: its centre over the support's top footprint, its
+    bottom within ``STACK_SLACK_M`` of the support's top."""
+    from dataclasses import replace
+
+    from realize.world.objects import SceneObject
+
+    x, y, z = pose.position
+    bottom = z - geometry.object(name).half_height
+    if isinstance(support, SceneObject):
+        w, qx, qy, qz = support_pose.quaternion
+        yaw = math.atan2(2 * (w * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+        s = replace(support, position=tuple(support_pose.position), yaw=yaw)
+        return s.contains_xy(x, y) and abs(bottom - s.top_z) <= STACK_SLACK_M
+    return support.contains_xy(x, y) and abs(bottom - support.top_z) <= STACK_SLACK_M
+
+
+def blocks_facts(state: SceneState, geometry: SceneGeometry, blocks: list[str], tables: list[str]
+                 ) -> tuple[list[tuple[str, ...]], list[str]]:
+    """The blocks domain's dynamic facts of ``state`` (module docstring) over the problem's
+    ``blocks`` (scene objects) and ``tables``, and one note per block that rests on nothing the
+    domain can say."""
+    facts: list[tuple[str, ...]] = [("holding", state.held) if state.held else ("hand-empty",)]
+    covered: set[str] = set()
+    notes: list[str] = []
+    for x in blocks:
+        if x == state.held or x not in state.objects:
+            continue
+        pose = state.objects[x]
+        on = next((s for s in blocks if s not in (x, state.held) and s in state.objects
+                   and _rests_on(geometry, x, pose, geometry.object(s), state.objects[s])), None)
+        if on is not None:
+            facts.append(("on", x, on))
+            covered.add(on)
+            continue
+        table = next((t for t in tables if _rests_on(geometry, x, pose, geometry.table(t))), None)
+        if table is not None:
+            facts += [("on", x, table), ("ontable", x)]
+            continue
+        px, py, pz = pose.position
+        notes.append(f"{x} at ({px:.3f}, {py:.3f}, {pz:.3f}) rests on no table or block of the problem")
+    facts += [("clear", s) for s in blocks if s not in covered] + [("clear", t) for t in tables]
+    return facts, notes
+
+
+@dataclass(frozen=True)
+class _Needed:
+    """A region the problem lacks: a grasp of ``block`` (``support`` None) or ``block`` placed on
+    ``support``."""
+
+    block: str
+    support: str | None = None
+
+    @property
+    def name(self) -> str:
+        return f"Re_grasp_{self.block}" if self.support is None else f"Re_{self.block}_on_{self.support}"
+
+    def __str__(self) -> str:
+        return f"a grasp of {self.block}" if self.support is None else f"{self.block} placed on {self.support}"
+
+
+def _missing_regions(text: str, static: list[tuple[str, ...]], blocks: list[str], tables: list[str],
+                     kinds: dict[str, str]) -> tuple[str, dict[str, _Needed]]:
+    """``text`` (a blocks problem) with a grasp region per block that has none and a place region
+    per (block, support) pair that has none, and those regions by name."""
+    grasped = {f[2].casefold() for f in static if f[0].casefold() == "grasps" and len(f) == 3}
+    placed = {(f[2].casefold(), f[3].casefold()) for f in static if f[0].casefold() == "place-on" and len(f) == 4}
+    grasp_t = next((kinds[f[1].casefold()] for f in static if f[0].casefold() == "grasps"), "grasp_region")
+    place_t = next((kinds[f[1].casefold()] for f in static if f[0].casefold() == "place-on"), "place_region")
+    new: dict[str, _Needed] = {}
+    decl, init = "", ""
+    for x in blocks:
+        if x.casefold() not in grasped:
+            n = _Needed(x)
+            new[n.name], decl, init = n, decl + f"\n    {n.name} - {grasp_t}", init + f"\n    (grasps {n.name} {x})"
+        for s in blocks + tables:
+            if s != x and (x.casefold(), s.casefold()) not in placed:
+                n = _Needed(x, s)
+                new[n.name], decl = n, decl + f"\n    {n.name} - {place_t}"
+                init += f"\n    (place-on {n.name} {x} {s})"
+    lo, hi = _block(text, ":objects")
+    text = text[:hi - 1] + decl + ")" + text[hi:]
+    lo, hi = _block(text, ":init")
+    return text[:hi - 1] + init + ")" + text[hi:], new
+
+
+def _free_spot(geometry: SceneGeometry, state: SceneState, block: str, table: str) -> tuple[float, float] | None:
+    """Where on ``table`` to set ``block`` down: the first of the scene's own rest spots on it
+    (``block``'s first, then the others' in scene order) with no other observed object within
+    both radii and ``SPOT_CLEARANCE_M`` of it; None where every one is taken."""
+    me = geometry.object(block)
+    spots = [o for o in [me, *geometry.objects] if o.rests_on == table]
+    for spot in spots:
+        x, y = spot.position[0], spot.position[1]
+        if all(math.hypot(p.position[0] - x, p.position[1] - y) >= me.radius + geometry.object(o).radius
+               + SPOT_CLEARANCE_M for o, p in state.objects.items() if o not in (block, state.held)):
+            return (x, y)
+    return None
+
+
+def _make_region(need: _Needed, params: Mapping[str, Any], static: list[tuple[str, ...]], blocks: list[str],
+                 geometry: SceneGeometry, state: SceneState) -> dict[str, Any] | None:
+    """The region ``need`` stands for, in the task's params format, made like the task's own
+    (module docstring); None where the task has no region to make it like, or the table no
+    free spot."""
+    def framed(name: str, frame: str) -> dict[str, Any] | None:
+        r = params.get(name)
+        return dict(r) if isinstance(r, Mapping) and r.get("type") == "hemisphere" and \
+            str(r.get("frame", "")).casefold() == frame.casefold() else None
+
+    half = {b: geometry.object(b).half_height for b in blocks}
+    lower = {b.casefold(): b for b in blocks}
+    if need.support is None:
+        like = next((framed(f[1], f[2]) for f in static if f[0].casefold() == "grasps" and len(f) == 3
+                     and framed(f[1], f[2])), None)
+        return None if like is None else dict(like, frame=need.block)
+    # a place region of the task onto a block, framed by that block: its height above the two half heights
+    like, over = None, 0.0
+    for f in static:
+        if f[0].casefold() == "place-on" and len(f) == 4 and f[3].casefold() in lower and framed(f[1], f[3]):
+            like = framed(f[1], f[3])
+            assert like is not None
+            over = float(like["center"][2]) - half[lower[f[2].casefold()]] - half[lower[f[3].casefold()]]
+            break
+    if like is None:
+        return None
+    x = need.block
+    if need.support in blocks:
+        return dict(like, frame=need.support, center=[0.0, 0.0, half[x] + half[need.support] + over])
+    spot = _free_spot(geometry, state, x, need.support)
+    if spot is None:
+        return None
+    t = geometry.table(need.support)  # a table's frame: the centre of its top face
+    return dict(like, frame=need.support, center=[spot[0] - t.center[0], spot[1] - t.center[1], half[x] + over])
+
+
+def _resequence_blocks(text: str, init_facts: list[tuple[str, ...]], domain: Path, problem: Path,
+                       task_cfg: Mapping[str, Any], geometry: SceneGeometry, state: SceneState, out: Path
+                       ) -> tuple[list[str], dict[str, Any]]:
+    """The blocks domain's new plan (action texts) from ``state`` and the task's params with the
+    regions it made (module docstring)."""
+    from realize.realization.actions import TEMPLATES
+    from realize.tasks.pddl import PlanningError, plan_from_pddl
+
+    kinds = _typed_objects(text)
+    scene = {n.casefold(): n for n in geometry.object_names}
+    tables_of = {t.name.casefold(): t.name for t in geometry.tables}
+    names = {n.casefold(): n for n in re.findall(r"[^\s()]+", text)}  # the problem's spelling
+    blocks = [scene[n] for n, k in kinds.items() if k == "block" and n in scene]
+    tables = [tables_of[n] for n, k in kinds.items() if k == "table" and n in tables_of]
+    static = [f for f in init_facts if f and f[0].casefold() not in BLOCKS_PREDICATES]
+    facts, notes = blocks_facts(state, geometry, blocks, tables)
+    planner = task_cfg.get("planner") or {}
+    params = dict(task_cfg.get("params") or {})  # the task's symbolic parameters (a run's task may have no plan)
+    lo, hi = _block(text, ":init")
+    init = "(:init\n" + "".join(f"    ({' '.join(f)})\n" for f in static + facts) + "  )"
+    path = out / RESEQUENCE_PROBLEM
+    written = text[:lo] + init + text[hi:]
+    path.write_text(f"; {problem.name} with the initial state observed at the re-sequence\n" + written)
+    timeout = float(planner.get("timeout_s", 30.0))
+    said = "; ".join(notes)
+    try:
+        plans = plan_from_pddl(domain, path, list(TEMPLATES), list(params), objects=geometry.object_names,
+                               top_k=1, timeout_s=timeout)
+    except PlanningError as e:
+        plans, said = [], "; ".join([" ".join(str(e).split())[:300], *notes])
+    if plans:
+        return [str(a) for a in plans[0]], params
+    # no plan: is there one with a region for every grasp and place the problem lacks?
+    wider, new = _missing_regions(written, static, blocks, tables, kinds)
+    wpath = out / ("regions_" + RESEQUENCE_PROBLEM)
+    wpath.write_text(f"; {path.name} with a grasp and place region for every block and support\n" + wider)
+    try:
+        wplans = plan_from_pddl(domain, wpath, list(TEMPLATES), [*params, *new],
+                                objects=geometry.object_names, top_k=1, timeout_s=timeout)
+    except PlanningError:
+        wplans = []
+    needs = list(dict.fromkeys(new[p] for a in (wplans[0] if wplans else []) for p in a.params if p in new))
+    if needs:
+        made = {n.name: _make_region(n, params, static, blocks, geometry, state) for n in needs}
+        lacking = [str(n) for n in needs if made[n.name] is None]
+        if not lacking:
+            log.info("re-sequence: the plan needs regions the task lacks, made like the task's own: %s",
+                     ", ".join(f"{k} ({n})" for k, n in zip(made, needs)))
+            return [str(a) for a in wplans[0]], {**params, **made}
+        raise ConfigError(f"re-sequence: no plan from the observed state ({path}) with the task's regions; one "
+                          f"needs a region the task does not define and none could be made like its own: "
+                          f"{', '.join(lacking)}" + (f" ({said})" if notes else ""))
+    observed = " ".join(f"({' '.join(names.get(w.casefold(), w) for w in f)})" for f in facts)
+    raise ConfigError(f"re-sequence: the PDDL planner found no plan from the observed state ({path}): "
+                      f"{said or 'unsolvable'}; observed {observed}")
+
+
 def floor_site(obj: str) -> str:
     """The PDDL site of object ``obj`` lying on the floor."""
     return f"loc_floor_{obj}"
@@ -148,6 +414,13 @@ def resequence_task(task_cfg: Mapping[str, Any], geometry: SceneGeometry, state:
     problem = _resolve_path(planner["problem"], "task.planner.problem")
     text = _strip_comments(problem.read_text())
     lo, hi = _block(text, ":init")
+    if is_blocks_domain(domain_predicates(domain)):
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        new = dict(task_cfg)
+        new["plan"], new["params"] = _resequence_blocks(text, _facts(text[lo:hi]), domain, problem, task_cfg,
+                                                        geometry, state, out)
+        return new
     static = [f for f in _facts(text[lo:hi]) if f and f[0].casefold() not in DYNAMIC_PREDICATES]
     start = next((f[1] for f in _facts(text[lo:hi]) if f and f[0].casefold() == "robot-at" and len(f) == 2), None)
     if start is None:

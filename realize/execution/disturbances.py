@@ -14,7 +14,9 @@ What it does:
           knock_out: {object: cube}
 
     Effects (one key per entry): ``move_object {object, dx, dy}`` (teleported by dx, dy, same z,
-    at rest), ``knock_out {object}`` (out of the hand onto the surface below it),
+    at rest), ``knock_out {object[, dx, dy]}`` (out of the hand onto the surface below it, a
+    table's top or another object's, upright and at rest; with a displacement, moved sideways by
+    it first: a block knocked off a tower lands beside it; without one, nothing is drawn for it),
     ``move_table {table, dx, dy}`` (a static table moved, what rests on it with it),
     ``add_box {name, center: [x, y], size: [sx, sy, sz]}`` (a new box obstacle on the floor),
     ``push_base {dx, dy}`` (the robot's base displaced). Any ``dx, dy`` may instead be drawn per
@@ -111,8 +113,13 @@ class MoveObject:
 
 @dataclass(frozen=True)
 class KnockOut:
+    """An object knocked onto the surface below it; ``dx, dy`` (m): moved sideways first (0, 0:
+    straight down, the effect without a displacement)."""
+
     kind: ClassVar[str] = "knock_out"
     object: str
+    dx: float = 0.0
+    dy: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -151,7 +158,8 @@ EFFECTS = ("move_object", "knock_out", "move_table", "add_box", "push_base")
 class Disturbance:
     """One checked entry, ranges not yet drawn: ``kind`` (one of ``EFFECTS``), ``target`` (the
     object, table or new box's name; None for ``push_base``), ``move`` (move_object,
-    move_table, push_base), ``box`` and ``size`` (add_box)."""
+    move_table, push_base; knock_out where it gives a displacement, else None), ``box`` and
+    ``size`` (add_box)."""
 
     index: int
     trigger: Trigger
@@ -175,7 +183,7 @@ class Scheduled:
 _MOVE_KEYS = ("dx", "dy", "distance", "direction_deg")
 _KEYS = {
     "move_object": ("object",) + _MOVE_KEYS,
-    "knock_out": ("object",),
+    "knock_out": ("object",) + _MOVE_KEYS,  # the displacement optional
     "move_table": ("table",) + _MOVE_KEYS,
     "add_box": ("name", "center", "between", "at", "size"),
     "push_base": _MOVE_KEYS,
@@ -305,8 +313,9 @@ def read_disturbances(entries: Sequence[Any] | None, geometry: SceneGeometry, pl
         p = as_mapping(d[kind] if d[kind] is not None else {}, ew)
         check_unknown(p, _KEYS[kind], ew)
         if kind in ("move_object", "knock_out"):
+            sideways = kind == "move_object" or any(k in p for k in _MOVE_KEYS)
             out.append(Disturbance(i, trigger, kind, _name(p.get("object"), objects, "object", f"{ew}.object"),
-                                   move=_displacement(p, ew) if kind == "move_object" else None))
+                                   move=_displacement(p, ew) if sideways else None))
         elif kind == "move_table":
             out.append(Disturbance(i, trigger, kind, _name(p.get("table"), tables, "table", f"{ew}.table"),
                                    move=_displacement(p, ew)))
@@ -337,7 +346,7 @@ def draw(disturbances: Sequence[Disturbance], rng: np.random.Generator) -> list[
             effect = AddBox(d.target, d.size, center=c.center, between=c.between, at=c.at[0])
         elif d.kind == "knock_out":
             assert d.target is not None
-            effect = KnockOut(d.target)
+            effect = KnockOut(d.target) if d.move is None else KnockOut(d.target, *d.move.draw(rng))
         else:
             assert d.move is not None
             dx, dy = d.move.draw(rng)

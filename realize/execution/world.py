@@ -7,8 +7,9 @@ perturbation model (``realize.tasks.worlds.draw_worlds`` on its own stream,
 ``perturb=False``: the nominal world). The executor drives ``world.scene`` with the robot's
 own controllers. Disturbances (``realize.execution.disturbances``) are carried out by
 ``apply``: objects and the base teleported, a held object knocked onto the surface below it
-(the gripper command opened), tables moved (their static PhysX actors posed anew; what rests on
-them moves along), box obstacles put in place. Every box an ``add_box`` of the world's
+(moved sideways first where the effect says: a table's top, or the top of another object under
+its footprint there; upright, at rest; the gripper command opened), tables moved (their static
+PhysX actors posed anew; what rests on them moves along), box obstacles put in place. Every box an ``add_box`` of the world's
 disturbances needs is built in the PhysX scene when the world is built, parked out of the way
 (below the floor, outside the map), and only moved into place when it fires. Moved tables and
 placed boxes stay where they are through ``scene.reset(state=...)`` (a restore moves dynamic
@@ -96,6 +97,20 @@ def _yaw(q: Sequence[float]) -> float:
 
 def _upright(yaw: float) -> tuple[float, float, float, float]:
     return (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+
+
+def _footprints_overlap(c1: Sequence[float], h1: Sequence[float], yaw1: float, c2: Sequence[float],
+                        h2: Sequence[float], yaw2: float) -> bool:
+    """Whether two rectangles (centre, half sizes, yaw) overlap by more than a millimetre: no
+    separating axis among their four edge normals."""
+    axes = [(math.cos(a), math.sin(a)) for yaw in (yaw1, yaw2) for a in (yaw, yaw + math.pi / 2)]
+    d = (c2[0] - c1[0], c2[1] - c1[1])
+
+    def radius(h: Sequence[float], yaw: float, n: tuple[float, float]) -> float:
+        u, v = (math.cos(yaw), math.sin(yaw)), (-math.sin(yaw), math.cos(yaw))
+        return h[0] * abs(u[0] * n[0] + u[1] * n[1]) + h[1] * abs(v[0] * n[0] + v[1] * n[1])
+
+    return all(abs(d[0] * n[0] + d[1] * n[1]) < radius(h1, yaw1, n) + radius(h2, yaw2, n) - 1e-3 for n in axes)
 
 
 class ExecutionWorld:
@@ -228,12 +243,23 @@ class ExecutionWorld:
         elif isinstance(e, KnockOut):
             was_held = bool(scene.holds(e.object)[0])
             p, q = self._object(e.object)
-            surface, top = self.surface_below(p[0], p[1])
-            half = scene.geometry.object(e.object).half_size[2]
-            self._set_object(e.object, (p[0], p[1], top + half), _upright(_yaw(q)))
+            x, y = p[0] + e.dx, p[1] + e.dy  # (dx, dy) = (0, 0): straight down, as it always was
+            surface, top = self.surface_below(x, y)
+            me = scene.geometry.object(e.object)
+            half = me.half_size[2]
+            for o in scene.geometry.objects:  # another object under its footprint there: it lands on that
+                if o.name == e.object:
+                    continue
+                po, qo = self._object(o.name)
+                top_o = po[2] + o.half_size[2]
+                if top < top_o <= p[2] - half + ON_SURFACE and _footprints_overlap(
+                        (x, y), me.half_size[:2], _yaw(q), po[:2], o.half_size[:2], _yaw(qo)):
+                    surface, top = o.name, top_o
+            self._set_object(e.object, (x, y, top + half), _upright(_yaw(q)))
             scene.set_gripper(torch.zeros(1, dtype=torch.bool))
-            text = (f"knocked {e.object} {'out of the hand ' if was_held else '(not held) '}onto {surface} at "
-                    f"({p[0]:.3f}, {p[1]:.3f}); gripper opened")
+            sideways = f"by ({e.dx:+.3f}, {e.dy:+.3f}) m " if (e.dx, e.dy) != (0.0, 0.0) else ""
+            text = (f"knocked {e.object} {'out of the hand ' if was_held else '(not held) '}{sideways}onto "
+                    f"{surface} at ({x:.3f}, {y:.3f}); gripper opened")
         elif isinstance(e, MoveTable):
             text = self._move_table(e)
         elif isinstance(e, AddBox):

@@ -1,0 +1,163 @@
+"""Re-sequencing in the blocks domain (realize/app/resequence.py): the symbolic state read off a
+hand-made scene state of the three-block tower (robot=panda experiment=tower3), and the new plan
+Fast Downward finds from it. No simulation: geometry and PDDL only."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from helpers import REPO, compose_config
+from realize.app.resequence import (blocks_facts, domain_predicates, is_blocks_domain, resequence_task,
+                                    symbolic_facts)
+from realize.config import ConfigError
+from realize.world.geometry import GeometryCfg, build_geometry
+from realize.world.state import ObjectPose, SceneState
+
+BLOCKS = ["cube_a", "cube_b", "cube_c"]
+TABLES = ["table1"]
+Z0 = 0.72 + 0.0225  # a 4.5 cm cube's centre on table 1 (top 0.72 m)
+H = 0.045  # the cube's height: one level of the tower
+PLAN = ["grasp(cube_b, CubeB_g)", "place(cube_b, CubeB_on_a)", "grasp(cube_c, CubeC_g)", "place(cube_c, CubeC_on_b)"]
+
+
+@pytest.fixture(scope="module")
+def tower3() -> tuple[dict, object]:
+    """The tower3 task mapping (as a run's saved config has it: the planner on, no plan written)
+    and its scene."""
+    cfg = compose_config("robot=panda", "experiment=tower3")
+    task = dict(cfg["task"])
+    assert task["planner"]["enabled"] and "plan" not in task
+    return task, build_geometry(GeometryCfg.from_mapping(cfg["scene"], "scene"))
+
+
+def _yawed(yaw: float) -> tuple[float, float, float, float]:
+    return (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+
+
+def _state(held: str | None = None, **poses) -> SceneState:
+    objects = {k: ObjectPose(*v) if isinstance(v[0], tuple) else ObjectPose(v) for k, v in poses.items()}
+    return SceneState(base=(-0.42, 1.2, 0.0), objects=objects, held=held, gripper_closed=held is not None)
+
+
+def _facts(geometry, state: SceneState) -> tuple[set[tuple[str, ...]], list[str]]:
+    facts, notes = blocks_facts(state, geometry, BLOCKS, TABLES)
+    return set(facts), notes
+
+
+# ------------------------------------------------------------------------------ which convention
+def test_the_convention_is_read_from_the_domains_predicates() -> None:
+    pddl = REPO / "configs" / "pddl"
+    assert is_blocks_domain(domain_predicates(pddl / "blocks_domain.pddl"))
+    for other in ("pick_place_domain.pddl", "carry_or_push_domain.pddl"):
+        preds = domain_predicates(pddl / other)
+        assert "item-at" in preds and not is_blocks_domain(preds), (other, preds)
+
+
+# ------------------------------------------------------------------------------ the facts
+def test_a_finished_tower(tower3) -> None:
+    _, g = tower3
+    facts, notes = _facts(g, _state(cube_a=(0.0, 1.2, Z0), cube_b=(0.004, 1.203, Z0 + H),
+                                    cube_c=(0.0, 1.198, Z0 + 2 * H)))
+    assert facts == {("hand-empty",), ("on", "cube_a", "table1"), ("ontable", "cube_a"), ("on", "cube_b", "cube_a"),
+                     ("on", "cube_c", "cube_b"), ("clear", "cube_c"), ("clear", "table1")}
+    assert notes == []
+
+
+def test_a_block_knocked_off_the_tower_rests_on_the_table(tower3) -> None:
+    _, g = tower3
+    facts, _ = _facts(g, _state(cube_a=(0.0, 1.2, Z0), cube_b=(0.05, 1.11, Z0 + 0.001), cube_c=(0.0, 1.4, Z0)))
+    assert facts == {("hand-empty",), *[(p, b, *t) for b in BLOCKS for p, t in (("on", ("table1",)), ("ontable", ()))],
+                     *[("clear", s) for s in BLOCKS + TABLES]}
+
+
+def test_a_held_block_and_one_on_a_turned_block(tower3) -> None:
+    """cube_b stands 2.8 cm off cube_a's centre along x: over cube_a's top only because cube_a is
+    turned 45 degrees (its corner reaches 3.2 cm along x; square it reaches 2.25 cm)."""
+    _, g = tower3
+    state = _state("cube_c", cube_a=((0.0, 1.2, Z0), _yawed(math.pi / 4)), cube_b=(0.028, 1.2, Z0 + H),
+                   cube_c=(0.1, 1.3, 0.95))
+    facts, _ = _facts(g, state)
+    assert facts == {("holding", "cube_c"), ("on", "cube_a", "table1"), ("ontable", "cube_a"),
+                     ("on", "cube_b", "cube_a"), ("clear", "cube_b"), ("clear", "cube_c"), ("clear", "table1")}
+    square = _state("cube_c", cube_a=(0.0, 1.2, Z0), cube_b=(0.028, 1.2, Z0 + H), cube_c=(0.1, 1.3, 0.95))
+    facts, notes = _facts(g, square)
+    assert not any(f[:2] == ("on", "cube_b") for f in facts) and notes and "cube_b" in notes[0]
+
+
+def test_a_block_on_the_floor_or_in_the_air_gets_no_on_fact(tower3) -> None:
+    _, g = tower3
+    for where in ((0.6, 1.2, 0.0225), (0.0, 1.2, Z0 + H + 0.03)):  # the floor; above cube_a, not resting
+        facts, notes = _facts(g, _state(cube_a=(0.0, 1.2, Z0), cube_b=where, cube_c=(0.0, 1.4, Z0)))
+        assert not any(f[0] in ("on", "ontable") and f[1] == "cube_b" for f in facts), facts
+        assert ("clear", "cube_b") in facts and len(notes) == 1 and notes[0].startswith("cube_b at")
+
+
+# ------------------------------------------------------------------------------ the new plans
+def test_a_knocked_off_block_is_stacked_again_with_the_tasks_regions(tower3, tmp_path: Path) -> None:
+    task, g = tower3
+    new = resequence_task(task, g, _state(cube_a=(0.0, 1.2, Z0), cube_b=(0.05, 1.11, Z0), cube_c=(0.0, 1.4, Z0)),
+                          tmp_path)
+    assert new["plan"] == PLAN and new["params"] == task["params"] and new["goal"] == task["goal"]
+    held = resequence_task(task, g, _state("cube_b", cube_a=(0.0, 1.2, Z0), cube_b=(0.0, 1.1, 0.9),
+                                           cube_c=(0.0, 1.4, Z0)), tmp_path / "held")
+    assert held["plan"] == PLAN[1:]
+    text = (tmp_path / "held" / "resequence.pddl").read_text()
+    assert "(holding cube_b)" in text and "(hand-empty)" not in text and "(grasps CubeB_g cube_b)" in text
+
+
+@pytest.mark.parametrize("b_at, spot", [((0.05, 1.11), (0.0, 0.2)),  # cube_c back where it started
+                                        ((0.0, 1.4), (0.0, -0.2))])  # there cube_b: cube_b's own spot
+def test_a_block_stacked_on_a_knocked_off_one_is_set_down_on_a_free_spot_first(tower3, tmp_path: Path, b_at,
+                                                                              spot) -> None:
+    """cube_c went onto the knocked-off cube_b: it must go down on the table first, and the task
+    has no place region for cube_c on the table: one is made like the task's own place region
+    (a hemisphere, radius 0.15, within 0.35 rad of straight down, the placed cube's centre 5 mm
+    above resting height), framed by table 1 over a free rest spot of the scene (offsets of
+    configs/scene/tower3.yaml: cube_a 0, cube_b -0.2, cube_c +0.2 in y from the table's centre)."""
+    task, g = tower3
+    state = _state(cube_a=(0.0, 1.2, Z0), cube_b=(*b_at, Z0), cube_c=(*b_at, Z0 + H))
+    new = resequence_task(task, g, state, tmp_path)
+    assert new["plan"] == ["grasp(cube_c, CubeC_g)", "place(cube_c, Re_cube_c_on_table1)", *PLAN]
+    made = new["params"]["Re_cube_c_on_table1"]
+    assert made == {"type": "hemisphere", "frame": "table1", "center": pytest.approx([*spot, 0.0225 + 0.005]),
+                    "radius": 0.15, "polar_max": 0.35}
+    assert {k: v for k, v in new["params"].items() if k != "Re_cube_c_on_table1"} == task["params"]
+
+
+def test_a_plan_that_needs_a_region_that_cannot_be_made_is_refused_in_one_line(tower3, tmp_path: Path) -> None:
+    """The same, with the task's place regions fixed in the world frame (nothing to make a region
+    framed by a support like): the refusal names the region the plan needs."""
+    task, g = tower3
+    params = dict(task["params"])
+    for name, at in (("CubeB_on_a", (0.0, 1.2, Z0 + H + 0.005)), ("CubeC_on_b", (0.0, 1.2, Z0 + 2 * H + 0.005))):
+        params[name] = {"type": "hemisphere", "center": list(at), "radius": 0.15, "polar_max": 0.35}
+    state = _state(cube_a=(0.0, 1.2, Z0), cube_b=(0.05, 1.11, Z0), cube_c=(0.05, 1.11, Z0 + H))
+    with pytest.raises(ConfigError) as ei:
+        resequence_task(dict(task, params=params), g, state, tmp_path)
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.endswith("none could be made like its own: cube_c placed on table1"), msg
+
+
+def test_a_block_the_domain_cannot_say_makes_the_planner_say_unsolvable_in_one_line(tower3, tmp_path: Path) -> None:
+    task, g = tower3
+    state = _state(cube_a=(0.0, 1.2, Z0), cube_b=(0.6, 1.2, 0.0225), cube_c=(0.0, 1.4, Z0))
+    with pytest.raises(ConfigError) as ei:
+        resequence_task(task, g, state, tmp_path)
+    msg = str(ei.value)
+    assert "\n" not in msg and "unsolvable" in msg.lower() and "cube_b at (0.600, 1.200" in msg, msg
+
+
+def test_the_pick_place_facts_are_unchanged() -> None:
+    """The pick-place path (symbolic_facts) still reads item-at off a table top."""
+    from realize.app.task_plans import build_task
+
+    cfg = compose_config()
+    g = build_geometry(GeometryCfg.from_mapping(cfg["scene"], "scene"))
+    task = build_task(dict(cfg["task"], planner=dict(cfg["task"]["planner"], enabled=False)), g, "test")
+    cube = g.object("cube")
+    state = SceneState(base=(-2.0, 0.0, 0.0), objects={"cube": ObjectPose(cube.position)})
+    facts = symbolic_facts(state, g, task, [], "start")
+    assert ("hand-empty",) in facts and ("item-at", "cube", f"loc_{cube.rests_on}") in facts
