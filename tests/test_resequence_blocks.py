@@ -101,6 +101,7 @@ def test_a_knocked_off_block_is_stacked_again_with_the_tasks_regions(tower3, tmp
     new = resequence_task(task, g, _state(cube_a=(0.0, 1.2, Z0), cube_b=(0.05, 1.11, Z0), cube_c=(0.0, 1.4, Z0)),
                           tmp_path)
     assert new["plan"] == PLAN and new["params"] == task["params"] and new["goal"] == task["goal"]
+    assert new["planner"]["enabled"] is False  # a run of it takes that plan, not the problem's own again
     held = resequence_task(task, g, _state("cube_b", cube_a=(0.0, 1.2, Z0), cube_b=(0.0, 1.1, 0.9),
                                            cube_c=(0.0, 1.4, Z0)), tmp_path / "held")
     assert held["plan"] == PLAN[1:]

@@ -6,8 +6,9 @@ hand, so ``place`` has nothing to place), ``resequence_task(task_cfg, geometry, 
 derives the symbolic state of the observed world, writes the task's PDDL problem with that
 initial state (``resequence.pddl`` in ``out_dir``), solves it with the task's domain (Fast
 Downward, ``realize.tasks.pddl``) and returns the task mapping with the new plan (the same
-params, goal and final cost; a blocks plan's params with the regions it needed made, below),
-ready for ``realize.app.planner.Planner.resequence``.
+params, goal and final cost; a blocks plan's params with the regions it needed made, below, and
+its ``planner.enabled`` off, so that the run takes that plan rather than plan the task's own
+problem again), ready for ``realize.app.planner.Planner.resequence``.
 
 The symbolic state (``symbolic_facts``), by the conventions of ``configs/pddl/`` (its domains
 name these predicates; a domain without them cannot be re-planned from a state, which is said
@@ -420,6 +421,7 @@ def resequence_task(task_cfg: Mapping[str, Any], geometry: SceneGeometry, state:
         new = dict(task_cfg)
         new["plan"], new["params"] = _resequence_blocks(text, _facts(text[lo:hi]), domain, problem, task_cfg,
                                                         geometry, state, out)
+        new["planner"] = dict(planner, enabled=False)  # the plan is the one above: not the problem's again
         return new
     static = [f for f in _facts(text[lo:hi]) if f and f[0].casefold() not in DYNAMIC_PREDICATES]
     start = next((f[1] for f in _facts(text[lo:hi]) if f and f[0].casefold() == "robot-at" and len(f) == 2), None)
