@@ -353,8 +353,8 @@ def _resequence_blocks(text: str, init_facts: list[tuple[str, ...]], domain: Pat
     try:
         wplans = plan_from_pddl(domain, wpath, list(TEMPLATES), [*params, *new],
                                 objects=geometry.object_names, top_k=1, timeout_s=timeout)
-    except PlanningError:
-        wplans = []
+    except PlanningError as e:  # said too: the wider problem should not fail where the narrower one did not
+        wplans, said = [], "; ".join([said or "unsolvable", "with every region: " + " ".join(str(e).split())[:200]])
     needs = list(dict.fromkeys(new[p] for a in (wplans[0] if wplans else []) for p in a.params if p in new))
     if needs:
         made = {n.name: _make_region(n, params, static, blocks, geometry, state) for n in needs}
