@@ -109,22 +109,31 @@ def test_a_knocked_off_block_is_stacked_again_with_the_tasks_regions(tower3, tmp
     assert "(holding cube_b)" in text and "(hand-empty)" not in text and "(grasps CubeB_g cube_b)" in text
 
 
-@pytest.mark.parametrize("b_at, spot", [((0.05, 1.11), (0.0, 0.2)),  # cube_c back where it started
-                                        ((0.0, 1.4), (0.0, -0.2))])  # there cube_b: cube_b's own spot
-def test_a_block_stacked_on_a_knocked_off_one_is_set_down_on_a_free_spot_first(tower3, tmp_path: Path, b_at,
-                                                                              spot) -> None:
+@pytest.mark.parametrize("b_at", [(0.05, 1.11), (0.0, 1.4)])
+def test_a_block_stacked_on_a_knocked_off_one_is_set_down_on_a_free_spot_first(tower3, tmp_path: Path, b_at) -> None:
     """cube_c went onto the knocked-off cube_b: it must go down on the table first, and the task
     has no place region for cube_c on the table: one is made like the task's own place region
     (a hemisphere, radius 0.15, within 0.35 rad of straight down, the placed cube's centre 5 mm
-    above resting height), framed by table 1 over a free rest spot of the scene (offsets of
-    configs/scene/tower3.yaml: cube_a 0, cube_b -0.2, cube_c +0.2 in y from the table's centre)."""
+    above resting height), framed by table 1 (centre (0, 1.2)) over a free spot near cube_c.
+    With cube_b at (0.05, 1.11) that is cube_b's own start spot (0, 1.0) (configs/scene/
+    tower3.yaml), 12 cm away: every ring point 10 cm around is too near cube_b below. With cube_b
+    on cube_c's start spot (0, 1.4) it is a point 14 cm around, clear of both other cubes."""
     task, g = tower3
     state = _state(cube_a=(0.0, 1.2, Z0), cube_b=(*b_at, Z0), cube_c=(*b_at, Z0 + H))
     new = resequence_task(task, g, state, tmp_path)
     assert new["plan"] == ["grasp(cube_c, CubeC_g)", "place(cube_c, Re_cube_c_on_table1)", *PLAN]
-    made = new["params"]["Re_cube_c_on_table1"]
-    assert made == {"type": "hemisphere", "frame": "table1", "center": pytest.approx([*spot, 0.0225 + 0.005]),
-                    "radius": 0.15, "polar_max": 0.35}
+    made = dict(new["params"]["Re_cube_c_on_table1"])
+    sx, sy, sz = made.pop("center")
+    assert made == {"type": "hemisphere", "frame": "table1", "radius": 0.15, "polar_max": 0.35}
+    assert sz == pytest.approx(0.0225 + 0.005)
+    x, y = sx, 1.2 + sy
+    if b_at == (0.05, 1.11):
+        assert (x, y) == pytest.approx((0.0, 1.0))
+    else:
+        assert math.hypot(x - b_at[0], y - b_at[1]) == pytest.approx(0.14)
+    clear = 2 * math.hypot(0.0225, 0.0225) + 0.04  # both cubes' radii and the fingers' room
+    assert math.hypot(x, y - 1.2) >= clear and math.hypot(x - b_at[0], y - b_at[1]) >= clear
+    assert abs(x) <= 0.25 and abs(y - 1.2) <= 0.25  # on the 60 cm top, 5 cm in from its edges
     assert {k: v for k, v in new["params"].items() if k != "Re_cube_c_on_table1"} == task["params"]
 
 

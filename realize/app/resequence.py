@@ -42,9 +42,10 @@ for every block and a place region for every (block, support) pair the problem l
 the task's own (hemispheres, added to the task's params as ``Re_grasp_X`` and ``Re_X_on_S``): a
 grasp of X like a grasp region framed by its block, re-framed to X; X on block S like a place
 region of the task framed by the block it places on, re-framed to S at the same height above the
-two half heights; X on table S the same shape framed by S, centred over the first free one of
-the scene's own rest spots on S (X's own first; free: no other object within both radii and
-``SPOT_CLEARANCE_M``), e.g. a block stacked on a knocked-off one is set down where it started.
+two half heights; X on table S the same shape framed by S, centred over a free spot on S near
+X (``_free_spot``: of the scene's own rest spots and points 10-18 cm around X, within the reach
+of the scene's own spots from the base, the nearest to X with no other object within both radii
+and ``SPOT_CLEARANCE_M``), e.g. a block stacked on a knocked-off one is set down beside it.
 Where one cannot be made (the task has no region to make it like, every spot is taken), the
 refusal names the regions the plan would need (one line).
 What it doesn't: simulate, or search the new plan's parameters (the planner does).
@@ -72,7 +73,10 @@ __all__ = ["symbolic_facts", "blocks_facts", "domain_predicates", "is_blocks_dom
 DYNAMIC_PREDICATES = ("robot-at", "hand-empty", "holding", "item-at")
 BLOCKS_PREDICATES = ("on", "ontable", "clear", "holding", "hand-empty")  # the blocks domain's dynamic ones
 STACK_SLACK_M = 0.015  # blocks: a bottom within this of a support's top rests on it (less than half a block)
-SPOT_CLEARANCE_M = 0.02  # blocks: a spot to set a block down on a table keeps this clear of every other object
+SPOT_CLEARANCE_M = 0.04  # blocks: a spot to set a block down keeps this clear of every other object (the fingers)
+SPOT_RINGS_M = (0.10, 0.14, 0.18)  # blocks: candidate spots at these distances around the block
+SPOT_EDGE_M = 0.05  # blocks: candidate spots this far in from the table top's edges
+SPOT_REACH_SLACK_M = 0.1  # blocks: candidate spots this much nearer or farther from the base than the scene's own
 
 log = logging.getLogger("realize")
 RESEQUENCE_PROBLEM = "resequence.pddl"
@@ -265,17 +269,27 @@ def _missing_regions(text: str, static: list[tuple[str, ...]], blocks: list[str]
 
 
 def _free_spot(geometry: SceneGeometry, state: SceneState, block: str, table: str) -> tuple[float, float] | None:
-    """Where on ``table`` to set ``block`` down: the first of the scene's own rest spots on it
-    (``block``'s first, then the others' in scene order) with no other observed object within
-    both radii and ``SPOT_CLEARANCE_M`` of it; None where every one is taken."""
-    me = geometry.object(block)
-    spots = [o for o in [me, *geometry.objects] if o.rests_on == table]
-    for spot in spots:
-        x, y = spot.position[0], spot.position[1]
-        if all(math.hypot(p.position[0] - x, p.position[1] - y) >= me.radius + geometry.object(o).radius
-               + SPOT_CLEARANCE_M for o, p in state.objects.items() if o not in (block, state.held)):
-            return (x, y)
-    return None
+    """Where on ``table`` to set ``block`` down: of the scene's own rest spots on it and the
+    points ``SPOT_RINGS_M`` around where the block is now (16 directions), those on the top
+    ``SPOT_EDGE_M`` in from its edges, as far from the robot's base as the scene's own spots on
+    it (``SPOT_REACH_SLACK_M`` of slack either way) and free (no other observed object within
+    both radii and ``SPOT_CLEARANCE_M``), the nearest to where the block is (a short carry: the
+    monitor expects the block near where the plan began); None where none is free."""
+    me, t = geometry.object(block), geometry.table(table)
+    own = [o.position[:2] for o in geometry.objects if o.rests_on == table]
+    bx, by = state.base[0], state.base[1]
+    reach = [math.hypot(x - bx, y - by) for x, y in own]
+    if not reach:
+        return None
+    lo, hi = min(reach) - SPOT_REACH_SLACK_M, max(reach) + SPOT_REACH_SLACK_M
+    cx, cy = state.objects[block].position[:2] if block in state.objects else me.position[:2]
+    ring = [(cx + r * math.cos(k * math.pi / 8), cy + r * math.sin(k * math.pi / 8)) for r in SPOT_RINGS_M
+            for k in range(16)]
+    others = [(p.position, geometry.object(o).radius) for o, p in state.objects.items() if o not in (block, state.held)]
+    free = [(x, y) for x, y in [*own, *ring]
+            if t.contains_xy(x, y, margin=-SPOT_EDGE_M) and lo <= math.hypot(x - bx, y - by) <= hi
+            and all(math.hypot(p[0] - x, p[1] - y) >= me.radius + r + SPOT_CLEARANCE_M for p, r in others)]
+    return min(free, key=lambda q: math.hypot(q[0] - cx, q[1] - cy)) if free else None
 
 
 def _make_region(need: _Needed, params: Mapping[str, Any], static: list[tuple[str, ...]], blocks: list[str],
