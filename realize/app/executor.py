@@ -27,6 +27,8 @@ from realize.app.execution_records import ActionRecord, WorldLog
 from realize.app.repair import EXECUTION_BACKEND, Segment, go_on, repair, why_no_plan
 from realize.execution.disturbances import Scheduled
 from realize.execution.monitor import Deviation, check, expectation
+from realize.execution.in_hand import square_in_hand
+from realize.execution.layout_updates import apply_geometry_updates, geometry_updates
 from realize.execution.perception import Belief, Sensor
 from realize.execution.precheck import Precheck
 from realize.execution.schedule import Schedule
@@ -86,7 +88,7 @@ class Executor:
         noise = settings.noise
         self.sensor = None if noise.off or not closed else Sensor(noise, self.world.scene.control_dt, world_seed)
         self.belief = None if noise.off or not closed else Belief(noise)
-        self.precheck = Precheck(spec, settings.precheck, world_seed) if closed and settings.precheck.copies else None
+        self.precheck = Precheck(spec, settings.precheck, world_seed) if closed else None
         self.world.scene.add_step_hook(self._on_step)
 
     # ------------------------------------------------------------------ hooks
@@ -198,15 +200,15 @@ class Executor:
         dt = self.world.scene.control_dt
         seg = Segment(spec.task, z, None, spec.geometry, 0)
         source: Any = self.run.run_dir
-        handed: Any = None  # the world's own state where a repaired plan takes over (None: its start)
+        resume = False  # a repaired plan takes over from the world as it is (no restore)
         pending: tuple[list[str], Observation, int] | None = None  # a deviation found at a hand-over
         while True:
             self.seg = seg
             if pending is None:
                 realizer = PlanRealizer(seg.task, self.world.scene, seg.rollout or spec.rollout, seed=spec.seed,
-                                        start=handed, geometry=seg.belief)
+                                        geometry=seg.belief)
                 realizer.action_hook = self._on_action
-                reasons, obs, a_fail, done = self._segment(seg, realizer)
+                reasons, obs, a_fail, done = self._segment(seg, realizer, resume)
                 if done:
                     self.log.success = True
                     break
@@ -225,6 +227,9 @@ class Executor:
             if elapsed >= s.time_limit_s:
                 self.log.failure = f"{reasons[0]} (time limit {s.time_limit_s:g} s reached)"
                 break
+            if any(r.startswith("grasp_lost") for r in reasons):  # see where it lands before deciding
+                obs = self._observe() if self._wait_for_rest() else obs
+            obs = self._firm_grip(obs)
             seg_new, think_s = go_on(self, seg, obs, a_fail, reasons)
             if seg_new is None:
                 rec, seg_new = repair(self, seg, source, obs, a_fail, reasons)
@@ -251,8 +256,7 @@ class Executor:
                 self.log.checks[-1]["hold_steps"] = self._hold(think_s)
             self.log.pause_s += think_s
             seg = seg_new
-            handed = self.world.scene.capture_state(0, source=f"execution world seed {self.world.seed}, step "
-                                                              f"{self.now()}")
+            resume = True
             # the plan takes over from the world as it is now: what it assumed may be stale
             self.seg = seg
             obs = self._observe()
@@ -266,13 +270,13 @@ class Executor:
         self.log.wall_s = time.perf_counter() - t0
         return self.log
 
-    def _segment(self, seg: Segment, realizer: Any) -> tuple[list[str], Observation, int, bool]:
-        """Run ``seg`` until it ends or deviates: (reasons, what the robot saw, the action to
-        repair from, reached the goal)."""
+    def _segment(self, seg: Segment, realizer: Any, resume: bool) -> tuple[list[str], Observation, int, bool]:
+        """Run ``seg`` until it ends or deviates, from the world's start or (``resume``) from the
+        world as it is: (reasons, what the robot saw, the action to repair from, reached the goal)."""
         stop: _Stop | None = None
         res = None
         try:
-            res = realizer.rollout(torch.tensor([seg.z], dtype=torch.float64))
+            res = realizer.rollout(torch.tensor([seg.z], dtype=torch.float64), resume=resume)
         except _Stop as e:
             stop = e
         now = self.now()
@@ -307,6 +311,41 @@ class Executor:
                 scene.hold_still()
                 for _ in range(n):
                     scene.step()
+        finally:
+            self.holding = False
+        self.log.hold_steps += n
+        return n
+
+    def _firm_grip(self, obs: Observation) -> Observation:
+        """The state the planner starts from, with a grip its restore keeps: where the object in
+        the hand, restored as observed, falls out of the fingers within a few steps (a grip a
+        few degrees askew), it is squared with the hand (``realize.execution.in_hand``); a grip
+        that holds is left as observed."""
+        s = obs.state
+        if s.held is None or obs.hand is None or self.precheck is None:
+            return obs
+        cfg = apply_geometry_updates(self.spec.geometry_cfg, geometry_updates(obs, self.spec.geometry_cfg, self.moved_m()))
+        if self.precheck.grip_holds(s, cfg):
+            return obs
+        squared = square_in_hand(s, obs.hand, self.spec.geometry.object(s.held))
+        log.info("world %d: the grip of %s as observed slips in a restore: the planner assumes it square", self.k,
+                 s.held)
+        return dataclasses.replace(obs, state=squared)
+
+    def _wait_for_rest(self, most_s: float = 3.0) -> int:
+        """The robot holds until every object is at rest (``controller.rest_speed``), at most
+        ``most_s`` of control time: a dropped object is read where it lands, not in the air.
+        Returns the steps held (world time lost, counted in ``hold_steps``)."""
+        scene, dt = self.world.scene, self.world.scene.control_dt
+        rest = self.spec.rollout.rest_speed
+        n = 0
+        self.holding = True
+        try:
+            with torch.inference_mode():
+                scene.hold_still()
+                while n < int(round(most_s / dt)) and float(scene.object_velocities()[0, :, :3].norm(dim=-1).max()) > rest:
+                    scene.step()
+                    n += 1
         finally:
             self.holding = False
         self.log.hold_steps += n

@@ -57,7 +57,8 @@ def go_on(ex: Any, seg: Segment, obs: Observation, a: int, reasons: list[str]) -
     from realize.tasks.suffix import check_suffix_start, suffix_columns, task_suffix
     from realize.world.geometry import build_geometry
 
-    if ex.precheck is None or a >= seg.task.n_actions or reasons[0].startswith("action_failed"):
+    if ex.precheck is None or not ex.precheck.settings.copies or a >= seg.task.n_actions \
+            or reasons[0].startswith("action_failed"):
         return None, 0.0
     try:
         suffix = task_suffix(seg.task, a)

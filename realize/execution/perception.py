@@ -256,4 +256,10 @@ class Belief:
                   for name, t in truth.tables.items()}
         boxes = tuple(BoxSeen(b.name, tuple(float(v) for v in self._boxes[b.name].mean()), b.size)  # type: ignore[arg-type]
                       for b in truth.boxes if b.name in self._boxes)
-        return Observation(truth.step, truth.time_s, state, tables, boxes)
+        hand = None
+        if truth.hand is not None:  # the arm's kinematics from the believed base: moved with its error
+            h = truth.hand
+            dx, dy = h[0] - s.base[0], h[1] - s.base[1]
+            hand = (s.base[0] + ex + c * dx - si * dy, s.base[1] + ey + si * dx + c * dy, h[2],
+                    *_turn(tuple(h[3:]), eyaw))
+        return Observation(truth.step, truth.time_s, state, tables, boxes, hand)

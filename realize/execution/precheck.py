@@ -3,7 +3,7 @@ few copies, to tell a deviation that breaks the plan from one it survives.
 
 What it does: ``Precheck(spec, settings, seed)`` keeps, per believed world layout (the run's
 scene config with the tables where they are believed to stand and the boxes seen), one batched
-scene of ``settings.copies`` copies, built on first use. ``__call__(task, z, action, state,
+scene of ``settings.copies`` (at least one) copies, built on first use. ``__call__(task, z, action, state,
 geometry_cfg)`` simulates actions ``action, ...`` of ``task``'s plan with the parameters of
 ``z`` (the plan being carried out: nothing re-searched) from ``state`` (the believed state) in
 every copy: copy 0 from the state itself, the others with each object not in hand moved by a
@@ -12,6 +12,9 @@ with friction and mass factors drawn from the task's perturbation model (``draw_
 own stream, ``PRECHECK_STREAM``; the same draws for every check of a study's world). The
 controllers plan in the believed layout. It returns a ``PrecheckResult``: how many copies
 reached the goal, the failures, the wall time and whether the scene was built for it.
+``grip_holds(state, geometry_cfg)`` tells whether the object in the hand of ``state``, restored
+at rest, stays in the fingers for ``GRIP_STEPS`` control steps (the executor squares a grip that
+does not: ``realize.execution.in_hand``).
 What it doesn't: decide (the executor compares the share with ``min_success``), observe the
 world, or search.
 """
@@ -35,6 +38,7 @@ from realize.world.state import ObjectPose, SceneState
 
 __all__ = ["PRECHECK_STREAM", "PrecheckResult", "Precheck"]
 
+GRIP_STEPS = 5  # control steps a restored grip must hold (the slipping ones let go within 3)
 PRECHECK_STREAM = 4  # draw_worlds stream of the checks' copies (search 1, validation 2, execution 3)
 assert PRECHECK_STREAM not in (SEARCH_STREAM, VALIDATION_STREAM, 3)
 
@@ -89,7 +93,7 @@ class Precheck:
         for old in self._scenes.values():  # one layout at a time: a moved table makes the last one stale
             old.close()
         self._scenes.clear()
-        k = self.settings.copies
+        k = max(1, self.settings.copies)
         scene = BatchedScene(k, geometry_cfg, self.spec.sim, robot=self.spec.robot)
         scene.set_worlds(draw_worlds(self.spec.task.perturbation, scene.geometry.objects, k, self.seed,
                                      stream=PRECHECK_STREAM))
@@ -116,6 +120,18 @@ class Precheck:
                         for f, good in zip(res.failure, res.feasible.tolist()) if not good)
         return PrecheckResult(action, s.copies, ok, ok >= s.min_success * s.copies, time.perf_counter() - t0, how,
                               dict(fails))
+
+    def grip_holds(self, state: SceneState, geometry_cfg: GeometryCfg, steps: int = GRIP_STEPS) -> bool:
+        """Whether ``state``'s held object, restored at rest in this check's scene (every copy),
+        is still in the hand after ``steps`` control steps with every target holding (copy 0)."""
+        scene, _ = self._scene(geometry_cfg)
+        with torch.inference_mode():
+            scene.reset(seed=self.spec.seed, state=state)
+            scene.hold_still()
+            for _ in range(steps):
+                scene.step()
+            k = int(scene.held_object()[0])
+        return k >= 0 and scene.object_names[k] == state.held
 
     def close(self) -> None:
         for scene in self._scenes.values():

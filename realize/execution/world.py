@@ -76,13 +76,14 @@ class BoxSeen:
 
 @dataclass(frozen=True)
 class Observation:
-    """What the world shows at one control step: the copy's state, the tables, the new boxes."""
+    """What the world shows at one control step: the copy's state, the tables, the new boxes, the hand."""
 
     step: int
     time_s: float
     state: SceneState
     tables: dict[str, TablePose]
     boxes: tuple[BoxSeen, ...] = ()
+    hand: tuple[float, ...] | None = None  # the hand link's pose (x, y, z, qw, qx, qy, qz), as the arm's encoders give it
 
     @property
     def held(self) -> str | None:
@@ -343,7 +344,8 @@ class ExecutionWorld:
         """The copy's state now, every table's pose and the boxes that appeared."""
         step = self.scene.step_count
         state = self.scene.capture_state(0, source=f"execution world seed {self.seed}, step {step}")
-        return Observation(step, step * self.scene.control_dt, state, self.tables(), self.boxes())
+        return Observation(step, step * self.scene.control_dt, state, self.tables(), self.boxes(),
+                           tuple(float(v) for v in self.scene.ee_pose()[0].tolist()))
 
     def close(self) -> None:
         self.scene.close()

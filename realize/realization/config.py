@@ -10,12 +10,16 @@ What it doesn't: run anything (``realize.realization.rollout``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from realize.config import Settings, setting
 from realize.controllers.astar import PLANNERS
 from realize.controllers.pid import PIDConfig
 from realize.controllers.whole_body import WholeBodyConfig
+
+if TYPE_CHECKING:
+    from realize.tasks.spec import TaskSpec
+    from realize.world.state import SceneState
 
 
 @dataclass
@@ -71,3 +75,13 @@ class RolloutConfig(Settings):
     pid: PIDConfig = field(default_factory=PIDConfig)
     astar: AStarConfig = field(default_factory=AStarConfig)
     fabric: WholeBodyConfig = field(default_factory=WholeBodyConfig)
+
+
+class RealizerSpec(Protocol):
+    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.app.run_config.RunSpec``)."""
+
+    task: TaskSpec
+    rollout: RolloutConfig
+    seed: int
+    start: SceneState | None
+    keep_best: int | None

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Protocol
 
 import torch
 from torch import Tensor
@@ -33,7 +32,7 @@ from realize.controllers.whole_body import WholeBodyFabric
 from realize.search.protocol import EvalResult
 from realize.realization.actions import TEMPLATES
 from realize.realization.actions.base import Template
-from realize.realization.config import RolloutConfig
+from realize.realization.config import RealizerSpec, RolloutConfig
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
 from realize.realization.pruning import EliteBound
@@ -47,26 +46,20 @@ from realize.tasks.regions import Region
 from realize.tasks.spec import TaskSpec, check_fixed_base
 
 
-class RealizerSpec(Protocol):
-    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.app.run_config.RunSpec``)."""
-
-    task: TaskSpec
-    rollout: RolloutConfig
-    seed: int
-    start: SceneState | None
-    keep_best: int | None
-
-
 class Rollout:
     """One rollout of a batch Z in progress: the per-plan state (N,) and the phases of a step."""
 
-    def __init__(self, realizer: PlanRealizer, Z: Tensor, record: bool, starts: list[SceneState] | None = None):
+    def __init__(self, realizer: PlanRealizer, Z: Tensor, record: bool, starts: list[SceneState] | None = None,
+                 resume: bool = False):
         scene, task = realizer.scene, realizer.task
         self.realizer, self.scene, self.task, self.cfg = realizer, scene, task, realizer.cfg
         self.templates = realizer.templates
         n, dev = scene.n_envs, realizer.device
         self.n_envs, self.device, self.m = n, dev, Z.shape[0]
-        scene.reset(seed=realizer.seed, state=realizer.start if starts is None else starts)
+        if resume:  # an executed world goes on as it is (BatchedScene.resume)
+            scene.resume()
+        else:
+            scene.reset(seed=realizer.seed, state=realizer.start if starts is None else starts)
         self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy,
                                realizer.occupancy_tight, realizer.geometry)
         self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
@@ -375,9 +368,10 @@ class PlanRealizer:
                    seed=spec.seed if seed is None else seed, start=spec.start, keep_best=spec.keep_best)
 
     def rollout(self, Z: Tensor, record: bool = False, starts: list[SceneState] | None = None,
-                capture_end: bool = False) -> RolloutResult:
+                capture_end: bool = False, resume: bool = False) -> RolloutResult:
         """Simulate the plan for every row of Z (M, D), M <= the scene's copies, and score it; row i
-        starts from ``starts[i]`` (else ``self.start``); ``capture_end``: fill ``end_states``."""
+        starts from ``starts[i]`` (else ``self.start``); ``capture_end``: fill ``end_states``;
+        ``resume``: no reset, the scene goes on as it is (``BatchedScene.resume``)."""
         t0 = time.perf_counter()
         n, m = self.scene.n_envs, Z.shape[0]
         if Z.ndim != 2 or Z.shape[1] != self.layout.dim:
@@ -387,7 +381,7 @@ class PlanRealizer:
         # inference mode: no version counters or autograd bookkeeping on the ~1,700 small ops of
         # a control step; the result is copied out as ordinary tensors (callers may edit them)
         with torch.inference_mode():
-            res = Rollout(self, Z, record, starts).run(t0)
+            res = Rollout(self, Z, record, starts, resume).run(t0)
             if capture_end:  # finished copies are frozen: the state each feasible plan ended in
                 res.end_states = [self.scene.capture_state(i, "stitched segment") if bool(ok) else None
                                   for i, ok in enumerate(res.feasible.tolist())]

@@ -167,6 +167,17 @@ class BatchedScene(ObjectProperties):
         for hook, _ in self._hooks:
             hook(0)
 
+    @torch.inference_mode()
+    def resume(self) -> None:
+        """Go on from the scene as it is (an executed world after a hold), nothing restored: every
+        copy awake and holding; ``step_count`` 0 and the step hooks called with 0, as a reset does."""
+        self._frozen.zero_()
+        self._impl.wake()
+        self.hold_still()  # written by the next step
+        self.step_count = 0
+        for hook, _ in self._hooks:
+            hook(0)
+
     def _restore(self, states: Sequence[SceneState]) -> None:
         if len(states) > self.n_envs:
             raise ValueError(f"{len(states)} states for {self.n_envs} copies")

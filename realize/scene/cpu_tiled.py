@@ -272,6 +272,11 @@ class CpuTiledBackend(PhysicsBackend):
             art.set_qvel(np.zeros(art.dof, dtype=np.float32))
             art.root.put_to_sleep()
 
+    def wake(self) -> None:
+        self._write_all = True
+        for art in self._arts:
+            art.root.wake_up()
+
     # ------------------------------------------------------------------ tests, what-ifs, perturbations
     def push_object(self, k: int, copy: int, velocity: tuple[float, float, float]) -> None:
         self._object_bodies[k][copy].set_linear_velocity(np.asarray(velocity, dtype=np.float32))

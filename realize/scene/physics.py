@@ -142,6 +142,9 @@ class PhysicsBackend(ABC):
         """Stop simulating the robots of ``copies`` until the next reset (their base targets are
         already zero): sleep where the backend can, else nothing."""
 
+    def wake(self) -> None:
+        """Undo ``freeze`` without a reset: every copy simulated again (the next targets written)."""
+
     @abstractmethod
     def push_object(self, k: int, copy: int, velocity: tuple[float, float, float]) -> None:
         """Give object ``k`` of one copy a linear velocity (tests: copies are independent)."""
