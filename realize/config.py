@@ -28,7 +28,8 @@ import typing
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
-__all__ = ["ConfigError", "Settings", "setting", "read_mapping", "check_unknown", "as_mapping", "closest", "did_you_mean"]
+__all__ = ["ConfigError", "Settings", "setting", "read_mapping", "check_unknown", "as_mapping", "closest", "did_you_mean",
+           "read_preset"]
 
 _WHERE: contextvars.ContextVar[str | None] = contextvars.ContextVar("realize_config_where", default=None)
 
@@ -225,3 +226,25 @@ def _is_settings(hint: Any) -> bool:
     if isinstance(hint, type):
         return issubclass(hint, Settings)
     return any(isinstance(a, type) and issubclass(a, Settings) for a in typing.get_args(hint))
+
+
+def read_preset(name: Any, directory: Any, what: str) -> tuple[Any, str]:
+    """The YAML of preset ``name`` of ``directory`` (``<directory>/<name>.yaml``), or of the YAML
+    file ``name``, and its stem; an unknown preset (the known ones listed), a missing file or bad
+    YAML is one ``ConfigError`` (``what`` names the kind: "execute preset", "noise preset")."""
+    from pathlib import Path
+
+    import yaml
+
+    path = Path(name)
+    if path.suffix not in (".yaml", ".yml"):
+        path = Path(directory) / f"{name}.yaml"
+        if not path.is_file():
+            known = sorted(p.stem for p in Path(directory).glob("*.yaml"))
+            raise ConfigError(f"{what} {str(name)!r} is unknown; presets: {known}")
+    elif not path.is_file():
+        raise ConfigError(f"{what} file {str(path)!r} does not exist")
+    try:
+        return yaml.safe_load(path.read_text()), path.stem
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path.name}: not YAML ({str(e).splitlines()[0]})") from None

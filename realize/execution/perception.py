@@ -36,9 +36,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
-import yaml
-
-from realize.config import ConfigError, Settings, setting
+from realize.config import ConfigError, Settings, read_preset, setting
 from realize.paths import CONFIG_DIR
 from realize.world.state import ObjectPose
 
@@ -82,18 +80,8 @@ def noise_presets() -> list[str]:
 def load_noise(name: str | Path) -> Noise:
     """``configs/noise/<name>.yaml`` (or the YAML file ``name``) as ``Noise``; an unknown name,
     a missing file, bad YAML or a bad key is one ``ConfigError``."""
-    path = Path(name)
-    if path.suffix not in (".yaml", ".yml"):
-        path = NOISE_DIR / f"{name}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"noise preset {str(name)!r} is unknown; presets: {noise_presets()}")
-    elif not path.is_file():
-        raise ConfigError(f"noise file {str(path)!r} does not exist")
-    try:
-        d = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path.name}: not YAML ({str(e).splitlines()[0]})") from None
-    return Noise.from_mapping(d, f"noise[{path.stem}]")
+    d, stem = read_preset(name, NOISE_DIR, "noise preset")
+    return Noise.from_mapping(d, f"noise[{stem}]")
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
-import yaml
-
-from realize.config import ConfigError, Settings, setting
+from realize.config import Settings, read_preset, setting
 from realize.execution.perception import Noise
 from realize.paths import CONFIG_DIR
 
@@ -102,15 +100,5 @@ def presets() -> list[str]:
 
 def load_preset(name: str | Path) -> ExecuteSettings:
     """``configs/execute/<name>.yaml`` (or the YAML file ``name``) as ``ExecuteSettings``."""
-    path = Path(name)
-    if path.suffix not in (".yaml", ".yml"):
-        path = PRESET_DIR / f"{name}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"execute preset {str(name)!r} is unknown; presets: {presets()}")
-    elif not path.is_file():
-        raise ConfigError(f"execute preset file {str(path)!r} does not exist")
-    try:
-        d = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path.name}: not YAML ({str(e).splitlines()[0]})") from None
-    return ExecuteSettings.from_mapping(d, f"execute[{path.stem}]")
+    d, stem = read_preset(name, PRESET_DIR, "execute preset")
+    return ExecuteSettings.from_mapping(d, f"execute[{stem}]")
