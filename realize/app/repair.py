@@ -152,4 +152,7 @@ def why_no_plan(rec: ReplanRecord, state: Any) -> str:
 
     floor = [f"{o} lies on the floor at ({p.position[0]:.2f}, {p.position[1]:.2f})"
              for o, p in state.objects.items() if floor_region(o) in rec.plan]
+    if refused and "unsolvable" in text.casefold():  # where the objects lie that no fact placed
+        floor += [f"{o} at ({p.position[0]:.2f}, {p.position[1]:.2f}, {p.position[2]:.3f})"
+                  for o, p in state.objects.items() if o != state.held]
     return "; ".join([text, *floor])
