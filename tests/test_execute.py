@@ -98,6 +98,18 @@ def test_summary_json_has_the_study_keys(table_study) -> None:
         assert (where / f).is_file(), f
 
 
+def test_the_table_script_prints_the_studys_row(table_study) -> None:
+    """scripts/execution_table.py: the header and one row with the study's numbers."""
+    summary, where = table_study
+    r = subprocess.run([sys.executable, str(REPO / "scripts" / "execution_table.py"), str(where)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    header, _, line = r.stdout.strip().splitlines()
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert header.startswith("| study | open loop | closed loop") and cells[:3] == ["table", "0/1", "1/1"]
+    assert cells[3].startswith(f"{sum(summary.replans)} (") and cells[4] == "0 / 0"
+
+
 def test_the_docs_trajectory_example_runs(table_study) -> None:
     """docs/execution_format.md's reading example, on the closed-loop world's trajectory: one line
     per action segment, its text and its first and last times."""
