@@ -9,7 +9,6 @@ one world with small replans (8 copies, 2 elites, at most 2 iterations, one work
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import io
 import json
 import subprocess
@@ -23,7 +22,6 @@ from helpers import REPO, doc_block
 from realize.app.execute import WorldLog, execute, execute_world
 from realize.app.planner import Planner, ReplanBudget
 from realize.config import ConfigError
-from realize.execution.perception import load_noise
 from realize.execution.settings import ExecuteSettings
 from realize.execution.trajectory import read_trajectory
 from test_planner import write_known_run
@@ -144,49 +142,6 @@ def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp
     assert a.joint_names == b.joint_names and a.action_text == b.action_text
 
 
-# table 2 nudged 12 cm in -y while the cube is carried: past the monitor's tolerance (5 cm), but the
-# planned place point still lies on its top
-TABLE_NUDGED = {"trigger": {"action": 2, "delay_s": 1.0}, "move_table": {"table": "table2", "dx": 0.0, "dy": -0.12}}
-
-
-def test_a_check_lets_the_plan_go_on_where_it_still_reaches_the_goal(run: Path, tmp_path: Path) -> None:
-    """A table nudged past the monitor's tolerance: the remaining plan, simulated from the
-    state with the table where it stands now, still reaches the goal in the check's copies, so
-    the plan goes on unchanged, no replan, and reaches the goal in the world. Without the check
-    the same world replans (the deviation alone asks for it): a replan the check saves."""
-    wl = _world(run, settings(TABLE_NUDGED), tmp_path / "checked")
-    assert wl.success, wl.failure
-    assert wl.replans == [] and len(wl.checks) == 1
-    chk = wl.checks[0]
-    assert chk["go_on"] and chk["successes"] >= 0.75 * chk["copies"] and chk["action"] == 2
-    assert chk["hold_steps"] == 40 and wl.hold_steps == 40  # the world ran on while it checked
-    assert [a.text for a in wl.actions].count("move_to(Table2)") == 2  # interrupted, then the same action again
-    unchecked = _world(run, settings(TABLE_NUDGED, precheck={"copies": 0}), tmp_path / "unchecked")
-    assert len(unchecked.replans) >= 1 and unchecked.checks == []
-
-
-def test_realistic_noise_alone_asks_for_no_repair_and_repeats_bit_for_bit(run: Path, tmp_path: Path) -> None:
-    """No disturbance, the realistic observation model (3 mm, 2.5 deg, 1 cm drift, 100 ms late, 5 %
-    lost): the monitor, deciding from the filtered belief, finds no deviation, and the world
-    reaches the goal. With a moved table under the same noise, the same seed gives the same
-    trajectory twice (the sensor's draws are seeded, the latency and the hold are in control
-    steps)."""
-    s = ExecuteSettings.from_mapping(
-        {**dataclasses.asdict(settings()), "noise": dataclasses.asdict(load_noise("realistic"))})
-    a = _world(run, s, tmp_path / "a")
-    assert a.success, a.failure
-    assert a.deviations == [] and a.replans == [] and a.checks == []
-    # a moved table under the same noise, twice: a check, a hold of 40 steps, the same bits
-    moved = dataclasses.replace(s, disturbances=[TABLE_MOVED])
-    b = _world(run, moved, tmp_path / "b", trajectory=tmp_path / "b.npz")
-    c = _world(run, moved, tmp_path / "c", trajectory=tmp_path / "c.npz")
-    assert b.success and len(b.checks) >= 1 and b.hold_steps >= 40
-    tb, tc = read_trajectory(tmp_path / "b.npz"), read_trajectory(tmp_path / "c.npz")
-    assert len(tb) == len(tc) > 0 and np.array_equal(tb.joint_targets, tc.joint_targets)
-    assert np.array_equal(tb.base_velocity, tc.base_velocity) and b.steps == c.steps
-    assert [x["successes"] for x in b.checks] == [x["successes"] for x in c.checks]
-
-
 # ------------------------------------------------------------------------------ a knocked-out cube
 def test_knocked_out_cube_is_resequenced_with_a_second_grasp(run: Path, tmp_path: Path) -> None:
     wl = _world(run, settings(KNOCKED), tmp_path)
@@ -195,24 +150,6 @@ def test_knocked_out_cube_is_resequenced_with_a_second_grasp(run: Path, tmp_path
     grasps = [a for a in wl.actions if a.text.startswith("grasp(") and a.outcome == "done"]
     assert len(grasps) == 2, [(a.text, a.outcome) for a in wl.actions]
     assert wl.success, wl.failure
-
-
-# the cube knocked out of the hand 2 s into move_to(Table2), between the tables: it lands on the floor
-DROPPED = {"trigger": {"action": 2, "delay_s": 2.0}, "knock_out": {"object": "cube"}}
-
-
-def test_a_cube_on_the_floor_is_picked_up_again_and_reaches_the_goal(run: Path, tmp_path: Path) -> None:
-    """The re-sequence reads the cube on the floor as a site of its own, with a base region
-    around it, and the PDDL planner's new plan drives there, grasps it off the floor (the
-    fingers allowed down to it: controller.fabric.floor_exclude) and carries it to table 2."""
-    wl = _world(run, settings(DROPPED), tmp_path)
-    assert "onto floor" in wl.disturbances[0]["what"]
-    first = wl.replans[0]
-    assert first.kind == "re-sequence" and first.plan.startswith("move_to(Near_cube), grasp(cube"), first.plan
-    assert "controller.fabric.floor_exclude=true" in first.changes
-    assert wl.success, (wl.failure, [(r.kind, r.feasible, r.plan) for r in wl.replans])
-    grasps = [a for a in wl.actions if a.text.startswith("grasp(") and a.outcome == "done"]
-    assert len(grasps) == 2 and any(a.text == "move_to(Near_cube)" and a.outcome == "done" for a in wl.actions)
 
 
 # ------------------------------------------------------------------------------ refusals
