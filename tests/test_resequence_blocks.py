@@ -10,8 +10,9 @@ from pathlib import Path
 import pytest
 
 from helpers import REPO, compose_config
-from realize.app.resequence import (blocks_facts, domain_predicates, is_blocks_domain, resequence_task,
-                                    symbolic_facts)
+from realize.app.pddl_text import domain_predicates
+from realize.app.resequence import resequence_task, symbolic_facts
+from realize.app.resequence_blocks import blocks_facts, is_blocks_domain
 from realize.config import ConfigError
 from realize.world.geometry import GeometryCfg, build_geometry
 from realize.world.state import ObjectPose, SceneState
