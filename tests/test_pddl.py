@@ -207,3 +207,27 @@ def test_blocks_unstack_to_the_table_before_restacking(tmp_path: Path) -> None:
                            objects=BLOCKS[:2])
     assert plans == [[A("grasp", "CubeB_g", obj="cube_b"), A("place", "CubeB_t", obj="cube_b"),
                       A("grasp", "CubeA_g", obj="cube_a"), A("place", "CubeA_on_b", obj="cube_a")]]
+
+
+def test_the_planner_runs_in_a_private_working_directory(tmp_path, monkeypatch) -> None:
+    """Fast Downward's driver writes output.sas into its working directory (and deletes it at
+    the end); the planner subprocess runs in a private one, so planners started at once from one
+    directory (a sweep's jobs, two studies) cannot read each other's, and the caller's
+    directory is left as it was."""
+    import os
+    import subprocess
+
+    monkeypatch.chdir(tmp_path)
+    started_in: list[str] = []
+    real = subprocess.Popen
+
+    def popen(*args, **kwargs):  # the planner's subprocess inherits the working directory
+        started_in.append(kwargs.get("cwd") or os.getcwd())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(subprocess, "Popen", popen)
+    for top_k in (1, 2):
+        assert plan_from_pddl(SEED_DOMAIN, SEED_PROBLEM, TEMPLATES, SEED_PARAMS, objects=SEED_OBJECTS, top_k=top_k)
+    assert len(started_in) >= 2 and str(tmp_path) not in started_in
+    assert len(set(started_in)) == len(started_in)  # a directory of its own each time
+    assert os.getcwd() == str(tmp_path) and list(tmp_path.iterdir()) == []

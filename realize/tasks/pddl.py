@@ -41,7 +41,9 @@ Every failure raises :class:`PlanningError`, whose message names the file and th
 
 from __future__ import annotations
 
+import contextlib
 import re
+import tempfile
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -178,6 +180,13 @@ def _solve(
             f"pip install {_ENGINE_PACKAGE[engine]}"
         )
     where = f"domain {domain}, problem {problem}"
+    with tempfile.TemporaryDirectory(prefix="realize-pddl-") as private, contextlib.chdir(private):
+        # Fast Downward's driver writes output.sas into the working directory: planners run at
+        # once from one directory (a sweep's jobs, a study beside another) read each other's
+        return _solve_here(task, engine, top_k, timeout_s, where)
+
+
+def _solve_here(task: Problem, engine: str, top_k: int, timeout_s: float, where: str) -> list[SequentialPlan]:
     if top_k == 1:
         with ups.OneshotPlanner(name=engine) as planner:
             result = planner.solve(task, timeout=timeout_s)
