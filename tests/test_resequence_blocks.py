@@ -172,3 +172,30 @@ def test_the_pick_place_facts_are_unchanged() -> None:
     state = SceneState(base=(-2.0, 0.0, 0.0), objects={"cube": ObjectPose(cube.position)})
     facts = symbolic_facts(state, g, task, [], "start")
     assert ("hand-empty",) in facts and ("item-at", "cube", f"loc_{cube.rests_on}") in facts
+
+
+def test_the_monitor_sees_the_block_a_remaining_place_stacks_on_knocked_off(tower3) -> None:
+    """During grasp(cube_c) the plan still places cube_c on cube_b: cube_b knocked off cube_a onto
+    the table (5 cm lower, 10 cm aside, far within object_m) is a support_moved deviation; cube_b
+    where the plan left it is none; and the repair is a re-sequence (a new pose cannot rebuild)."""
+    from realize.app.repair import _restack
+    from realize.app.task_plans import build_task
+    from realize.execution.monitor import check, expectation
+    from realize.execution.settings import Tolerance
+    from realize.execution.world import Observation
+
+    task_cfg, geometry = tower3
+    task = build_task({**task_cfg, "plan": ["grasp(cube_b, CubeB_g)", "place(cube_b, CubeB_on_a)",
+                                           "grasp(cube_c, CubeC_g)", "place(cube_c, CubeC_on_b)"],
+                       "planner": {**task_cfg["planner"], "enabled": False}}, geometry, "test")
+    a = geometry.object("cube_a").position
+    on_a = (a[0], a[1], a[2] + 0.05)
+    start = _state(cube_a=a, cube_b=on_a, cube_c=geometry.object("cube_c").position)
+    exp = expectation(task, geometry, 2, objects_at={n: p.position for n, p in start.objects.items()})
+    assert set(exp.supports) == {"cube_b"}
+    ok = Observation(0, 0.0, start, {}, ())
+    assert [d.kind for d in check(ok, exp, Tolerance())] == []
+    knocked = _state(cube_a=a, cube_b=(a[0], a[1] - 0.10, a[2]), cube_c=geometry.object("cube_c").position)
+    devs = check(Observation(0, 0.0, knocked, {}, ()), exp, Tolerance())
+    assert [d.kind for d in devs] == ["support_moved"] and "cube_b" in devs[0].detail
+    assert _restack([str(d) for d in devs])

@@ -187,7 +187,7 @@ class Executor:
         """The monitor's checks of ``obs`` against what ``seg``'s plan expects during action
         ``a`` (``done``: at its end)."""
         start_held = None if seg.start is None else seg.start.held
-        objects_at = None if seg.start is None else {n: tuple(p.position[:2]) for n, p in seg.start.objects.items()}
+        objects_at = None if seg.start is None else {n: tuple(p.position) for n, p in seg.start.objects.items()}
         exp = expectation(seg.task, seg.belief, a, done=done, start_held=start_held, objects_at=objects_at)
         return check(obs, exp, self.settings.tolerance)
 

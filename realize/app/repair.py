@@ -58,7 +58,7 @@ def go_on(ex: Any, seg: Segment, obs: Observation, a: int, reasons: list[str]) -
     from realize.world.geometry import build_geometry
 
     if ex.precheck is None or not ex.precheck.settings.copies or a >= seg.task.n_actions \
-            or reasons[0].startswith("action_failed"):
+            or reasons[0].startswith("action_failed") or _restack(reasons):
         return None, 0.0
     try:
         suffix = task_suffix(seg.task, a)
@@ -92,7 +92,7 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     state = obs.state
     changes = geometry_changes(obs, ex.spec.geometry_cfg, ex.moved_m())
     kind = "re-parameterize"
-    if a >= seg.task.n_actions:  # every action done but the goal does not hold: a new sequence from here
+    if a >= seg.task.n_actions or _restack(reasons):  # all done but no goal, or the tower it builds on fell
         kind = "re-sequence"
     else:
         try:
@@ -156,3 +156,9 @@ def why_no_plan(rec: ReplanRecord, state: Any) -> str:
         floor += [f"{o} at ({p.position[0]:.2f}, {p.position[1]:.2f}, {p.position[2]:.3f})"
                   for o, p in state.objects.items() if o != state.held]
     return "; ".join([text, *floor])
+
+
+def _restack(reasons: list[str]) -> bool:
+    """A block the remaining plan stacks on left its place (``support_moved``): the plan's
+    symbolic state no longer holds, so no new pose can repair it."""
+    return any(r.startswith("support_moved") for r in reasons)

@@ -9,6 +9,9 @@ from the task's plan, the belief geometry and the action index), each returning 
     forces: ``BatchedScene.holds``) says otherwise;
   * ``object_moved``: an object the remaining actions grasp or push lies more than
     ``tolerance.object_m`` (xy) from where the plan assumed it (the belief);
+  * ``support_moved``: a block that a remaining ``place`` stacks on (its place region is framed
+    by it) stands more than ``SUPPORT_DROP_M`` lower or higher than the plan assumed: knocked
+    off the block below it, the plan's tower no longer stands (a re-sequence, not a new pose);
   * ``table_moved``: a table's centre is more than ``tolerance.table_m`` from the belief;
   * ``path_blocked``: a box appeared that the belief geometry does not have, and it lies (any
     part of its footprint) within the belief map's bounds. This is deliberately conservative:
@@ -26,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from realize.execution.settings import Tolerance
@@ -37,9 +40,10 @@ if TYPE_CHECKING:
     from realize.world.geometry import SceneGeometry
 
 __all__ = ["Deviation", "Expectation", "KINDS", "held_by_plan", "expectation", "check_grasp", "check_objects",
-           "check_tables", "check_path", "check_base", "check"]
+           "check_supports", "check_tables", "check_path", "check_base", "check"]
 
-KINDS = ("grasp_lost", "object_moved", "table_moved", "path_blocked", "base_off")
+KINDS = ("grasp_lost", "object_moved", "support_moved", "table_moved", "path_blocked", "base_off")
+SUPPORT_DROP_M = 0.02  # m: a block a remaining place stacks on, this much lower or higher, left its support
 GRASPS = ("grasp",)  # templates whose object the hand holds after them
 RELEASES = ("place",)  # templates that let their object go
 ACTS_ON = ("grasp", "push")  # templates that need their object where the plan assumed it
@@ -68,6 +72,7 @@ class Expectation:
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
     base_target: tuple[float, float] | None = None
+    supports: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # objects placed on, at (x, y, z)
 
 
 def held_by_plan(task: TaskSpec, action: int, done: bool = False, start_held: str | None = None) -> str | None:
@@ -103,9 +108,18 @@ def expectation(task: TaskSpec, belief: SceneGeometry, action: int, *, done: boo
             else:
                 xy = belief.object(a.obj).position[:2]
             objects[a.obj] = (float(xy[0]), float(xy[1]))
+    supports: dict[str, tuple[float, float, float]] = {}
+    movable = set(belief.object_names)
+    for a in task.plan[first:]:  # the blocks a remaining place stacks on (its region framed by the block)
+        below = next((task.frame_of(p) for p in a.params if task.frame_of(p) in movable), None) \
+            if a.template in RELEASES else None
+        if below is not None and below != held and below not in supports:
+            p = objects_at[below] if objects_at is not None and below in objects_at and len(objects_at[below]) > 2 \
+                else belief.object(below).position
+            supports[below] = (float(p[0]), float(p[1]), float(p[2]))
     names = {b.name for b in belief.static_obstacles} | {c.name for c in belief.containers}
     return Expectation(held, objects, {t.name: (t.center[0], t.center[1]) for t in belief.tables},
-                       frozenset(names), tuple(belief.bounds_low), tuple(belief.bounds_high), base_target)
+                       frozenset(names), tuple(belief.bounds_low), tuple(belief.bounds_high), base_target, supports)
 
 
 def check_grasp(obs: Observation, exp: Expectation) -> list[Deviation]:
@@ -124,6 +138,20 @@ def check_objects(obs: Observation, exp: Expectation, tol: Tolerance) -> list[De
         if d > tol.object_m:
             out.append(Deviation("object_moved", f"{name} is {d:.3f} m from ({x:.3f}, {y:.3f}) (tolerance "
                                                  f"{tol.object_m:g} m)"))
+    return out
+
+
+def check_supports(obs: Observation, exp: Expectation) -> list[Deviation]:
+    out = []
+    for name, (x, y, z) in exp.supports.items():
+        pose = obs.state.objects.get(name)
+        if pose is None:
+            continue
+        dz = pose.position[2] - z
+        if abs(dz) > SUPPORT_DROP_M:
+            out.append(Deviation("support_moved", f"{name}, which a remaining place stacks on, is {abs(dz):.3f} m "
+                                                  f"{'lower' if dz < 0 else 'higher'} than the plan assumed "
+                                                  f"(tolerance {SUPPORT_DROP_M:g} m)"))
     return out
 
 
@@ -167,5 +195,5 @@ def check_base(obs: Observation, exp: Expectation, tol: Tolerance) -> list[Devia
 
 def check(obs: Observation, exp: Expectation, tol: Tolerance) -> list[Deviation]:
     """Every check, in ``KINDS`` order."""
-    return (check_grasp(obs, exp) + check_objects(obs, exp, tol) + check_tables(obs, exp, tol)
+    return (check_grasp(obs, exp) + check_objects(obs, exp, tol) + check_supports(obs, exp) + check_tables(obs, exp, tol)
             + check_path(obs, exp) + check_base(obs, exp, tol))
