@@ -199,3 +199,18 @@ def test_the_monitor_sees_the_block_a_remaining_place_stacks_on_knocked_off(towe
     devs = check(Observation(0, 0.0, knocked, {}, ()), exp, Tolerance())
     assert [d.kind for d in devs] == ["support_moved"] and "cube_b" in devs[0].detail
     assert _restack([str(d) for d in devs])
+
+
+def test_the_monitor_leaves_a_block_the_plan_itself_carries(tower3) -> None:
+    """While grasp(cube_b) lifts cube_b, the later place of cube_c on cube_b watches nothing:
+    the plan moves cube_b itself before it stacks on it (cube_a, which nothing moves, is watched)."""
+    from realize.app.task_plans import build_task
+    from realize.execution.monitor import expectation
+
+    task_cfg, geometry = tower3
+    task = build_task({**task_cfg, "plan": ["grasp(cube_b, CubeB_g)", "place(cube_b, CubeB_on_a)",
+                                           "grasp(cube_c, CubeC_g)", "place(cube_c, CubeC_on_b)"],
+                       "planner": {**task_cfg["planner"], "enabled": False}}, geometry, "test")
+    assert set(expectation(task, geometry, 0).supports) == {"cube_a"}
+    assert set(expectation(task, geometry, 1).supports) == {"cube_a"}  # cube_b in hand, placed on cube_a
+    assert set(expectation(task, geometry, 2).supports) == {"cube_b"}

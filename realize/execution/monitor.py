@@ -109,14 +109,16 @@ def expectation(task: TaskSpec, belief: SceneGeometry, action: int, *, done: boo
                 xy = belief.object(a.obj).position[:2]
             objects[a.obj] = (float(xy[0]), float(xy[1]))
     supports: dict[str, tuple[float, float, float]] = {}
-    movable = set(belief.object_names)
-    for a in task.plan[first:]:  # the blocks a remaining place stacks on (its region framed by the block)
+    movable, carried = set(belief.object_names), {held}
+    for k, a in enumerate(task.plan[action:], start=action):  # the blocks a remaining place stacks on
         below = next((task.frame_of(p) for p in a.params if task.frame_of(p) in movable), None) \
-            if a.template in RELEASES else None
-        if below is not None and below != held and below not in supports:
+            if a.template in RELEASES else None  # its place region framed by the block
+        if below is not None and below not in carried and below not in supports and k >= first:
             p = objects_at[below] if objects_at is not None and below in objects_at and len(objects_at[below]) > 2 \
                 else belief.object(below).position
             supports[below] = (float(p[0]), float(p[1]), float(p[2]))
+        if a.template in GRASPS + RELEASES:  # the plan moves it itself: where it stands now is no promise
+            carried.add(a.obj)
     names = {b.name for b in belief.static_obstacles} | {c.name for c in belief.containers}
     return Expectation(held, objects, {t.name: (t.center[0], t.center[1]) for t in belief.tables},
                        frozenset(names), tuple(belief.bounds_low), tuple(belief.bounds_high), base_target, supports)
