@@ -214,3 +214,6 @@ def test_the_monitor_leaves_a_block_the_plan_itself_carries(tower3) -> None:
     assert set(expectation(task, geometry, 0).supports) == {"cube_a"}
     assert set(expectation(task, geometry, 1).supports) == {"cube_a"}  # cube_b in hand, placed on cube_a
     assert set(expectation(task, geometry, 2).supports) == {"cube_b"}
+    # cube_b, stacked by the plan itself, is checked against cube_a's top wherever cube_a stands
+    at2 = expectation(task, geometry, 2)
+    assert at2.supports["cube_b"][0] == "on" and at2.stacked == {"cube_b": "cube_a"}

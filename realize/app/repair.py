@@ -161,4 +161,4 @@ def why_no_plan(rec: ReplanRecord, state: Any) -> str:
 def _restack(reasons: list[str]) -> bool:
     """A block the remaining plan stacks on left its place (``support_moved``): the plan's
     symbolic state no longer holds, so no new pose can repair it."""
-    return any(r.startswith("support_moved") for r in reasons)
+    return any("support_moved" in r for r in reasons)

@@ -36,7 +36,7 @@ from realize.execution.settings import Tolerance
 
 if TYPE_CHECKING:
     from realize.execution.world import Observation
-    from realize.tasks.spec import TaskSpec
+    from realize.tasks.spec import ActionSpec, TaskSpec
     from realize.world.geometry import SceneGeometry
 
 __all__ = ["Deviation", "Expectation", "KINDS", "held_by_plan", "expectation", "check_grasp", "check_objects",
@@ -72,7 +72,11 @@ class Expectation:
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
     base_target: tuple[float, float] | None = None
-    supports: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # objects placed on, at (x, y, z)
+    # the blocks a remaining place stacks on: ("z", height the plan found it at) or ("on", 0) where the plan
+    # itself stacked it on ``stacked[name]``; ``halves``: every object's half height
+    supports: dict[str, tuple[str, float]] = field(default_factory=dict)
+    stacked: dict[str, str] = field(default_factory=dict)
+    halves: dict[str, float] = field(default_factory=dict)
 
 
 def held_by_plan(task: TaskSpec, action: int, done: bool = False, start_held: str | None = None) -> str | None:
@@ -108,20 +112,31 @@ def expectation(task: TaskSpec, belief: SceneGeometry, action: int, *, done: boo
             else:
                 xy = belief.object(a.obj).position[:2]
             objects[a.obj] = (float(xy[0]), float(xy[1]))
-    supports: dict[str, tuple[float, float, float]] = {}
+    supports: dict[str, tuple[str, float]] = {}
     movable, carried = set(belief.object_names), {held}
-    for k, a in enumerate(task.plan[action:], start=action):  # the blocks a remaining place stacks on
-        below = next((task.frame_of(p) for p in a.params if task.frame_of(p) in movable), None) \
-            if a.template in RELEASES else None  # its place region framed by the block
+
+    def below_of(a: ActionSpec) -> str | None:  # the block a place stacks on: its region's frame
+        return next((task.frame_of(p) for p in a.params if task.frame_of(p) in movable), None) \
+            if a.template in RELEASES else None
+
+    placed_on = {a.obj: below_of(a) for a in task.plan[:first] if a.template in RELEASES}  # by this plan, so far
+    for k, a in enumerate(task.plan[action:], start=action):
+        below = below_of(a)
         if below is not None and below not in carried and below not in supports and k >= first:
-            p = objects_at[below] if objects_at is not None and below in objects_at and len(objects_at[below]) > 2 \
-                else belief.object(below).position
-            supports[below] = (float(p[0]), float(p[1]), float(p[2]))
+            if placed_on.get(below) is not None:  # the plan stacked it: it must still stand on that block
+                supports[below] = ("on", 0.0)
+            else:  # as the plan found it
+                p = objects_at[below] if objects_at is not None and below in objects_at and len(objects_at[below]) > 2 \
+                    else belief.object(below).position
+                supports[below] = ("z", float(p[2]))
         if a.template in GRASPS + RELEASES:  # the plan moves it itself: where it stands now is no promise
             carried.add(a.obj)
+    stacked = {s: placed_on[s] for s, (how, _) in supports.items() if how == "on"}
+    halves = {o.name: o.half_height for o in belief.objects}
     names = {b.name for b in belief.static_obstacles} | {c.name for c in belief.containers}
     return Expectation(held, objects, {t.name: (t.center[0], t.center[1]) for t in belief.tables},
-                       frozenset(names), tuple(belief.bounds_low), tuple(belief.bounds_high), base_target, supports)
+                       frozenset(names), tuple(belief.bounds_low), tuple(belief.bounds_high), base_target,
+                       {n: (how, z) for n, (how, z) in supports.items()}, stacked, halves)
 
 
 def check_grasp(obs: Observation, exp: Expectation) -> list[Deviation]:
@@ -145,11 +160,16 @@ def check_objects(obs: Observation, exp: Expectation, tol: Tolerance) -> list[De
 
 def check_supports(obs: Observation, exp: Expectation) -> list[Deviation]:
     out = []
-    for name, (x, y, z) in exp.supports.items():
-        pose = obs.state.objects.get(name)
-        if pose is None:
+    objects = obs.state.objects
+    for name, (how, z) in exp.supports.items():
+        if name not in objects:
             continue
-        dz = pose.position[2] - z
+        if how == "on":  # on the block the plan put it on: its bottom on that block's top
+            lower = exp.stacked[name]
+            if lower not in objects:
+                continue
+            z = objects[lower].position[2] + exp.halves[lower] + exp.halves[name]
+        dz = objects[name].position[2] - z
         if abs(dz) > SUPPORT_DROP_M:
             out.append(Deviation("support_moved", f"{name}, which a remaining place stacks on, is {abs(dz):.3f} m "
                                                   f"{'lower' if dz < 0 else 'higher'} than the plan assumed "
