@@ -300,7 +300,7 @@ def _replay(world, rows: int, command) -> list[np.ndarray]:
     return tcp
 
 
-@pytest.mark.parametrize("which", ["executed", "executed_closed"])
+@pytest.mark.parametrize("which", ["executed", pytest.param("executed_closed", marks=pytest.mark.slow)])
 def test_the_bag_replayed_through_the_joint_drives_reaches_every_action_end_within_1cm(which: str, request) -> None:
     """The physical check: the executed targets and the bag's messages (arm trajectories sampled
     at the control rate, Twists, gripper commands at their stamps) drive the same simulated world
