@@ -217,3 +217,17 @@ def test_the_monitor_leaves_a_block_the_plan_itself_carries(tower3) -> None:
     # cube_b, stacked by the plan itself, is checked against cube_a's top wherever cube_a stands
     at2 = expectation(task, geometry, 2)
     assert at2.supports["cube_b"][0] == "on" and at2.stacked == {"cube_b": "cube_a"}
+
+
+def test_a_pick_place_resequence_turns_the_tasks_planner_off(tmp_path) -> None:
+    """The seed task with its PDDL planner on (task.planner.enabled=true): the cube knocked onto
+    table 1 after the grasp gives the plan from that state, and the returned task has the
+    planner off, so the replan's run realizes that plan rather than plan the problem again."""
+    cfg = compose_config("task.planner.enabled=true")
+    task_cfg = dict(cfg["task"])
+    geometry = build_geometry(GeometryCfg.from_mapping(cfg["scene"], "scene"))
+    cube = geometry.object("cube").position
+    state = SceneState(base=(-0.8, 1.2, 0.0), objects={"cube": ObjectPose(cube)})
+    new = resequence_task(task_cfg, geometry, state, tmp_path)
+    assert new["plan"][0].startswith("grasp(cube") and new["planner"]["enabled"] is False
+    assert task_cfg["planner"]["enabled"] is True  # the caller's mapping is left as it was

@@ -175,4 +175,5 @@ def resequence_task(task_cfg: Mapping[str, Any], geometry: SceneGeometry, state:
     new = dict(task_cfg)
     new["params"] = plain.get("params", task_cfg.get("params"))
     new["plan"] = [str(a) for a in plans[0]]
+    new["planner"] = dict(planner, enabled=False)  # the plan is the one above: not the problem's again
     return new
