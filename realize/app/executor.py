@@ -38,6 +38,7 @@ from realize.execution.world import ExecutionWorld, Observation
 __all__ = ["Executor", "EXECUTION_BACKEND"]
 
 HOLD_TEXT = "hold"  # the trajectory's action text while the robot holds for the planner
+WAIT_FOR_REST_S = 3.0  # s of control time at most a dropped object is waited for to land before deciding
 
 log = logging.getLogger("realize")
 
@@ -228,7 +229,8 @@ class Executor:
                 self.log.failure = f"{reasons[0]} (time limit {s.time_limit_s:g} s reached)"
                 break
             if any(r.startswith("grasp_lost") for r in reasons):  # see where it lands before deciding
-                obs = self._observe() if self._wait_for_rest() else obs
+                held = self._hold_steps(int(round(WAIT_FOR_REST_S / self.world.scene.control_dt)), until_rest=True)
+                obs = self._observe() if held else obs
             obs = self._firm_grip(obs)
             seg_new, think_s = go_on(self, seg, obs, a_fail, reasons)
             if seg_new is None:
@@ -297,20 +299,26 @@ class Executor:
 
     def _hold(self, think_s: float) -> int:
         """The world while the planner thinks ``think_s`` (``settings.think``): the robot holds
-        (base stopped, arm where it is, gripper as it was) for that many control steps, and the
-        world goes on (disturbances fire, the sensor reads); returns the steps held."""
+        for that many control steps (``_hold_steps``); returns them."""
         t = self.settings.think
-        dt = self.world.scene.control_dt
-        n = 0 if t == "frozen" else int(math.ceil(think_s / dt)) if t == "measured" else int(t)
-        if n == 0:
-            return 0
-        scene = self.world.scene
+        n = 0 if t == "frozen" else int(math.ceil(think_s / self.world.scene.control_dt)) if t == "measured" else int(t)
+        return self._hold_steps(n)
+
+    def _hold_steps(self, most: int, until_rest: bool = False) -> int:
+        """The robot holds (base stopped, arm where it is, gripper as it was) for ``most`` control
+        steps, or (``until_rest``) until every object is at rest (``controller.rest_speed``) if
+        sooner, while the world goes on (disturbances fire, the sensor reads, no monitor);
+        returns the steps held (world time lost, counted in ``hold_steps``)."""
+        scene, rest = self.world.scene, self.spec.rollout.rest_speed
+        n = 0
         self.holding = True
         try:
             with torch.inference_mode():
                 scene.hold_still()
-                for _ in range(n):
+                while n < most and not (until_rest and float(scene.object_velocities()[0, :, :3].norm(dim=-1).max())
+                                        <= rest):
                     scene.step()
+                    n += 1
         finally:
             self.holding = False
         self.log.hold_steps += n
@@ -324,32 +332,12 @@ class Executor:
         s = obs.state
         if s.held is None or obs.hand is None or self.precheck is None:
             return obs
-        cfg = apply_geometry_updates(self.spec.geometry_cfg, geometry_updates(obs, self.spec.geometry_cfg, self.moved_m()))
-        if self.precheck.grip_holds(s, cfg):
+        if self.precheck.grip_holds(s, self.layout(obs)):
             return obs
         squared = square_in_hand(s, obs.hand, self.spec.geometry.object(s.held))
         log.info("world %d: the grip of %s as observed slips in a restore: the planner assumes it square", self.k,
                  s.held)
         return dataclasses.replace(obs, state=squared)
-
-    def _wait_for_rest(self, most_s: float = 3.0) -> int:
-        """The robot holds until every object is at rest (``controller.rest_speed``), at most
-        ``most_s`` of control time: a dropped object is read where it lands, not in the air.
-        Returns the steps held (world time lost, counted in ``hold_steps``)."""
-        scene, dt = self.world.scene, self.world.scene.control_dt
-        rest = self.spec.rollout.rest_speed
-        n = 0
-        self.holding = True
-        try:
-            with torch.inference_mode():
-                scene.hold_still()
-                while n < int(round(most_s / dt)) and float(scene.object_velocities()[0, :, :3].norm(dim=-1).max()) > rest:
-                    scene.step()
-                    n += 1
-        finally:
-            self.holding = False
-        self.log.hold_steps += n
-        return n
 
     def replan_budget(self) -> Any:
         """The next replan's budget: the study's, its iterations doubled for every try in a row
@@ -362,6 +350,11 @@ class Executor:
     def moved_m(self) -> float | None:
         """How far a believed table must be from the config to count as moved (None: exact)."""
         return None if self.belief is None else self.settings.tolerance.table_m
+
+    def layout(self, obs: Observation) -> Any:
+        """The run's scene config with the world as ``obs`` shows it (moved tables, new boxes)."""
+        cfg = self.spec.geometry_cfg
+        return apply_geometry_updates(cfg, geometry_updates(obs, cfg, self.moved_m()))
 
     def _goal_holds(self, seg: Segment) -> bool:
         """The task's goal in the world as it is (a moved table where it stands now), whatever

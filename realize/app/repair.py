@@ -53,7 +53,6 @@ def go_on(ex: Any, seg: Segment, obs: Observation, a: int, reasons: list[str]) -
     """Check before you repair (``settings.precheck``): simulate the rest of the plan from
     the believed state; where it succeeds often enough, the same plan goes on (with the
     world as believed now). Returns (that segment or None, the check's wall time)."""
-    from realize.execution.layout_updates import apply_geometry_updates, geometry_updates
     from realize.tasks.suffix import check_suffix_start, suffix_columns, task_suffix
     from realize.world.geometry import build_geometry
 
@@ -63,8 +62,7 @@ def go_on(ex: Any, seg: Segment, obs: Observation, a: int, reasons: list[str]) -
     try:
         suffix = task_suffix(seg.task, a)
         check_suffix_start(suffix, obs.state)
-        now_cfg = apply_geometry_updates(ex.spec.geometry_cfg,
-                                         geometry_updates(obs, ex.spec.geometry_cfg, ex.moved_m()))
+        now_cfg = ex.layout(obs)
     except ConfigError:
         return None, 0.0
     chk = ex.precheck(seg.task, seg.z, a, obs.state, now_cfg)
@@ -103,11 +101,9 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     try:
         task_cfg = None
         if kind == "re-sequence":
-            from realize.execution.layout_updates import apply_geometry_updates, geometry_updates
             from realize.world.geometry import build_geometry
 
-            now_geo = build_geometry(apply_geometry_updates(ex.spec.geometry_cfg,
-                                                            geometry_updates(obs, ex.spec.geometry_cfg, ex.moved_m())))
+            now_geo = build_geometry(ex.layout(obs))
             task_cfg = resequence_task(saved_plan(source).config["task"], now_geo, state, rdir,
                                        pickup=dict(zip(("r_min", "r_max"), ex.settings.pickup_m)))
             if any(floor_region(o) in (task_cfg.get("params") or {}) for o in state.objects):
