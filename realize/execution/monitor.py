@@ -72,11 +72,15 @@ class Expectation:
     bounds_low: tuple[float, float]
     bounds_high: tuple[float, float]
     base_target: tuple[float, float] | None = None
-    # the blocks a remaining place stacks on: ("z", height the plan found it at) or ("on", 0) where the plan
-    # itself stacked it on ``stacked[name]``; ``halves``: every object's half height
-    supports: dict[str, tuple[str, float]] = field(default_factory=dict)
+    # the blocks a remaining place stacks on: at the height the plan found them (``support_z``), or, where the
+    # plan itself stacked one, on the block it stacked it on (``stacked``); ``halves``: every object's half height
+    support_z: dict[str, float] = field(default_factory=dict)
     stacked: dict[str, str] = field(default_factory=dict)
     halves: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def supports(self) -> frozenset[str]:
+        return frozenset(self.support_z) | frozenset(self.stacked)
 
 
 def held_by_plan(task: TaskSpec, action: int, done: bool = False, start_held: str | None = None) -> str | None:
@@ -112,7 +116,8 @@ def expectation(task: TaskSpec, belief: SceneGeometry, action: int, *, done: boo
             else:
                 xy = belief.object(a.obj).position[:2]
             objects[a.obj] = (float(xy[0]), float(xy[1]))
-    supports: dict[str, tuple[str, float]] = {}
+    support_z: dict[str, float] = {}
+    stacked: dict[str, str] = {}
     movable, carried = set(belief.object_names), {held}
 
     def below_of(a: ActionSpec) -> str | None:  # the block a place stacks on: its region's frame
@@ -122,21 +127,19 @@ def expectation(task: TaskSpec, belief: SceneGeometry, action: int, *, done: boo
     placed_on = {a.obj: below_of(a) for a in task.plan[:first] if a.template in RELEASES}  # by this plan, so far
     for k, a in enumerate(task.plan[action:], start=action):
         below = below_of(a)
-        if below is not None and below not in carried and below not in supports and k >= first:
+        if below is not None and below not in carried and k >= first:
             if placed_on.get(below) is not None:  # the plan stacked it: it must still stand on that block
-                supports[below] = ("on", 0.0)
-            else:  # as the plan found it
-                p = objects_at[below] if objects_at is not None and below in objects_at and len(objects_at[below]) > 2 \
-                    else belief.object(below).position
-                supports[below] = ("z", float(p[2]))
+                stacked[below] = placed_on[below]  # type: ignore[assignment]
+            elif below not in support_z:  # as the plan found it
+                at = objects_at.get(below) if objects_at is not None else None
+                support_z[below] = float((at if at is not None and len(at) > 2 else belief.object(below).position)[2])
         if a.template in GRASPS + RELEASES:  # the plan moves it itself: where it stands now is no promise
             carried.add(a.obj)
-    stacked = {s: placed_on[s] for s, (how, _) in supports.items() if how == "on"}
     halves = {o.name: o.half_height for o in belief.objects}
     names = {b.name for b in belief.static_obstacles} | {c.name for c in belief.containers}
     return Expectation(held, objects, {t.name: (t.center[0], t.center[1]) for t in belief.tables},
                        frozenset(names), tuple(belief.bounds_low), tuple(belief.bounds_high), base_target,
-                       {n: (how, z) for n, (how, z) in supports.items()}, stacked, halves)
+                       support_z, stacked, halves)
 
 
 def check_grasp(obs: Observation, exp: Expectation) -> list[Deviation]:
@@ -159,17 +162,13 @@ def check_objects(obs: Observation, exp: Expectation, tol: Tolerance) -> list[De
 
 
 def check_supports(obs: Observation, exp: Expectation) -> list[Deviation]:
-    out = []
     objects = obs.state.objects
-    for name, (how, z) in exp.supports.items():
-        if name not in objects:
-            continue
-        if how == "on":  # on the block the plan put it on: its bottom on that block's top
-            lower = exp.stacked[name]
-            if lower not in objects:
-                continue
-            z = objects[lower].position[2] + exp.halves[lower] + exp.halves[name]
-        dz = objects[name].position[2] - z
+    expected = dict(exp.support_z)  # on the block the plan put it on: its bottom on that block's top
+    expected.update({n: objects[b].position[2] + exp.halves[b] + exp.halves[n]
+                     for n, b in exp.stacked.items() if b in objects})
+    out = []
+    for name, z in expected.items():
+        dz = objects[name].position[2] - z if name in objects else 0.0
         if abs(dz) > SUPPORT_DROP_M:
             out.append(Deviation("support_moved", f"{name}, which a remaining place stacks on, is {abs(dz):.3f} m "
                                                   f"{'lower' if dz < 0 else 'higher'} than the plan assumed "
