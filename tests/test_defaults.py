@@ -167,3 +167,13 @@ def test_every_config_key_is_read_somewhere() -> None:
             if f.name not in used and f.name not in interpolated:
                 unread.append(f"{cls.__name__}.{f.name}")
     assert not unread, f"config keys nothing reads: {unread}"
+
+
+def test_a_config_without_the_validation_group_gets_the_dataclass_defaults() -> None:
+    """One default: a new config that leaves the group out validates as ``ValidationSettings``
+    says; a run saved before the group existed (it never validated) reads as ``replicas: 0``."""
+    without = {k: v for k, v in DEFAULT.items() if k != "validation"}
+    assert build_run_spec(without).validation == ValidationSettings()
+    saved = upgrade_config(without)
+    assert saved["validation"] == {"replicas": 0} and build_run_spec(saved).validation.replicas == 0
+    assert upgrade_config(DEFAULT)["validation"] == DEFAULT["validation"]  # a group it has is kept

@@ -154,8 +154,9 @@ class Placement:
 class ValidationSettings(Settings):
     """Hydra ``validation`` group: validate the run's candidates after its search
     (``realize.app.candidate_validation``, called by ``realize.app.run``); ``replicas: 0`` turns it off.
-    The defaults are the group file's (``configs/validation/default.yaml``, test_defaults.py); a
-    config without the group (a run recorded before it existed) gets ``replicas: 0``."""
+    These defaults are the ones a config without the group gets (the group file,
+    ``configs/validation/default.yaml``, agrees: test_defaults.py); a run saved before the group
+    existed reads as ``replicas: 0`` (``realize.run_dir.upgrade``), as it ran."""
 
     config_key = "validation"
 
@@ -379,6 +380,6 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
         budget=budget,
         warm_start=keys.warm_start,
         replan=replan,
-        validation=ValidationSettings.from_mapping(d.get("validation", {"replicas": 0})),
+        validation=ValidationSettings.from_mapping(d.get("validation")),
         stitch=stitch,
     )

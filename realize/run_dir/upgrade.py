@@ -10,6 +10,9 @@ what replaced it:
     moves to ``sim.cpu_workers`` where that is unset;
   * ``scene.robot_radius`` (retired 2026-12-04): a robot's footprint, which is its spec's; its
     value moves to ``robot.base.footprint_radius`` where that is unset.
+A group added since: ``validation`` (added 2026-12-02): a run saved without it never validated, so
+it reads as ``validation: {replicas: 0}`` (a new config without the group gets the dataclass's
+defaults, ``realize.app.run_config.ValidationSettings``).
 ``check_retired(cfg)`` refuses a retired key in a new config in one line, saying what replaced it
 (``realize.app.run_config`` calls it before anything is read).
 What it doesn't: upgrade anything but configs (``scene.json``'s reader,
@@ -38,8 +41,10 @@ _MOVED = {("workers", "physx_threads"): ("sim", "cpu_workers"), ("scene", "robot
 
 
 def upgrade_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
-    """``cfg`` (a saved run config) without its retired keys; the rest as it was."""
+    """``cfg`` (a saved run config) without its retired keys, with the groups added since as the
+    run ran without them; the rest as it was."""
     out = dict(cfg)
+    out.setdefault("validation", {"replicas": 0})  # saved before the group: the run did not validate
     for (group, key) in RETIRED:
         node = out.get(group)
         if not isinstance(node, Mapping) or key not in node:
