@@ -288,6 +288,21 @@ def test_added_box_blocks_bodies_and_the_robot(spec) -> None:
         assert x < -1.25 - 0.2  # stopped at the box's face (-1.25) minus the robot's reach
 
 
+def test_a_box_drawn_onto_the_robot_slides_on_until_it_is_clear(spec) -> None:
+    box = AddBox("obstacle", (0.5, 0.5, 0.5), between=("base", "table2"), at=0.05)  # drawn on the base itself
+    with ExecutionWorld(spec, 0, perturb=False, disturbances=[Scheduled(0, Trigger(action=0), box)]) as w:
+        base = w.observe().state.base
+        line = w.apply(box)
+        assert "further on than drawn" in line
+        (seen,) = w.observe().boxes
+        for lo, hi in w._bodies_aabbs():  # PhysX's own bounds of every link and object
+            apart = [lo[i] > seen.center[i] + 0.25 or hi[i] < seen.center[i] - 0.25 for i in range(2)]
+            assert any(apart) or lo[2] > 0.5
+        for _ in range(20):
+            w.scene.step()
+        assert w.observe().state.base[:2] == pytest.approx(base[:2], abs=0.01)  # nothing was thrown
+
+
 def test_knock_out_leaves_the_object_on_the_table_below_not_held(spec) -> None:
     with ExecutionWorld(spec, 0, perturb=False) as w:
         w.scene.reset(state=load_state(FIXTURE))

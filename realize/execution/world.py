@@ -9,7 +9,8 @@ own controllers. Disturbances (``realize.execution.disturbances``) are carried o
 ``apply``: objects and the base teleported, a held object knocked onto the surface below it
 (moved sideways first where the effect says: a table's top, or the top of another object under
 its footprint there; upright, at rest; the gripper command opened), tables moved (their static
-PhysX actors posed anew; what rests on them moves along), box obstacles put in place. Every box an ``add_box`` of the world's
+PhysX actors posed anew; what rests on them moves along), box obstacles put in place (slid on
+along their line where the drawn place overlaps the robot or an object). Every box an ``add_box`` of the world's
 disturbances needs is built in the PhysX scene when the world is built, parked out of the way
 (below the floor, outside the map), and only moved into place when it fires. Moved tables and
 placed boxes stay where they are through ``scene.reset(state=...)`` (a restore moves dynamic
@@ -53,6 +54,8 @@ assert EXECUTION_STREAM not in (SEARCH_STREAM, VALIDATION_STREAM)
 PARK_DEPTH = 10.0  # m below the floor where boxes wait
 PARK_OUTSIDE = 50.0  # m beyond the map's low corner, in x and y
 BOX_COLOR = (0.8, 0.3, 0.2, 1.0)
+BOX_CLEARANCE_M = 0.05  # m an appearing box keeps from the robot and the objects
+BOX_SLIDE_M = 0.05  # m: the step it slides on by until it does
 ON_SURFACE = 0.01  # m: an object whose bottom is at least this high above a table's top - it rests on it
 
 
@@ -309,9 +312,49 @@ class ExecutionWorld:
             assert e.between is not None
             a, b = self._point(e.between[0]), self._point(e.between[1])
             c = a + e.at * (b - a)
+        c, moved = self._clear_of_bodies(c, e.size, None if e.between is None else self._point(e.between[1]))
         self._pose_static(self._box_entities[e.name], (c[0], c[1], e.size[2] / 2))
         self._placed[e.name] = BoxSeen(e.name, (float(c[0]), float(c[1])), tuple(e.size))
-        return f"box {e.name} {e.size[0]:g} x {e.size[1]:g} x {e.size[2]:g} m appeared at ({c[0]:.3f}, {c[1]:.3f})"
+        further = "" if moved == 0 else f" ({moved:.2f} m further on than drawn: clear of the robot and the objects)" \
+            if moved > 0 else " (overlapping the robot or an object: no clear place on its way)"
+        return (f"box {e.name} {e.size[0]:g} x {e.size[1]:g} x {e.size[2]:g} m appeared at ({c[0]:.3f}, "
+                f"{c[1]:.3f}){further}")
+
+    def _bodies_aabbs(self) -> np.ndarray:
+        """World-frame AABBs ``(K, 2, 3)`` of the robot's links and the objects, as they are now."""
+        links = self.scene.u.agents[0].robot._objs[0].get_links()
+        bodies = [lk for lk in links if lk.get_collision_shapes()]
+        bodies += [self.scene.u.object_actors[n][0]._bodies[0] for n in self.scene.object_names]
+        boxes = np.array([np.asarray(b.compute_global_aabb_tight(), dtype=np.float64) for b in bodies])
+        return boxes - self._offset
+
+    def _clear_of_bodies(self, c: np.ndarray, size: Sequence[float], towards: np.ndarray | None
+                         ) -> tuple[np.ndarray, float]:
+        """Centre ``c`` of a box of ``size`` (upright, axis-aligned, on the floor), slid on towards
+        ``towards`` in 5 cm steps until its footprint keeps ``BOX_CLEARANCE_M`` from every robot
+        link and object below its top (a box does not appear inside the robot; PhysX would throw
+        what overlaps it across the map). Where no place up to ``towards`` is clear (or the box
+        has a fixed centre), ``c`` as drawn. Returns (centre, how far it slid: 0 where it was
+        clear, -1 where it overlaps something)."""
+        aabbs = self._bodies_aabbs()
+        half = np.asarray(size[:2], dtype=np.float64) / 2 + BOX_CLEARANCE_M
+        low = aabbs[:, 0, 2] < float(size[2])  # what reaches below the box's top
+
+        def clear(p: np.ndarray) -> bool:
+            sep = (aabbs[:, 0, :2] > p + half) | (aabbs[:, 1, :2] < p - half)
+            return bool((sep.any(axis=1) | ~low).all())
+
+        if clear(c):
+            return c, 0.0
+        if towards is None:
+            return c, -1.0
+        d = towards - c
+        length = float(np.linalg.norm(d))
+        for s in np.arange(BOX_SLIDE_M, length + 1e-9, BOX_SLIDE_M):
+            p = c + d * (s / length)
+            if clear(p):
+                return p, float(s)
+        return c, -1.0
 
     def _push_base(self, e: PushBase) -> str:
         scene = self.scene
