@@ -138,24 +138,34 @@ def _settings_classes() -> list[type]:
     return out
 
 
-def _names_code_uses(path: Path) -> set[str]:
-    """The names a module's code (not its docstrings or comments) uses: attributes (``x.key``),
-    string constants (``d["key"]``, ``getattr(x, "key")``) and keyword arguments (``f(key=...)``)."""
+def _names_code_uses(source: str) -> set[str]:
+    """The names a module's code (not its docstrings, other bare strings or comments) uses:
+    attributes (``x.key``), string constants (``d["key"]``, ``getattr(x, "key")``) and keyword
+    arguments (``f(key=...)``)."""
     import ast
 
-    tree = ast.parse(path.read_text())
-    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
-                  if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
-                  and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    tree = ast.parse(source)
+    prose = {id(node.value) for node in ast.walk(tree)  # a string standing alone as a statement
+             if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)}
     out: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Attribute):
             out.add(node.attr)
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in prose:
             out.add(node.value)
         elif isinstance(node, ast.keyword) and node.arg:
             out.add(node.arg)
     return out
+
+
+def test_a_name_in_prose_is_not_a_use() -> None:
+    """The key-use test below cannot be fooled by a docstring, a field's docstring or a comment."""
+    src = ('"""batch_scale in a module docstring."""\n'
+           'class C:\n    """batch_scale in a class docstring."""\n    x: int = 1\n    """batch_scale below a field."""\n'
+           'def f(d):\n    """batch_scale in a function docstring."""\n    # batch_scale in a comment\n'
+           '    return d["n_envs"], d.shard_rows, g(pool=1)\n')
+    used = _names_code_uses(src)
+    assert "batch_scale" not in used and {"n_envs", "shard_rows", "pool"} <= used
 
 
 def test_every_config_key_is_read_somewhere() -> None:
@@ -170,7 +180,7 @@ def test_every_config_key_is_read_somewhere() -> None:
     used: set[str] = set()
     for d in ("realize", "envs"):
         for p in (REPO / d).rglob("*.py"):
-            used |= _names_code_uses(p)
+            used |= _names_code_uses(p.read_text())
     interpolated = {m.rsplit(".", 1)[-1] for p in (REPO / "configs").rglob("*.yaml")
                     for m in re.findall(r"\$\{[^}:]*?([\w.]+)\}", p.read_text())}
     unread = []
