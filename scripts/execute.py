@@ -28,6 +28,9 @@ from pathlib import Path
 
 def main(argv: list[str] | None = None) -> int:
     from realize.app.planner import ReplanBudget
+    from realize.execution.settings import ExecuteSettings
+
+    study, budget = ExecuteSettings(), ReplanBudget()  # the defaults the help names (written once, there)
 
     p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()), epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -41,13 +44,13 @@ def main(argv: list[str] | None = None) -> int:
                         "family's, else none)")
     p.add_argument("--think", default=None,
                    help="the world while the planner thinks: measured (its wall time), frozen, or a number of control "
-                        "steps (fixed: a study repeats bit for bit) (default: measured)")
+                        f"steps (fixed: a study repeats bit for bit) (default: the preset's, else {study.think})")
     p.add_argument("--check-copies", type=int, default=None,
-                   help="copies of the check before a repair (0: none; default 8)")
+                   help=f"copies of the check before a repair (0: none; default: the preset's, else "
+                        f"{study.precheck.copies})")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--open-only", action="store_true", help="no replanning")
     mode.add_argument("--closed-only", action="store_true", help="no open-loop baseline")
-    budget = ReplanBudget()  # the defaults the help names
     p.add_argument("--n-envs", type=int, default=None,
                    help=f"copies per replan iteration (default {budget.n_envs}, {budget.n_elite} elites; with N "
                         f"given, {ReplanBudget.elites_for(32)} of 32: an eighth from 32 on, a quarter below)")
