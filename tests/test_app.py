@@ -601,6 +601,20 @@ def test_summary_lists_jobs_without_results(tmp_path: Path) -> None:
     assert [r["seed"] for r in rows] == ["0", "1"] and [r["final_success"] for r in rows] == ["0.5", ""]
     assert rows[0]["best_cost"] == "412.0" and rows[0]["feasible"] == "True"
     assert rows[1]["error"] == "RuntimeError: boom"
+    assert rows[0]["final_stopped"] == rows[0]["final_finished_success"] == ""  # a run without pruning
+
+
+def test_summary_says_a_pruned_jobs_finished_share_beside_its_stopped_rows(tmp_path: Path) -> None:
+    """With ce.prune, final_success counts a stopped row as failed; the summary also says how many
+    were stopped and the share of the rest that ended feasible (issue 58)."""
+    d = tmp_path / "0"
+    d.mkdir()
+    (d / JOB_STATUS_FILE).write_text(json.dumps({"job_num": 0, "overrides": ["seed=0"], "status": "done"}))
+    (d / RESULT_FILE).write_text(json.dumps({"status": "done", "feasible": True, "best_cost": 412.0, "iterations_done": 2,
+                                             "success_per_iter": [0.1, 0.1], "n_envs_per_iter": [100, 100],
+                                             "n_feasible_per_iter": [10, 10], "n_stopped_per_iter": [50, 80]}))
+    (row,) = _read_summary(write_summary(tmp_path))
+    assert (row["final_success"], row["final_stopped"], row["final_finished_success"]) == ("0.1", "80", "0.5")
 
 
 @pytest.mark.slow

@@ -11,9 +11,14 @@ rebuilds it once more.
 
 Columns: ``job``, then one column per key the jobs override (``ce.n_envs``, ``seed``: the swept
 keys and any fixed override, each job's value; empty where a job lacks it), then ``overrides,
-status, error, feasible, best_cost, objective, final_success, wall_time_s, iterations_done,
-interrupted, run_dir`` (``objective``: what the run returned to the sweeper, ``realize.app.objective``). ``status`` is ``done``, ``failed`` or ``interrupted``; ``final_success`` is the share
-of successful samples in the job's last iteration. Each update prints where it wrote the table.
+status, error, feasible, best_cost, objective, final_success, final_finished_success, final_stopped,
+wall_time_s, iterations_done, interrupted, run_dir`` (``objective``: what the run returned to the
+sweeper, ``realize.app.objective``). ``status`` is ``done``, ``failed`` or ``interrupted``;
+``final_success`` is the share of successful samples in the job's last iteration (a row stopped
+by ``ce.prune`` counts as not successful); with ``ce.prune``, ``final_stopped`` is how many rows
+of that iteration were stopped and ``final_finished_success`` the share of the rest (the rows
+that ran to their end) that ended feasible (both empty without pruning; ``result.json``'s
+``n_stopped_per_iter`` and ``finished_success_per_iter``). Each update prints where it wrote the table.
 Both files are read and written through ``realize.run_dir.directory.RunDir`` (``JobStatusDoc``,
 ``ResultDoc``/``FailureDoc``).
 What it doesn't: run or retry jobs, or read anything but JSON files (no unpickling).
@@ -49,6 +54,8 @@ COLUMNS = (
     "best_cost",
     "objective",
     "final_success",
+    "final_finished_success",
+    "final_stopped",
     "wall_time_s",
     "iterations_done",
     "interrupted",
@@ -83,7 +90,8 @@ def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
         "overrides": " ".join(st.overrides),
         "status": status,
         "error": _one_line(error) if error else "",
-        "feasible": "", "best_cost": "", "objective": "", "final_success": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
+        "feasible": "", "best_cost": "", "objective": "", "final_success": "", "final_finished_success": "",
+        "final_stopped": "", "wall_time_s": "", "iterations_done": "", "interrupted": "",
         "run_dir": rel,
     }
     if res is not None:
@@ -98,6 +106,12 @@ def _row(status_file: Path, sweep_dir: Path) -> dict[str, Any]:
         last = getattr(res, "success_per_iter", None)
         if last and math.isfinite(last[-1]):
             row["final_success"] = last[-1]
+        stopped = getattr(res, "n_stopped_per_iter", None)
+        if stopped:  # ce.prune: the share above counts the stopped rows as failed
+            row["final_stopped"] = stopped[-1]
+            finished = res.finished_success_per_iter()
+            if finished and finished[-1] is not None:
+                row["final_finished_success"] = finished[-1]
     row.update(_override_values(st.overrides))
     return row
 
