@@ -110,6 +110,25 @@ def test_a_knocked_off_block_is_stacked_again_with_the_tasks_regions(tower3, tmp
     assert "(holding cube_b)" in text and "(hand-empty)" not in text and "(grasps CubeB_g cube_b)" in text
 
 
+def test_a_restack_of_a_planner_chosen_plan_is_a_replan_of_it(tower3, tmp_path: Path) -> None:
+    """The run's saved task has no plan (the PDDL planner chose it): the re-sequence is matched
+    against the plan its result.json names, so the search is warm-started from the run."""
+    import json
+
+    from realize.app.planner import realized_task
+    from realize.tasks.suffix import tail_index
+
+    task, g = tower3
+    new = resequence_task(task, g, _state("cube_b", cube_a=(0.0, 1.2, Z0), cube_b=(0.0, 1.1, 0.9),
+                                          cube_c=(0.0, 1.4, Z0)), tmp_path / "new")
+    assert tail_index(task, new) is None  # the saved config alone names no plan
+    (tmp_path / "result.json").write_text(json.dumps({"plan": ", ".join(PLAN)}))
+    assert realized_task(task, tmp_path)["plan"] == PLAN
+    assert tail_index(realized_task(task, tmp_path), new) == 1
+    other = dict(new, plan=PLAN[:1] + PLAN[2:])
+    assert tail_index(realized_task(task, tmp_path), other) is None
+
+
 @pytest.mark.parametrize("b_at", [(0.05, 1.11), (0.0, 1.4)])
 def test_a_block_stacked_on_a_knocked_off_one_is_set_down_on_a_free_spot_first(tower3, tmp_path: Path, b_at) -> None:
     """cube_c went onto the knocked-off cube_b: it must go down on the table first, and the task

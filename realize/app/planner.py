@@ -259,7 +259,7 @@ class Planner:
         self._check_open()
         src = self._source(source)
         base = saved_config(src)
-        k = tail_index(base.get("task") or {}, task)
+        k = tail_index(realized_task(base.get("task") or {}, src), task)
         if k is not None:
             return self.replan(state, k, changes, source=src, run_dir=run_dir, budget=budget, seed=seed)
         budget = budget or ReplanBudget()
@@ -378,3 +378,17 @@ def _what_differs(key: str, other: str) -> str:
         elif a != b:
             diff.append(k)
     return ", ".join(diff) or "nothing"
+
+
+def realized_task(task: Mapping[str, Any], run_dir: str | Path) -> dict[str, Any]:
+    """Task mapping ``task`` of the run in ``run_dir`` with the plan that run realized: where the
+    PDDL planner chose it (``task.planner.enabled``, no ``plan`` written), the plan its
+    ``result.json`` names, so a re-sequence that plans the same actions again is recognised as
+    a replan of them (warm-started) rather than searched cold."""
+    import re
+
+    out = dict(task)
+    if not out.get("plan"):
+        done = RunDir(run_dir).result_json() or {}
+        out["plan"] = re.findall(r"\w+\([^()]*\)", str(done.get("plan") or ""))
+    return out
