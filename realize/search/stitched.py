@@ -69,7 +69,9 @@ SegmentEvaluator = Callable[[str, Tensor, "Sequence[Any] | None"], "tuple[EvalRe
 class StitchConfig:
     """The stitched search's budget: samples per segment and round, rounds, the prefix pool, how
     many stitched plans are confirmed whole, and the cut (``split``: the suffix's first action;
-    None: the action after the plan's first grasp, ``realize.tasks.split.default_split``)."""
+    None: the action after the plan's first grasp, ``realize.tasks.split.default_split``). A
+    chain of more segments (``splits``) or one with ``credit`` runs ``realize.search.chain``
+    (``n_suffix`` rows for each segment after the first)."""
 
     n_prefix: int = 100
     n_suffix: int = 100
@@ -77,6 +79,10 @@ class StitchConfig:
     pool: int = 10
     confirm: int = 10
     split: int | None = None
+    # a chain (``realize.search.chain``): every segment's first action after the first (None: ``(split,)``)
+    splits: tuple[int, ...] | None = None
+    credit: int = 0  # a chain's pool entry is dead after this many rows from it, none feasible (0: off)
+    credit_radius: float = 0.1  # a row is doomed within this normalized distance of a dead entry
 
     def __post_init__(self) -> None:
         for name in ("n_prefix", "n_suffix", "iterations", "pool", "confirm"):
@@ -85,12 +91,31 @@ class StitchConfig:
                 raise ValueError(f"stitch.{name} = {v!r} is invalid: expected an integer >= 1")
         if self.iterations < 2:
             raise ValueError("stitch.iterations must be >= 2: the suffix starts from the prefixes of round 0")
+        if isinstance(self.credit, bool) or not isinstance(self.credit, int) or self.credit < 0:
+            raise ValueError(f"stitch.credit = {self.credit!r} is invalid: expected an integer >= 0")
+        if not self.credit_radius >= 0:
+            raise ValueError(f"stitch.credit_radius = {self.credit_radius!r} is invalid: expected a number >= 0")
+        if self.splits is not None and (not self.splits or list(self.splits) != sorted(set(self.splits))):
+            raise ValueError(f"stitch.splits = {list(self.splits)!r} is invalid: expected increasing action indices")
+
+    @property
+    def cuts(self) -> tuple[int, ...]:
+        """Each segment's first action after the first (the split, or a chain's ``splits``)."""
+        if self.splits is not None:
+            return tuple(self.splits)
+        return () if self.split is None else (self.split,)
+
+    @property
+    def chain(self) -> bool:
+        """Whether ``realize.search.chain.ChainSearch`` runs it: more than one cut, or credit."""
+        return len(self.cuts) > 1 or self.credit > 0
 
     @property
     def batches(self) -> int:
-        """Batches of a whole search: a prefix per round, a suffix per round after the first, then
-        the confirmation."""
-        return 2 * self.iterations
+        """Batches of a whole search (at most): segment j's in each round from round j on, then
+        the confirmation (two segments: a prefix per round, a suffix per round after the first)."""
+        k = len(self.cuts) + 1
+        return k * self.iterations - k * (k - 1) // 2 + 1 if k > 2 else 2 * self.iterations
 
 
 @dataclass
