@@ -152,6 +152,34 @@ def test_fig4_mean_and_band(tmp_path):
     assert rows[0]["cost_seed0"] == ""
 
 
+def test_fig4_reads_the_share_of_rows_that_finished(tmp_path):
+    """A pruned run's share is of the rows that ran to their end (``finished_success_per_iter``),
+    not ``success_per_iter``, which counts the stopped rows as failed; a pruned run written before
+    that key gets it from its counts, a run without pruning keeps ``success_per_iter``."""
+    dirs = [write_run_dir(run_synthetic(n=30, iterations=3, n_elite=5, seed=s), tmp_path / f"seed{s}",
+                          trajectories=False, scene=False) for s in range(3)]
+    docs = [json.loads((d / "result.json").read_text()) for d in dirs]
+    # seed0: pruned, with the key; seed1: pruned, before the key (counts only); seed2: no pruning
+    docs[0].update(n_envs_per_iter=[30, 30, 30], n_feasible_per_iter=[3, 3, 3], success_per_iter=[0.1, 0.1, 0.1],
+                   n_stopped_per_iter=[0, 15, 27], finished_success_per_iter=[0.1, 0.2, 1.0])
+    docs[1].update(n_envs_per_iter=[30, 30, 30], n_feasible_per_iter=[6, 6, 0], success_per_iter=[0.2, 0.2, 0.0],
+                   n_stopped_per_iter=[0, 10, 30])
+    docs[1].pop("finished_success_per_iter", None)
+    for d, doc in zip(dirs, docs):
+        (d / "result.json").write_text(json.dumps(doc))
+    assert RunDir(dirs[2]).n_stopped_per_iter() is None
+    np.testing.assert_allclose(RunDir(dirs[1]).finished_success_per_iter(), [0.2, 0.3, np.nan])
+    _, csv_path = fig4(dirs, tmp_path / "fig4.png")
+    rows = _rows(csv_path)
+    plain = np.asarray(docs[2]["success_per_iter"]) * 100
+    assert [float(r["share_seed0"]) for r in rows] == pytest.approx([10, 20, 100])
+    assert [float(r["share_seed1"]) for r in rows[:2]] == pytest.approx([20, 30]) and rows[2]["share_seed1"] == ""
+    np.testing.assert_allclose([float(r["share_seed2"]) for r in rows], plain, rtol=1e-5)
+    assert [float(r["stopped_seed0"]) for r in rows] == [0, 15, 27] and rows[0]["stopped_seed2"] == ""
+    assert [float(r["stopped_mean"]) for r in rows] == pytest.approx([0, 12.5, 28.5])
+    assert float(rows[2]["share_mean"]) == pytest.approx((100 + plain[2]) / 2, rel=1e-5)  # seed1 all stopped there
+
+
 def test_history_written_by_the_history_writer_loads(synthetic, tmp_path):
     h = History(synthetic.layout.column_names)
     for r in synthetic.records:

@@ -233,6 +233,30 @@ class RunDir:
         h = self.history_arrays()
         return np.asarray(h["success_share"], dtype=np.float64) if "success_share" in h else np.zeros(0)
 
+    def finished_success_per_iter(self) -> np.ndarray:
+        """Per iteration, the share of the rows that ran to their end that ended feasible (NaN
+        where every row was stopped). With ``ce.prune``, ``success_per_iter`` counts the rows
+        stopped as "could not be an elite" as failed and reads flat while the search learns; this
+        share leaves them out. ``result.json``'s ``finished_success_per_iter``, else derived from
+        its counts (pruned runs written before that key), else ``success_per_iter`` (a run without
+        pruning, where both are the same share)."""
+        d = self.result_json() or {}
+        if "finished_success_per_iter" in d:
+            return np.asarray([decode_float(v) for v in d["finished_success_per_iter"]], dtype=np.float64)
+        stopped = d.get("n_stopped_per_iter")
+        n, k = d.get("n_envs_per_iter"), d.get("n_feasible_per_iter")
+        if stopped is not None and n is not None and k is not None and len(n) == len(k) == len(stopped):
+            return np.asarray([ki / (ni - si) if ni > si else math.nan for ni, ki, si in zip(n, k, stopped)],
+                              dtype=np.float64)
+        return self.success_per_iter()
+
+    def n_stopped_per_iter(self) -> np.ndarray | None:
+        """Rows stopped by ``ce.prune`` per iteration (``result.json``'s ``n_stopped_per_iter``);
+        ``None`` where the run does not say (no pruning, or a run from before the key)."""
+        d = self.result_json() or {}
+        stopped = d.get("n_stopped_per_iter")
+        return None if stopped is None else np.asarray([int(v) for v in stopped], dtype=np.int64)
+
     def best_cost_per_iter(self) -> np.ndarray:
         """Best feasible cost so far per iteration (``inf`` before the first success)."""
         d = self.result_json() or {}
