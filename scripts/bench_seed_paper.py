@@ -4,7 +4,12 @@ Runs ``python -m realize experiment=seed_paper seed=S validation=off`` (the sear
 validation stage) for each seed, one at a time, in a child
 process (so wall time includes start-up, as a user sees it), and appends a row to ``--out`` as
 soon as a run ends: seed, wall_s, peak_rss_mb (the child's maximum resident set), feasible,
-success_iter0, success_last, best_cost, best_cost_iter0, commit, note. With ``--reference CSV`` it
+success_iter0, success_last, best_cost, best_cost_iter0, commit, note, stopped_last. The success
+columns are the share of the rows that ran to their end that ended feasible
+(``finished_success_per_iter``): with ``ce.prune`` the rows stopped as "could not be an elite"
+are left out (``stopped_last``: how many in the last iteration), where ``success_per_iter`` would
+count them as failed; without pruning (every reference row) the two are the same share. A CSV
+written before ``stopped_last`` keeps its columns. With ``--reference CSV`` it
 prints, for the seeds both files hold, the wall-time ratio and the fidelity checks of the
 throughput issue (feasible in every run, iteration-0 success 3-30 %, last-iteration success
 >= 85 % mean, mean best cost no more than 2 % above the reference's).
@@ -41,7 +46,7 @@ sys.path.insert(0, str(REPO))
 from realize.run_dir.directory import RunDir  # noqa: E402
 
 FIELDS = ["seed", "wall_s", "peak_rss_mb", "feasible", "success_iter0", "success_last",
-          "best_cost", "best_cost_iter0", "commit", "note"]
+          "best_cost", "best_cost_iter0", "commit", "note", "stopped_last"]
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -82,12 +87,14 @@ def run_seed(seed: int, code: Path, run_dir: Path, extra: list[str]) -> dict[str
         raise SystemExit(f"seed {seed}: realize exited {proc.returncode}:\n{err[-2000:]}")
     rd = RunDir(run_dir)
     doc = rd.result()
-    success = rd.success_per_iter()
+    success = rd.finished_success_per_iter()  # of the rows that finished: ce.prune's stopped rows left out
+    stopped = rd.n_stopped_per_iter()
     per_iter = rd.best_cost_per_iter()
     return {"seed": seed, "wall_s": round(wall, 1), "peak_rss_mb": round(usage.ru_maxrss / 1024.0),
             "feasible": int(bool(doc.feasible)), "success_iter0": round(float(success[0]), 4),
             "success_last": round(float(success[-1]), 4), "best_cost": doc.best_cost,
-            "best_cost_iter0": float(per_iter[0]), "commit": commit_of(code), "note": ""}
+            "best_cost_iter0": float(per_iter[0]), "commit": commit_of(code), "note": "",
+            "stopped_last": "" if stopped is None or not len(stopped) else int(stopped[-1])}
 
 
 def read_rows(path: Path) -> dict[int, dict[str, float]]:
@@ -115,9 +122,15 @@ def summary(rows: dict[int, dict[str, float]], name: str) -> None:
     rss = [r["peak_rss_mb"] for r in rows.values() if "peak_rss_mb" in r]
     print(f"{name}: {n} seeds, wall {mean(col('wall_s')):.1f} s mean ({min(col('wall_s')):.1f}-"
           f"{max(col('wall_s')):.1f}), peak rss {max(rss) if rss else float('nan'):.0f} MB, feasible "
-          f"{int(sum(col('feasible')))}/{n}, success iter0 {min(col('success_iter0')):.3f}-"
-          f"{max(col('success_iter0')):.3f}, last {mean(col('success_last')):.3f} mean, best cost "
-          f"{mean(col('best_cost')):.1f} mean")
+          f"{int(sum(col('feasible')))}/{n}, success of the rows that finished iter0 "
+          f"{min(col('success_iter0')):.3f}-{max(col('success_iter0')):.3f}, last {mean(col('success_last')):.3f} "
+          f"mean{stopped_text(rows)}, best cost {mean(col('best_cost')):.1f} mean")
+
+
+def stopped_text(rows: dict[int, dict[str, float]]) -> str:
+    """', stopped last iter M mean' where the rows say (runs with ce.prune); else nothing."""
+    stopped = [r["stopped_last"] for r in rows.values() if "stopped_last" in r]
+    return f" (stopped in the last iteration: {sum(stopped) / len(stopped):.1f} mean)" if stopped else ""
 
 
 def compare(new: dict[int, dict[str, float]], ref: dict[int, dict[str, float]]) -> bool:
@@ -161,8 +174,12 @@ def main() -> None:
     done = read_rows(args.out) if args.out.exists() else {}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     new_file = not args.out.exists() or args.out.stat().st_size == 0
+    fields = FIELDS
+    if not new_file:  # an older CSV keeps its header (no stopped_last column)
+        with open(args.out, newline="") as f:
+            fields = next(csv.reader(f), None) or FIELDS
     with open(args.out, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=FIELDS)
+        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
         if new_file:
             w.writeheader()
         for seed in parse_seeds(args.seeds):

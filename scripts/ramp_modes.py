@@ -10,7 +10,10 @@ directory of seeds, or a Hydra multirun sweep), takes the best plan's release po
 * the run's status (``running``, ``interrupted``, ``failed``) when it has not finished.
 
 It prints one row per run and a summary (runs per mode, best cost mean +- std per mode), and
-writes both as CSV (``--out``, default ``ramp_modes.csv`` in the first directory).
+writes both as CSV (``--out``, default ``ramp_modes.csv`` in the first directory). A run's
+success shares (iteration 0, last) are of the rows that ran to their end (``ce.prune``'s stopped
+rows left out, ``stopped_last`` says how many in the last iteration), where ``success_per_iter``
+counts the stopped rows as failed; a run without pruning gives ``success_per_iter``, the same share.
 What it doesn't: simulate anything; a plan's mode is read from its parameters only.
 
 Usage::
@@ -69,6 +72,14 @@ def mode_of(result: ResultDoc | FailureDoc, geometry: SceneGeometry) -> str:
     return "other"
 
 
+def finished_success(r: ResultDoc) -> list[float]:
+    """Per iteration, the share of the rows that finished (not stopped by ``ce.prune``) that ended
+    feasible (NaN where every row was stopped); without pruning, ``success_per_iter``."""
+    if r.n_stopped_per_iter is None:
+        return list(r.success_per_iter)
+    return [math.nan if v is None else v for v in r.finished_success_per_iter()]
+
+
 def rows_from(dirs: list[Path]) -> list[dict[str, Any]]:
     rows = []
     for d in dirs:
@@ -82,14 +93,16 @@ def rows_from(dirs: list[Path]) -> list[dict[str, Any]]:
             geometry = build_geometry(GeometryCfg.from_mapping(cfg.get("scene")))
             ce = cfg.get("ce", {})
             done = isinstance(r, ResultDoc)
-            success = (r.success_per_iter if done else []) or [math.nan]
+            success = (finished_success(r) if done else []) or [math.nan]
+            stopped = (r.n_stopped_per_iter if done else None) or []
             xy = release_point(r) if done else None
             rows.append({
                 "run": str(f.parent), "scene": geometry.variant, "seed": r.seed if done else None,
                 "feasible": bool(r.feasible), "best_cost": r.best_cost if math.isfinite(r.best_cost) else None,
                 "mode": mode_of(r, geometry), "release_x": xy[0] if xy else None,
                 "release_y": xy[1] if xy else None, "success_iter0": success[0],
-                "success_last": success[-1], "wall_time_s": r.wall_time_s if math.isfinite(r.wall_time_s) else None,
+                "success_last": success[-1], "stopped_last": stopped[-1] if stopped else None,
+                "wall_time_s": r.wall_time_s if math.isfinite(r.wall_time_s) else None,
                 **{k: ce.get(k) for k in MODE_OPTIONS},
             })
     return rows
@@ -127,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         cost = "-" if r["best_cost"] is None else f"{r['best_cost']:.0f}"
         print(f"{r['run']:<40} {r['scene']:<6} seed {r['seed']!s:<3} {r['mode']:<6} cost {cost:>5}  "
-              f"success {r['success_iter0']:.0%} -> {r['success_last']:.0%}".replace("nan%", "-"))
+              f"success {r['success_iter0']:.0%} -> {r['success_last']:.0%}".replace("nan%", "-")
+              + ("" if r["stopped_last"] is None else f" of the rows that finished ({r['stopped_last']} stopped)"))
     summ = summary(rows)
     for s in summ:
         print(f"{s['scene']}: {s['mode']} in {s['runs']} of {s['of']} runs, best cost "

@@ -11,7 +11,11 @@ Regions follow their objects (``frame:`` in configs/task/pick_place.yaml), so bo
 around where the cube and table 2 now are. One CSV row per run is appended to ``--out`` as soon
 as it ends (a killed study keeps what it has; ``--resume`` skips rows already there), and a
 table is printed with the issue's checks: warm feasible in every world, its best cost within
-5 % of the cold run's in >= 8 of 10, in <= 25 % of the cold run's wall time.
+5 % of the cold run's in >= 8 of 10, in <= 25 % of the cold run's wall time. The success
+columns are the share of the rows that ran to their end that ended feasible
+(``finished_success_per_iter``; ``stopped_last``: the rows ``ce.prune`` stopped in the last
+iteration), which ``success_per_iter`` would count as failed; a run from before that key gives
+``success_per_iter``. A CSV written before ``stopped_last`` keeps its columns.
 What it doesn't: run worlds in parallel (timings would interfere) or compare rows measured on
 different machines.
 
@@ -51,7 +55,7 @@ COLD = ["experiment=seed_paper"]
 WARM = ["experiment=seed_paper", "ce.n_envs=100", "ce.iterations=3", "sim.shard_rows=50"]
 QUIET = ["logging.rerun=false", "logging.progress=false"]
 FIELDS = ["world", "mode", "wall_s", "realize_wall_s", "feasible", "best_cost", "success_iter0", "success_last",
-          "n_envs", "iterations", "run_dir"]
+          "n_envs", "iterations", "run_dir", "stopped_last"]
 
 
 def realize(args: list[str], run_dir: Path) -> tuple[float, dict]:
@@ -66,12 +70,21 @@ def realize(args: list[str], run_dir: Path) -> tuple[float, dict]:
     return wall, json.loads((run_dir / "result.json").read_text())
 
 
+def finished_success(doc: dict) -> list[float]:
+    """Per iteration, the share of the rows that finished (not stopped by ``ce.prune``) that ended
+    feasible: ``finished_success_per_iter``, else ``success_per_iter`` (no pruning, or an older run)."""
+    shares = doc.get("finished_success_per_iter") or doc.get("success_per_iter") or [None]
+    return [float("nan") if v is None else float(v) for v in shares]
+
+
 def row(world: str, mode: str, wall: float, doc: dict, run_dir: Path) -> dict:
-    succ = doc.get("success_per_iter") or [float("nan")]
+    succ = finished_success(doc)
+    stopped = doc.get("n_stopped_per_iter") or []
     return {"world": world, "mode": mode, "wall_s": f"{wall:.1f}", "realize_wall_s": f"{doc['wall_time_s']:.1f}",
             "feasible": doc["feasible"], "best_cost": doc["best_cost"], "success_iter0": f"{succ[0]:.3f}",
             "success_last": f"{succ[-1]:.3f}", "n_envs": doc["n_envs_per_iter"][0],
-            "iterations": doc["iterations_done"], "run_dir": str(run_dir)}
+            "iterations": doc["iterations_done"], "run_dir": str(run_dir),
+            "stopped_last": stopped[-1] if stopped else ""}
 
 
 def summary(path: Path) -> None:
@@ -122,8 +135,9 @@ def main() -> None:
     if a.resume and a.out.is_file():
         done = {(r["world"], r["mode"]) for r in csv.DictReader(a.out.open())}
     new_file = not a.out.is_file()
+    fields = FIELDS if new_file else (next(csv.reader(a.out.open()), None) or FIELDS)  # an older CSV's header
     with a.out.open("a", newline="") as f:
-        w = csv.DictWriter(f, FIELDS)
+        w = csv.DictWriter(f, fields, extrasaction="ignore")
         if new_file:
             w.writeheader()
         # every warm run first: they are short, and say early whether the warm start works
