@@ -61,7 +61,6 @@ from realize.run_dir.names import CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, RES
 from realize.run_dir.result_doc import ResultDoc
 from realize.run_dir.summaries import IterationSummary
 from realize.search.protocol import SearchReport, Searcher
-from realize.search.stitched import SEGMENT_NAMES
 from realize.sinks.base import Iteration, Sink, SinkSet
 from realize.sinks.files import CheckpointSink, ResultSink, RunClock
 from realize.sinks.progress import ProgressSink
@@ -268,7 +267,11 @@ class _Assembly:
             sinks.append(TrajectorySink(self.rd, spec.task.layout, spec.geometry, padding, record=spec.logging.record,
                                         whole_plans_only=spec.stitch is not None))
         desc = "CE top-k" if spec.halving else "CE stitched" if spec.stitch is not None else "CE"
-        labels = None if spec.stitch is None else {k: SEGMENT_NAMES[k] for k in self.keys}
+        labels = None
+        if spec.stitch is not None:
+            from realize.app.stitched import segment_names
+
+            labels = {k: segment_names(spec.stitch)[k] for k in self.keys}
         sinks.append(ProgressSink(self.batches, self.start, desc, spec.logging.progress, labels))
         return sinks
 
@@ -291,8 +294,7 @@ class _Assembly:
             log.info("plan %s; %d copies on %s (setup %.1f s)", spec.task.describe(), pool.n_envs, pool.backend,
                      self.info.setup_time_s)
         if spec.stitch is not None:
-            log.info("stitched segments: %s, then %s; %s", self.tasks[1].describe(), self.tasks[2].describe(),
-                     spec.stitch)
+            log.info("stitched segments: %s; %s", ", then ".join(t.describe() for t in self.tasks[1:]), spec.stitch)
         return pool
 
     def execute(self, after_iteration: Callable[[int], None] | None = None, *, pools: PoolSource | None = None,

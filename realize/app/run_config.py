@@ -94,6 +94,11 @@ class StitchSettings(Settings):
     n_suffix: int | None = setting(None, ge=1)  # suffix rows per round (None: ce.n_envs)
     pool: int = setting(10, ge=1)  # the cheapest prefixes whose end states the suffix rows start from
     confirm: int = setting(10, ge=1)  # the cheapest stitched plans realized whole at the end (at most ce.n_envs)
+    # a chain of segments (realize.search.chain): each segment's first action after the first (None: one cut)
+    splits: tuple[int, ...] | None = setting(None)
+    cut: str = setting("after_grasp", choices=("after_grasp", "after_each_place"))  # the cuts where none is given
+    credit: int = setting(0, ge=0)  # a start is dead after this many rows from it, none feasible (0: off)
+    credit_radius: float = setting(0.1, ge=0)  # a row within this (normalized) distance of a dead start ranks last
 
 
 def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, top_k: int = 1, replan: bool = False,
@@ -120,9 +125,28 @@ def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, top_k: int = 1, replan: bo
     if ce.iterations < 2:
         raise ConfigError(f"ce.iterations = {ce.iterations}: a stitched search needs at least 2 rounds (the suffix "
                           "starts from the prefixes of the rounds before it)")
+    if st.splits is not None or st.cut != "after_grasp":
+        return _read_chain(st, ce, task, n_prefix, n_suffix)
     split = default_split(task) if st.split is None else st.split
     split_task(task, split)  # refuses a bad cut before anything runs
-    return StitchConfig(n_prefix, n_suffix, ce.iterations, st.pool, min(st.confirm, ce.n_envs), split)
+    return StitchConfig(n_prefix, n_suffix, ce.iterations, st.pool, min(st.confirm, ce.n_envs), split,
+                        credit=st.credit, credit_radius=st.credit_radius)
+
+
+def _read_chain(st: StitchSettings, ce: CEConfig, task: TaskSpec, n_prefix: int, n_suffix: int) -> StitchConfig:
+    """A chain of segments: ``stitch.splits``, or the cuts of ``stitch.cut`` (checked on ``task``)."""
+    from realize.tasks.split import chain_tasks, place_cuts
+
+    if st.split is not None:
+        other = f"stitch.splits = {list(st.splits)}" if st.splits is not None else f"stitch.cut = {st.cut}"
+        raise ConfigError(f"stitch.split = {st.split} and {other}: give one of them")
+    cuts = list(st.splits) if st.splits is not None else place_cuts(task)
+    chain_tasks(task, cuts, "stitch.splits" if st.splits is not None else f"stitch.cut = {st.cut}")
+    if ce.iterations < len(cuts) + 1:
+        raise ConfigError(f"ce.iterations = {ce.iterations}: a chain of {len(cuts) + 1} segments needs at least "
+                          f"{len(cuts) + 1} rounds (segment j first runs in round j)")
+    return StitchConfig(n_prefix, n_suffix, ce.iterations, st.pool, min(st.confirm, ce.n_envs), cuts[0],
+                        splits=tuple(cuts), credit=st.credit, credit_radius=st.credit_radius)
 
 
 @dataclass

@@ -5,7 +5,11 @@ What it does:
     cost: its cost counts its own control steps), the suffix task (``realize.tasks.suffix``:
     actions ``split ..``, the goal and the final cost) and the full layout's columns of each; a
     parameter both segments bind (a plan that comes back to a region) is one ``ConfigError``;
-  * ``default_split(task)``: the action after the plan's first grasp (the seed's example).
+  * ``default_split(task)``: the action after the plan's first grasp (the seed's example);
+  * ``chain_tasks(task, cuts)``: the plan cut before each action of ``cuts`` (a chain of
+    stitched segments): each segment's task (only the last has the goal and the final cost) and
+    the full layout's columns of each; ``place_cuts(task)``: after every place that another
+    action follows (the hand is empty, the object at rest: a stable symbolic state).
 What it doesn't: search or simulate the segments (``realize.search.stitched``, ``realize.app.stitched``).
 """
 
@@ -18,7 +22,9 @@ from realize.tasks.goal_spec import GoalSpec
 from realize.tasks.spec import TaskSpec, task_for_plan
 from realize.tasks.suffix import part_columns, task_suffix
 
-__all__ = ["split_task", "default_split"]
+__all__ = ["split_task", "default_split", "chain_tasks", "place_cuts", "CUT_RULES"]
+
+CUT_RULES = ("after_grasp", "after_each_place")  # stitch.cut
 
 
 def split_task(task: TaskSpec, split: int) -> tuple[TaskSpec, TaskSpec, list[int], list[int]]:
@@ -45,3 +51,42 @@ def default_split(task: TaskSpec) -> int:
             return i + 1
     raise ConfigError(f"stitch.split: the plan of {task.source} has no grasp followed by another action; give "
                       "the second segment's first action (0-based)")
+
+
+def place_cuts(task: TaskSpec) -> list[int]:
+    """The action after each place that another action follows; a ``ConfigError`` where none is."""
+    cuts = [i + 1 for i, a in enumerate(task.plan[:-1]) if a.template == "place"]
+    if not cuts:
+        raise ConfigError(f"stitch.cut = after_each_place: the plan of {task.source} has no place followed by "
+                          "another action; give the cuts as stitch.splits")
+    return cuts
+
+
+def chain_tasks(task: TaskSpec, cuts: list[int], key: str = "stitch.splits") -> tuple[list[TaskSpec], list[list[int]]]:
+    """The segments' tasks of ``task`` cut before each action of ``cuts`` (increasing, 1 ..
+    n_actions - 1) and the full layout's columns of each; one ``ConfigError`` naming ``key``
+    for a bad cut or a parameter bound in two segments."""
+    n = task.n_actions
+    if not cuts or any(isinstance(c, bool) or not isinstance(c, int) for c in cuts) or \
+            list(cuts) != sorted(set(cuts)) or not 1 <= cuts[0] <= cuts[-1] < n:
+        actions = "; ".join(f"{i}: {a}" for i, a in enumerate(task.plan))
+        raise ConfigError(f"{key} = {list(cuts)!r} is invalid: increasing first actions of the segments after the "
+                          f"first, each 1 .. {n - 1} ({actions})")
+    bounds = [0, *cuts, n]
+    free = dataclasses.replace(task, goal=GoalSpec(), final_cost=0.0)
+    tasks = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b == n:
+            t = task_suffix(task, a, key=key)
+        else:
+            t = task_for_plan(free, task.plan[a:b])
+            t.name = f"{task.name}[{a or ''}:{b}]"
+        tasks.append(t)
+    seen: dict[str, int] = {}
+    for j, t in enumerate(tasks):
+        for name in t.layout.names:
+            if name in seen:
+                raise ConfigError(f"{key} = {list(cuts)}: parameter {name} is bound in segments {seen[name]} and {j}; "
+                                  "cut where no parameter (or goal region) is used in two segments")
+            seen[name] = j
+    return tasks, [part_columns(task, t) for t in tasks]
