@@ -2,7 +2,7 @@
 
 * a plan found in the nominal world (the hand-chosen seed-task vector) grasps a cube lying 3 cm
   from its config pose when objects are tracked (``controller.track_objects``), and closes on
-  air with the switch off;
+  air with the switch off, or where the robot sees it elsewhere (an executor's belief);
 * the perturbation model reads from the task config, refuses bad ranges, and its friction and
   mass factors reach every copy's object in the simulator.
 """
@@ -43,6 +43,21 @@ def test_a_cube_3cm_off_is_grasped_where_it_lies_when_tracked(track: bool) -> No
         assert abs(float(cube[1]) + 1.2) < 0.3 and abs(float(cube[2]) - (0.72 + 0.0225)) < 5e-3  # on table 2
     else:
         assert res.failure == ["1:grasp:grasp_not_held"]  # the fingers closed where the cube was meant to be
+
+
+def test_the_controllers_aim_where_the_robot_sees_the_cube() -> None:
+    """An executor with perception hands the realizer its belief (``seen_objects``): the cube
+    lies 3 cm off, but the robot sees it at its config pose, so the fingers close there."""
+    spec = build_run_spec(compose_config("controller.track_objects=true"))
+    with BatchedScene(1, spec.geometry_cfg, spec.sim) as scene:
+        scene.reset()
+        state = scene.capture_state(0, source="cube 3 cm off along x")
+        x, y, z = state.objects["cube"].position
+        state = dataclasses.replace(state, objects={"cube": ObjectPose((x + 0.03, y, z), (1.0, 0.0, 0.0, 0.0))})
+        realizer = PlanRealizer(spec.task, scene, spec.rollout, seed=0, start=state)
+        realizer.seen_objects = lambda: torch.tensor([[[x, y, z]]])
+        res = realizer.rollout(torch.tensor([GOOD]))
+    assert res.failure == ["1:grasp:grasp_not_held"]
 
 
 def test_perturbation_model_from_the_task_config() -> None:

@@ -5,7 +5,7 @@ of such worlds; its docstring says what the loop does).
 What it does: ``Executor(run, spec, settings, scheduled, seed, k, closed, out, planner)`` builds the
 world (and its video, recording and trajectory log), ``run_world(z)`` executes the plan ``z``: each
 segment a ``PlanRealizer`` rollout of the plan being run from its start state in the robot's belief
-geometry, with step and action hooks that apply due disturbances, record the commands, and stop
+geometry (with perception on, its controllers aim at objects where the belief has them), with step and action hooks that apply due disturbances, record the commands, and stop
 the segment on a deviation; then ``_repair`` re-parameterizes or re-sequences and the next segment
 runs the new plan from the captured state.
 What it doesn't: choose worlds, write files or summarize a study (``realize.app.execute``).
@@ -103,6 +103,11 @@ class Executor:
         if self.belief is None:
             return truth
         return self.belief.observation(dataclasses.replace(truth, step=self.now()))
+
+    def _seen_objects(self) -> torch.Tensor:
+        """(1, n_objects, 3) where the robot believes each object's centre is (the scene's order)."""
+        seen = self._observe().state.objects
+        return torch.tensor([[seen[n].position for n in self.world.scene.object_names]], dtype=torch.float32)
 
     def _sense(self, step0: bool = False) -> None:
         if self.sensor is None or self.belief is None:
@@ -209,6 +214,8 @@ class Executor:
                 realizer = PlanRealizer(seg.task, self.world.scene, seg.rollout or spec.rollout, seed=spec.seed,
                                         geometry=seg.belief)
                 realizer.action_hook = self._on_action
+                if self.belief is not None:  # the controllers aim where the robot sees an object, not where it is
+                    realizer.seen_objects = self._seen_objects
                 reasons, obs, a_fail, done = self._segment(seg, realizer, resume)
                 if done:
                     self.log.success = True

@@ -153,7 +153,8 @@ class Rollout:
         and that object's shift (len, 3), or None: untracked."""
         if not self.cfg.track_objects or frame < 0:
             return params, None
-        return track_region(region, params, self.scene.geometry.objects[frame], self.ctx.objects[rows, frame, :3],
+        seen = self.ctx.objects if self.realizer.seen_objects is None else self.realizer.seen_objects()
+        return track_region(region, params, self.scene.geometry.objects[frame], seen[rows, frame, :3].to(self.ctx.objects),
                             self.cfg.track_min_shift)
 
     def _write_commands(self, asleep: Tensor) -> None:
@@ -333,6 +334,9 @@ class PlanRealizer:
         self.start = start  # every rollout starts from this state (None: the task's initial state)
         # hook(a, rows) when plans ``rows`` (copies) are about to begin action a (replay captures states)
         self.action_hook: Callable[[int, Tensor], None] | None = None
+        # where the robot sees the objects (n_envs, n_objects, >= 3), read when an action aims at a
+        # region framed by one (controller.track_objects); None: the scene's own poses (exact)
+        self.seen_objects: Callable[[], Tensor] | None = None
         self.cfg = cfg or RolloutConfig()  # checked when it was built
         self.seed = seed
         self.layout = task.layout
