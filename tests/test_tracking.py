@@ -60,6 +60,28 @@ def test_the_controllers_aim_where_the_robot_sees_the_cube() -> None:
     assert res.failure == ["1:grasp:grasp_not_held"]
 
 
+def test_the_base_is_steered_where_the_localizer_has_it() -> None:
+    """A localizer 8 cm off in x (``PlanRealizer.base_error``, an executor's belief): move_to
+    parks the believed base on its goal, so the true base stops 8 cm short of it."""
+    from realize.tasks.spec import task_for_plan
+    from realize.tasks.suffix import part_columns
+
+    spec = build_run_spec(compose_config())
+    drive = task_for_plan(spec.task, spec.task.plan[:1])  # move_to(Table1)
+    z = torch.tensor([[GOOD[c] for c in part_columns(spec.task, drive)]])
+    ends = []
+    with BatchedScene(1, spec.geometry_cfg, spec.sim) as scene:
+        for err in (None, (0.08, 0.0, 0.0)):
+            realizer = PlanRealizer(drive, scene, spec.rollout, seed=0)
+            if err is not None:
+                realizer.base_error = lambda: torch.tensor([err])
+            res = realizer.rollout(z)
+            assert bool(res.action_success[0, 0]), res.failure
+            ends.append(scene.base_pose()[0, :2].clone())
+    assert float(ends[1][0] - ends[0][0]) == pytest.approx(-0.08, abs=0.02)
+    assert float(ends[1][1] - ends[0][1]) == pytest.approx(0.0, abs=0.02)
+
+
 def test_perturbation_model_from_the_task_config() -> None:
     spec = build_run_spec(compose_config("+task.perturbation.mass=[0.5,1.5]", "task.perturbation.object_xy=0.03"))
     p = spec.task.perturbation

@@ -5,7 +5,8 @@ of such worlds; its docstring says what the loop does).
 What it does: ``Executor(run, spec, settings, scheduled, seed, k, closed, out, planner)`` builds the
 world (and its video, recording and trajectory log), ``run_world(z)`` executes the plan ``z``: each
 segment a ``PlanRealizer`` rollout of the plan being run from its start state in the robot's belief
-geometry (with perception on, its controllers aim at objects where the belief has them), with step and action hooks that apply due disturbances, record the commands, and stop
+geometry (with perception on, its controllers act on the belief: objects and the base where it has
+them), with step and action hooks that apply due disturbances, record the commands, and stop
 the segment on a deviation; then ``_repair`` re-parameterizes or re-sequences and the next segment
 runs the new plan from the captured state.
 What it doesn't: choose worlds, write files or summarize a study (``realize.app.execute``).
@@ -108,6 +109,11 @@ class Executor:
         """(1, n_objects, 3) where the robot believes each object's centre is (the scene's order)."""
         seen = self._observe().state.objects
         return torch.tensor([[seen[n].position for n in self.world.scene.object_names]], dtype=torch.float32)
+
+    def _base_error(self) -> torch.Tensor:
+        """(1, 3) how far off the localizer has the base (x, y, yaw)."""
+        assert self.belief is not None
+        return torch.tensor([self.belief.base_error], dtype=torch.float32)
 
     def _sense(self, step0: bool = False) -> None:
         if self.sensor is None or self.belief is None:
@@ -214,8 +220,10 @@ class Executor:
                 realizer = PlanRealizer(seg.task, self.world.scene, seg.rollout or spec.rollout, seed=spec.seed,
                                         geometry=seg.belief)
                 realizer.action_hook = self._on_action
-                if self.belief is not None:  # the controllers aim where the robot sees an object, not where it is
+                if self.belief is not None:  # the controllers act on the belief: objects and base where it has them
                     realizer.seen_objects = self._seen_objects
+                    if self.world.scene.robot.base.joints:
+                        realizer.base_error = self._base_error
                 reasons, obs, a_fail, done = self._segment(seg, realizer, resume)
                 if done:
                     self.log.success = True

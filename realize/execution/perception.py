@@ -216,6 +216,11 @@ class Belief:
             self._fold(self._boxes, name, np.array(c), 2)
         self._base_error = np.array(r.base_error)  # the localizer's newest correction
 
+    @property
+    def base_error(self) -> tuple[float, float, float]:
+        """How far off (x, y, yaw) the localizer has the base now: believed minus true."""
+        return (float(self._base_error[0]), float(self._base_error[1]), float(self._base_error[2]))
+
     def observation(self, truth: Observation) -> Observation:
         """The believed ``Observation`` at ``truth``'s step (module docstring)."""
         if self.readings == 0:

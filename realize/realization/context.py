@@ -14,6 +14,8 @@ and the templates), or write to the simulator (the rollout does).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import Tensor
 
@@ -93,6 +95,9 @@ class StepContext:
         self._fab_closing: list[Tensor] = []
         self.fab_invalid = torch.zeros(n, dtype=torch.bool, device=dev)
         self._holds: Tensor | None = None
+        # where the robot's localization has its base, as an offset (N, 3: x, y, yaw) from where it
+        # is; None: exact. Everything read below (q, the TCP, the base) is then the believed one
+        self.base_offset: Callable[[], Tensor] | None = None
 
 
     @property
@@ -107,6 +112,9 @@ class StepContext:
         """Read the scene's state after a physics step."""
         s = self.scene
         self.q = s.whole_body_q()
+        if self.base_offset is not None:
+            self.q = self.q.clone()
+            self.q[:, BASE] += self.base_offset().to(self.q)
         self.qd = s.whole_body_qd()
         self.base = self.q[:, BASE]
         tcp, approach, closing = self.fabric.kin.tcp_and_axes(self.q.to(self.fabric.dtype))

@@ -62,6 +62,7 @@ class Rollout:
             scene.reset(seed=realizer.seed, state=realizer.start if starts is None else starts)
         self.ctx = StepContext(scene, self.cfg, realizer.fabric, realizer.grid, realizer.occupancy,
                                realizer.occupancy_tight, realizer.geometry)
+        self.ctx.base_offset = realizer.base_error
         self.params = {k: v.to(dev, torch.float32) for k, v in realizer.layout.split(Z.to(dev)).items()}
         self.n_actions = task.n_actions
         self.action = torch.zeros(n, dtype=torch.long, device=dev)  # the action each plan is in
@@ -337,6 +338,9 @@ class PlanRealizer:
         # where the robot sees the objects (n_envs, n_objects, >= 3), read when an action aims at a
         # region framed by one (controller.track_objects); None: the scene's own poses (exact)
         self.seen_objects: Callable[[], Tensor] | None = None
+        # how far off the robot's localization has its base (n_envs, 3: x, y, yaw), read every
+        # control step: the controllers then steer the believed base; None: the exact one
+        self.base_error: Callable[[], Tensor] | None = None
         self.cfg = cfg or RolloutConfig()  # checked when it was built
         self.seed = seed
         self.layout = task.layout
