@@ -53,18 +53,20 @@ def sampling_distributions(history: Mapping[str, np.ndarray]) -> tuple[np.ndarra
     return m, s, labels
 
 
-def stitched_distributions(rd: RunDir, columns: list[str]) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def stitched_distributions(rd: RunDir, columns: list[str], segments: int = 2) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """``sampling_distributions`` of a stitched run over the whole plan's ``columns``: row ``r``
     holds round ``r``'s prefix distribution and the suffix's of the same round (the suffix's
-    iteration ``r - 1``; none in round 0), the last row both final refits."""
-    (hp, hs) = (rd.history_arrays(k) for k in (1, 2))
-    if "mean" not in hp or "mean" not in hs:
-        raise FileNotFoundError(f"fig3: {rd.path} is a stitched run without both segments' histories")
-    mp, sp, labels = sampling_distributions(hp)
-    ms, ss, _ = sampling_distributions(hs)
+    iteration ``r - 1``; none in round 0), the last row both final refits. A chain of
+    ``segments``: segment j's distributions from round j on (histories 1 .. segments)."""
+    hists = [rd.history_arrays(k) for k in range(1, segments + 1)]
+    if any("mean" not in h for h in hists):
+        raise FileNotFoundError(f"fig3: {rd.path} is a stitched run without every segment's history")
+    dists = [sampling_distributions(h) for h in hists]
+    mp, labels = dists[0][0], dists[0][2]
     mean, std = np.full((mp.shape[0], len(columns)), np.nan), np.full((mp.shape[0], len(columns)), np.nan)
-    for h, m, sd, first in ((hp, mp, sp, 0), (hs, ms, ss, mp.shape[0] - ms.shape[0])):
+    for h, (m, sd, _) in zip(hists, dists):
         cols = [columns.index(str(c)) for c in h["column_names"].tolist()]
+        first = mp.shape[0] - m.shape[0]
         mean[first:, cols], std[first:, cols] = m, sd
     return mean, std, labels
 
@@ -95,8 +97,9 @@ def fig3(
     run_dir = Path(run_dir)
     out_png = Path(out_png) if out_png else run_dir / "figures" / "fig3.png"
     out_csv = Path(out_csv) if out_csv else out_png.with_suffix(".csv")
-    stitched = "stitched" in (rd.result_json() or {})
-    mean, std, kinds = (stitched_distributions(rd, layout.column_names) if stitched
+    stitched = (rd.result_json() or {}).get("stitched")
+    segments = len(stitched.get("splits") or [0]) + 1 if isinstance(stitched, dict) else 2
+    mean, std, kinds = (stitched_distributions(rd, layout.column_names, segments) if stitched
                         else sampling_distributions(history))
     n_rows = mean.shape[0] if show_final else mean.shape[0] - 1
     params = planar_params(layout)
