@@ -1,0 +1,50 @@
+"""A chain of stitched segments through the search loop, the workers and the run directory
+(slow: each simulates). The seed task's golden default search (``tests/golden_runs.py``,
+``seed_paper_default``) run as a two-segment ``ChainSearch`` (``stitch.credit`` on: with two
+rounds no dropped start is ever asked for again) gives the fixture's numbers bit for bit, so the
+chain realizes, captures and restores states as the one-cut search does. A four-block tower cut
+after each place runs its three segments in order, each from the one before's end states, and
+result.json says which batch was which and each segment's seconds."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from golden_runs import FIXTURE, GOLDEN_RUNS, KEYS
+from helpers import compose_config
+from realize.app.run import run
+
+QUIET = ["logging.progress=false", "logging.rerun=false"]
+
+
+@pytest.mark.slow
+def test_two_segments_with_credit_give_the_golden_default_search(tmp_path: Path) -> None:
+    out = run(compose_config(*GOLDEN_RUNS["seed_paper_default"], "stitch.credit=2", *QUIET), tmp_path)
+    assert out.status == "done"
+    doc = json.loads((tmp_path / "result.json").read_text())
+    golden = json.loads(FIXTURE.read_text())["seed_paper_default"]
+    assert {k: doc.get(k) for k in KEYS} == {k: golden[k] for k in KEYS}
+    st = doc["stitched"]
+    assert st["splits"] == [2] and st["credit"] == 2 and st["segment_per_iter"] == ["prefix", "prefix", "suffix", "full"]
+
+
+@pytest.mark.slow
+def test_a_tower_cut_after_each_place_runs_its_segments_in_order(tmp_path: Path) -> None:
+    over = ["experiment=tower4", "levers=stitched", "stitch.cut=after_each_place", "stitch.credit=2",
+            "ce.n_envs=8", "ce.n_elite=2", "ce.iterations=3", "stitch.pool=3", "stitch.confirm=2", "validation=off"]
+    out = run(compose_config(*over, *QUIET), tmp_path)
+    assert out.status == "done"
+    doc = json.loads((tmp_path / "result.json").read_text())
+    st = doc["stitched"]
+    assert st["splits"] == [2, 4] and list(st["segments"]) == ["segment1", "segment2", "segment3"]
+    seq = st["segment_per_iter"]
+    assert seq[:1] == ["segment1"] and seq.count("segment1") == 3  # segment j first runs in round j
+    assert set(seq) <= {"segment1", "segment2", "segment3", "full"} and seq.index("segment1") < seq.index("segment2")
+    assert all(st["segment_s"][s] > 0 for s in set(seq))
+    assert len(doc["n_envs_per_iter"]) == len(seq)
+    for k in range(1, 4):
+        if f"segment{k}" in seq:
+            assert (tmp_path / f"history_c{k}.npz").is_file()
