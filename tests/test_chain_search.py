@@ -7,7 +7,8 @@
   and cut twice returns the same plan (to the searches' precision). Elsewhere a segment also
   pays a term of where it starts, so the starts handed out must be the right end states.
 * Credit: a suffix that fails from every start of the prefix's cheaper mode moves the prefix's
-  distribution to its other mode (without credit it stays); a dead entry's parent loses its win.
+  distribution to its other mode (without credit it stays), and the same one segment back in a
+  chain of three; a dead entry's parent loses its win.
 * A paused chain goes on from its ``state_dict`` as if never paused; bad input is refused.
 """
 
@@ -225,6 +226,40 @@ def test_a_suffix_failing_from_one_mode_moves_the_prefix_to_the_other(seed: int)
     assert sum(h.dead for h in res.history) > 0 and not base.history[-1].dead
     # the rows of the cheaper valley were ranked after the others: the refit left it
     assert credited.known[0] and any(dead for _, dead in credited.known[0].values())
+
+
+def test_the_last_segment_failing_from_one_mode_moves_the_middle_one() -> None:
+    """Three segments: the middle one's column has two valleys (-0.6: cost 0, +0.6: cost 0.4),
+    the last fails from every start whose middle column is negative. With credit the middle
+    segment's distribution ends in the valley the last succeeds from; without, in the cheaper."""
+    box = Box([-1.0], [1.0])
+    full = ParamLayout({"X": box, "Y": box, "W": box})
+    segs = [ParamLayout({n: box}) for n in ("X", "Y", "W")]
+
+    def valleys(y: torch.Tensor) -> torch.Tensor:
+        return 10.0 * torch.minimum((y + 0.6) ** 2, (y - 0.6) ** 2 + 0.04)
+
+    def evaluate(segment, Z, starts):
+        Z = Z.double()
+        ones = torch.ones(len(Z), dtype=torch.bool)
+        if segment == "segment1":
+            return EvalResult(Z[:, 0] ** 2, ones), [(float(x),) for x in Z[:, 0]]
+        if segment == "segment2":
+            return EvalResult(valleys(Z[:, 0]), ones), [(s[0], float(y)) for s, y in zip(starts, Z[:, 0])]
+        y = torch.tensor([s[1] for s in starts], dtype=torch.float64) if segment == "segment3" else Z[:, 1]
+        cost = Z[:, -1] ** 2 + (Z[:, 0] ** 2 + valleys(Z[:, 1]) if segment == "full" else 0.0)
+        return EvalResult(cost, y > 0, (y > 0).double()), None
+
+    means = []
+    for credit in (0, 2):
+        cfg = StitchConfig(n_prefix=30, n_suffix=30, iterations=10, pool=5, confirm=3, splits=(1, 2), credit=credit,
+                           credit_radius=0.15)
+        s = ChainSearch(full, segs, [[0], [1], [2]], CEConfig(n_envs=30, n_elite=5, iterations=10, seed=0,
+                                                             uniform_share=0.2), cfg)
+        res = s.run(evaluate)
+        means.append(float(s.opts[1].state.mean[0]))
+    assert means[0] < 0 < 0.3 < means[1]
+    assert res.feasible and float(res.z[1]) > 0 and sum(h.dead for h in res.history) > 0
 
 
 def _pool(ids: list[int], parent: list[int], cost: list[float]) -> Pool:

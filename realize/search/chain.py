@@ -200,6 +200,7 @@ class ChainSearch:
             if bool(doomed.any()):  # credit: ranked after the rows that are not (module docstring)
                 r.share = (r.feasible & ~doomed).to(self.dtype)
             rec = self.opts[j].tell(r, eval_time=eval_time)
+            rec.success_share = rec.n_feasible / rec.n_envs  # (the record's, not the share credit ranked by)
             src = self._src
             base_z, base_cost, parent = (Z[:, :0], torch.zeros_like(r.cost), torch.full((Z.shape[0],), -1)) \
                 if src is None else (self.pools[j - 1].z[src], self.pools[j - 1].cost[src], self.pools[j - 1].ids[src])
