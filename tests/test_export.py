@@ -269,7 +269,39 @@ def test_execute_writes_the_bag_and_the_dataset(executed) -> None:
     assert json.loads((out / "lerobot" / "open" / "meta" / "info.json").read_text())["total_episodes"] == 1
 
 
+def test_the_world_file_has_what_the_robot_measured_and_the_dataset_uses_it(executed) -> None:
+    """The executed world's file carries the measured joints and base beside the commands; the
+    joints track their targets (PD drives, within a few degrees of lag) and the LeRobot state
+    is the measurement of the step before (``realize.state_source`` = measured)."""
+    _, _, out, _, _ = executed
+    t = read_trajectory(out / "world-0-open.npz")
+    assert t.joint_positions is not None and t.base_pose is not None
+    assert t.joint_positions.shape == t.joint_targets.shape and t.base_pose.shape == (len(t), 3)
+    lag = np.abs(t.joint_positions - t.joint_targets)
+    assert np.median(lag) < 0.02 and not np.allclose(t.joint_positions, t.joint_targets, atol=1e-6)
+    moved = np.linalg.norm(t.base_pose[-1, :2] - t.base_pose[0, :2])
+    assert moved > 1.0  # the base drove from its start past table 1 and table 2
+    root = out / "lerobot" / "open"
+    info = json.loads((root / "meta" / "info.json").read_text())
+    assert info["realize.state_source"] == ["measured"]
+    data = pq.read_table(root / info["data_path"].format(chunk_index=0, file_index=0)).to_pydict()
+    state = np.array(data["observation.state"])
+    j = len(t.joint_names)
+    assert np.allclose(state[1:, :j], t.joint_positions[:-1], atol=1e-6)
+    assert np.allclose(state[1:, j:j + 3], t.base_pose[:-1], atol=1e-6)
+
+
+def test_a_log_has_measurements_at_every_step_or_none() -> None:
+    log = TrajectoryLog(20.0)
+    log.append(0, 0, "a", {"j": 0.0}, (0.0, 0.0, 0.0), False, measured=[0.0, 1.0, 2.0, 0.1])
+    with pytest.raises(ConfigError, match="every step or never"):
+        log.append(1, 0, "a", {"j": 0.0}, (0.0, 0.0, 0.0), False)
+    with pytest.raises(ConfigError, match="expected 4"):
+        log.append(1, 0, "a", {"j": 0.0}, (0.0, 0.0, 0.0), False, measured=[0.0])
+
+
 def test_a_closed_loop_bag_holds_what_the_monitor_saw(executed_closed) -> None:
+
     """The executor hands what its monitor decided from to the bag: the base, the cube and both
     tables as PoseStamped, one message per check, in time order; table 2's last pose is where
     the disturbance moved it (12 cm in -y)."""

@@ -35,6 +35,7 @@ from realize.execution.precheck import Precheck
 from realize.execution.schedule import Schedule
 from realize.execution.settings import ExecuteSettings
 from realize.execution.world import ExecutionWorld, Observation
+from realize.robot.layout import BASE, UPPER
 
 __all__ = ["Executor", "EXECUTION_BACKEND"]
 
@@ -173,8 +174,10 @@ class Executor:
         base, arm, grip = scene.commanded_targets()
         a = seg.action
         text = HOLD_TEXT if self.holding else str(seg.task.plan[a]) if a < len(seg.task.plan) else ""
+        q = scene.whole_body_q()[0]  # what the encoders and the localizer read (the belief's base where it drifts)
+        x, y, yaw = self._observe().state.base if self.belief is not None else q[BASE].tolist()
         self.traj.append(self.now(), len(self.log.actions) - 1, text, dict(zip(scene.robot.upper.joints, arm[0].tolist())),
-                         base[0].tolist(), bool(grip[0]))
+                         base[0].tolist(), bool(grip[0]), q[UPPER].tolist() + [x, y, yaw])
 
     def _monitor(self, done_action: int | None = None) -> None:
         seg = self.seg

@@ -4,7 +4,9 @@ What it does: ``episode_from_trajectory(trajectory)`` turns one world's executed
 an ``Episode`` (one frame per control step): ``action`` = what was commanded (the upper-joint
 position targets, the base velocity vx, vy, wz in the world frame, the gripper 1 closed / 0
 open); ``observation.state`` = the robot's joint positions, base pose (x, y, yaw) and gripper
-per step where the caller hands them in (``measured``); without them, the COMMANDED state (each
+per step where the caller hands them in (``measured``) or the trajectory file has them (its
+``joint_positions`` and ``base_pose``, read at the end of the previous step: the state each
+command began from; the gripper the previous command); without them, the COMMANDED state (each
 step's state is the previous step's targets; the base pose integrated from the velocity
 commands, relative to the start pose; the gripper the previous command), said so in
 ``meta/info.json`` (``realize.state_source``). Each frame's task is its action's text.
@@ -79,6 +81,10 @@ def episode_from_trajectory(trajectory: Trajectory, measured: np.ndarray | None 
         state = np.asarray(measured, dtype=np.float64)
         if state.shape != (len(t), len(state_names)):
             raise ValueError(f"measured has shape {state.shape}, expected {(len(t), len(state_names))}")
+        source = "measured"
+    elif t.joint_positions is not None and t.base_pose is not None:  # the file has what the robot read
+        prev = np.r_[0, np.arange(len(t) - 1)] if len(t) else np.zeros(0, dtype=int)
+        state = np.concatenate([t.joint_positions[prev], t.base_pose[prev], grip[prev]], axis=1)  # as it began
         source = "measured"
     else:
         prev = np.r_[0, np.arange(len(t) - 1)] if len(t) else np.zeros(0, dtype=int)

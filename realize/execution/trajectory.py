@@ -6,10 +6,12 @@ frame) and the gripper command, with the index and text of the action that step 
 ``save(path)`` writes a compressed ``.npz`` (``TRAJECTORY_FORMAT``): arrays ``step``, ``t_s``,
 ``action``, ``plan_index``, ``joint_names``, ``joint_targets (T, J)``, ``base_velocity (T, 3)``, ``gripper (T,)``,
 ``action_boundaries (A, 2)`` (first and last row of each action, in order of execution),
-``action_text (A,)``, ``control_freq`` and ``format``. ``read_trajectory(path)`` reads it back
-as a ``Trajectory`` and checks the format and the shapes.
+``action_text (A,)``, ``control_freq`` and ``format``; where the log was given what the robot
+measured at each step (its encoders and localization, once the step's command has run), also
+``joint_positions (T, J)`` and ``base_pose (T, 3)`` (x, y, yaw). ``read_trajectory(path)`` reads
+it back as a ``Trajectory`` and checks the format and the shapes.
 ``from_scene(scene, ...)`` is a convenience that appends the scene's current commanded
-targets (``BatchedScene.commanded_targets``, copy 0).
+targets (``BatchedScene.commanded_targets``, copy 0) and its measured joints and base.
 What it doesn't: simulate or drive anything; it keeps what it is given (units are the scene's).
 """
 
@@ -48,6 +50,8 @@ class Trajectory:
     gripper: np.ndarray  # (T,) bool closed
     action_boundaries: np.ndarray  # (A, 2) int64 first and last row (inclusive) of each action
     action_text: tuple[str, ...]
+    joint_positions: np.ndarray | None = None  # (T, J) float64 measured once the step's command has run
+    base_pose: np.ndarray | None = None  # (T, 3) float64 x, y (m), yaw (rad), measured likewise
 
     def __len__(self) -> int:
         return len(self.step)
@@ -65,15 +69,19 @@ class TrajectoryLog:
         self._rows: list[tuple[int, int, list[float], tuple[float, float, float], bool]] = []
         self._texts: list[str] = []  # one per segment (a run of rows of one action)
         self._segments: list[list[int]] = []  # [first row, last row] per segment
+        self._measured: list[list[float]] = []  # per row: joint positions, then base x, y, yaw
 
     def __len__(self) -> int:
         return len(self._rows)
 
     def append(self, step: int, action_index: int, action_text: str, joint_targets: Mapping[str, float],
-               base_velocity: Sequence[float], gripper_closed: bool) -> None:
+               base_velocity: Sequence[float], gripper_closed: bool,
+               measured: Sequence[float] | None = None) -> None:
         """One control step: ``step`` (increasing), the action being executed (its index in the
         plan being run and its text: a new segment starts whenever either changes), the joint
-        position targets by name (the same names every step), (vx, vy, wz), the gripper command."""
+        position targets by name (the same names every step), (vx, vy, wz), the gripper command;
+        ``measured``: the joint positions (the targets' order) then base x, y, yaw, as the robot
+        read them once this command has run (given at every step or never)."""
         names = tuple(joint_targets)
         if self.joint_names is None:
             self.joint_names = names
@@ -84,6 +92,13 @@ class TrajectoryLog:
         bv = tuple(float(v) for v in base_velocity)
         if len(bv) != 3:
             raise ConfigError(f"base_velocity = {base_velocity!r} is invalid: must be (vx, vy, wz)")
+        if (measured is None) != (not self._measured) and self._rows:
+            raise ConfigError("measured: give it at every step or never (a log has it for every row or none)")
+        if measured is not None:
+            m = [float(v) for v in measured]
+            if len(m) != len(names) + 3:
+                raise ConfigError(f"measured has {len(m)} values, expected {len(names) + 3} (joints, then x, y, yaw)")
+            self._measured.append(m)
         row = len(self._rows)
         if not self._segments or self._texts[-1] != action_text or self._rows[-1][1] != action_index:
             self._texts.append(str(action_text))
@@ -94,10 +109,15 @@ class TrajectoryLog:
                            bool(gripper_closed)))
 
     def from_scene(self, scene: BatchedScene, action_index: int, action_text: str, copy: int = 0) -> None:
-        """Append the scene's commanded targets of ``copy`` at its current ``step_count``."""
+        """Append the scene's commanded targets of ``copy`` at its current ``step_count``, with
+        its measured joints and base."""
+        from realize.robot.layout import BASE, UPPER
+
         base, arm, grip = scene.commanded_targets()
         targets = dict(zip(scene.robot.upper.joints, arm[copy].tolist()))
-        self.append(scene.step_count, action_index, action_text, targets, base[copy].tolist(), bool(grip[copy]))
+        q = scene.whole_body_q()[copy]
+        self.append(scene.step_count, action_index, action_text, targets, base[copy].tolist(), bool(grip[copy]),
+                    q[UPPER].tolist() + q[BASE].tolist())
 
     def arrays(self) -> dict[str, np.ndarray]:
         n = len(self._rows)
@@ -119,6 +139,9 @@ class TrajectoryLog:
             "gripper": np.array([r[4] for r in self._rows], dtype=bool),
             "action_boundaries": np.array(self._segments, dtype=np.int64).reshape(-1, 2),
             "action_text": np.array(self._texts, dtype=str),
+            **({"joint_positions": np.array([m[:-3] for m in self._measured], dtype=np.float64).reshape(n, len(names)),
+                "base_pose": np.array([m[-3:] for m in self._measured], dtype=np.float64).reshape(n, 3)}
+               if self._measured else {}),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -151,9 +174,14 @@ def read_trajectory(path: str | Path) -> Trajectory:
     j = len(d["joint_names"])
     shapes = {"t_s": (t,), "action": (t,), "plan_index": (t,), "joint_targets": (t, j), "base_velocity": (t, 3), "gripper": (t,),
               "action_boundaries": (len(d["action_text"]), 2)}
+    if ("joint_positions" in d) != ("base_pose" in d):
+        raise ConfigError(f"{path}: joint_positions and base_pose come together (one of them is missing)")
+    if "joint_positions" in d:
+        shapes.update({"joint_positions": (t, j), "base_pose": (t, 3)})
     for k, shape in shapes.items():
         if d[k].shape != shape:
             raise ConfigError(f"{path}: {k} has shape {d[k].shape}, expected {shape}")
     return Trajectory(fmt, float(d["control_freq"]), d["step"], d["t_s"], d["action"], d["plan_index"],
                       tuple(str(n) for n in d["joint_names"]), d["joint_targets"], d["base_velocity"],
-                      d["gripper"].astype(bool), d["action_boundaries"], tuple(str(s) for s in d["action_text"]))
+                      d["gripper"].astype(bool), d["action_boundaries"], tuple(str(s) for s in d["action_text"]),
+                      d.get("joint_positions"), d.get("base_pose"))
