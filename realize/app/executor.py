@@ -175,7 +175,8 @@ class Executor:
         a = seg.action
         text = HOLD_TEXT if self.holding else str(seg.task.plan[a]) if a < len(seg.task.plan) else ""
         q = scene.whole_body_q()[0]  # what the encoders and the localizer read (the belief's base where it drifts)
-        x, y, yaw = self._observe().state.base if self.belief is not None else q[BASE].tolist()
+        x, y, yaw = (q[BASE].double() + torch.tensor(self.belief.base_error if self.belief is not None else (0.0,) * 3,
+                                                     dtype=torch.float64)).tolist()
         self.traj.append(self.now(), len(self.log.actions) - 1, text, dict(zip(scene.robot.upper.joints, arm[0].tolist())),
                          base[0].tolist(), bool(grip[0]), q[UPPER].tolist() + [x, y, yaw])
 
