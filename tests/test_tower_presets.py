@@ -109,3 +109,21 @@ def test_hand_chosen_top_down_plans_build_the_tower(n: int) -> None:
     for lower, upper in zip(blocks, blocks[1:]):
         assert math.dist(lower[:2].tolist(), upper[:2].tolist()) <= 0.015
         assert abs(float(upper[2] - lower[2]) - 0.045) <= 0.003
+
+
+def test_a_chain_refuses_a_parameter_bound_in_two_segments_and_a_plan_without_a_place_to_cut_after() -> None:
+    """The seed plan that comes back to table 1 binds Table1 in the first and the last segment
+    (cut [2, 4] or [2]): one line naming the key. A plan whose only place is its last action has
+    no place to cut after."""
+    from realize.tasks.split import place_cuts
+
+    back = ["move_to(Table1)", "grasp(cube, Cube_g)", "move_to(Table2)", "place(cube, Cube_p)", "move_to(Table1)"]
+    d, _, task = _task("task.plan=[" + ",".join(f"'{a}'" for a in back) + "]", "task.goal.base_in=null")
+    with pytest.raises(ConfigError, match=r"stitch\.splits = \[2, 4\]: parameter Table1 is bound in segments 0 and 2"):
+        chain_tasks(task, [2, 4])
+    with pytest.raises(ConfigError, match=r"stitch\.splits = \[2\]: parameter Table1 is bound in segments 0 and 1"):
+        chain_tasks(task, [2])  # as split_task refuses one cut there
+    short = _task("task.plan=['move_to(Table1)','grasp(cube, Cube_g)','move_to(Table2)','place(cube, Cube_p)']",
+                  "task.goal.base_in=null")[2]
+    with pytest.raises(ConfigError, match="stitch.cut = after_each_place: the plan of .* has no place followed"):
+        place_cuts(short)
