@@ -4,7 +4,8 @@
 rounds no dropped start is ever asked for again) gives the fixture's numbers bit for bit, so the
 chain realizes, captures and restores states as the one-cut search does. A four-block tower cut
 after each place runs its three segments in order, each from the one before's end states, and
-result.json says which batch was which and each segment's seconds."""
+result.json says which batch was which and each segment's seconds. An interrupted chain run
+resumes to the uninterrupted one's result."""
 
 from __future__ import annotations
 
@@ -48,3 +49,27 @@ def test_a_tower_cut_after_each_place_runs_its_segments_in_order(tmp_path: Path)
     for k in range(1, 4):
         if f"segment{k}" in seq:
             assert (tmp_path / f"history_c{k}.npz").is_file()
+
+
+@pytest.mark.slow
+def test_a_resumed_chain_run_goes_on_from_its_checkpoint(tmp_path: Path) -> None:
+    """Interrupted after round 1's suffix, a chain run (the seed task, credit on, three rounds)
+    resumes from its checkpoint's searches, pools (their states as SceneState JSON), verdicts and
+    stitched plans, and ends as the uninterrupted run, bit for bit."""
+    over = ["levers=stitched", "ce.n_envs=12", "stitch.n_prefix=8", "ce.n_elite=3", "ce.iterations=3", "seed=0",
+            "stitch.credit=2", "validation=off", *QUIET]
+
+    def stop(i: int) -> None:
+        if i == 2:
+            raise KeyboardInterrupt
+
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    assert run(compose_config(*over), whole).status == "done"
+    assert run(compose_config(*over), cut, after_iteration=stop).interrupted
+    ckpt = json.loads((cut / "checkpoint.json").read_text())["ce_state"]
+    assert ckpt["kind"] == "stitched_chain" and ckpt["phase"] == 0 and ckpt["pools"][0]["states"]
+    run(compose_config("logging.progress=false", f"resume={cut}"), tmp_path / "hydra_dir")
+    a, b = (json.loads((d / "result.json").read_text()) for d in (whole, cut))
+    assert b["status"] == "done" and b["stitched"]["segment_per_iter"] == a["stitched"]["segment_per_iter"]
+    for key in ("n_feasible_per_iter", "best_cost_per_iter", "best_cost", "best_z"):
+        assert b[key] == a[key], key
