@@ -103,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
               f"(success share {rep.success_share:.2f})")
         for reason, n in rep.failures.items():
             print(f"  {n:3d} x {reason}")
+        for line in weak_lines(rep.per_action or []):  # where the failed replicas stopped
+            print(f"  {line}")
         if rep.cost_mean is not None:
             print(f"cost of the successful replicas {rep.cost_mean:.1f} +- {rep.cost_std:.1f} "
                   f"(the plan's search cost {rep.saved_cost})")

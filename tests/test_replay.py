@@ -151,6 +151,14 @@ def test_validation_writes_result_json(run_dir: Path) -> None:
     assert all(0.8 <= f / doc["config"]["scene"]["objects"]["cube"]["friction"] <= 1.2 for f in v["friction"]["cube"])
     assert doc["best_z"] == FEASIBLE_Z and doc["config"]["seed"] == 0  # the rest is kept
     assert rep.success_share > 0  # seed 3 gave 3 of 4 when written; the key matters here
+    # where the replicas failed adds up (realize.app.action_outcomes): completed never grows along the
+    # plan, the goal's is the successes, each entry's failures are its started - completed, all sum to the misses
+    acts, ok = v["per_action"], round(4 * v["success_share"])
+    assert [a["action"] for a in acts] == [str(a) for a in build_replay_spec(saved_plan(run_dir)).task.plan] + ["goal"]
+    assert all(x["completed"] >= y["completed"] for x, y in zip(acts, acts[1:])) and acts[-1]["completed"] == ok
+    assert all(sum(a["failures"].values()) == a["started"] - a["completed"] for a in acts)
+    assert sum(sum(a["failures"].values()) for a in acts) == 4 - ok == sum(v["failures"].values())
+    assert [(s["first"], s["last"], s["completed"]) for s in v["per_segment"]] == [(0, len(acts) - 2, ok)]
 
 
 @pytest.mark.slow  # a whole run and its video: make test-all

@@ -15,7 +15,8 @@ Modules, by what you look for (docs/architecture.md draws the path through them)
   ``realizers`` (the scene and realizers of a run), ``workers/`` (rollout workers: this process,
   local processes or Ray actors).
 * Validation and replay: ``candidate_validation`` (the K best plans in perturbed worlds, one
-  returned), ``validation`` (replicas of the returned plan), ``replay`` / ``replay_shard`` (the
+  returned), ``validation`` (replicas of the returned plan), ``action_outcomes`` (where in the
+  plan the replicas failed: per action and per segment), ``replay`` / ``replay_shard`` (the
   best plan again, in one copy or in its own shard), ``video``.
 * Replanning, execution and repair: ``replan`` (the rest of a plan from a state), ``resequence`` /
   ``resequence_blocks`` / ``pddl_text`` (a new action sequence from an observed scene),

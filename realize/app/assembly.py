@@ -342,6 +342,7 @@ class _Assembly:
     def _validate(self) -> None:
         """``validation``: the run's candidates under the task's perturbations, into result.json
         (after the search: a failure here is logged and leaves the run's results as they are)."""
+        from realize.app.action_outcomes import weak_lines
         from realize.app.candidate_validation import validate_candidates
         from realize.app.replay import ReplayError
 
@@ -359,6 +360,8 @@ class _Assembly:
         print(f"validation: {len(rep.candidates)} candidate(s) x {rep.replicas} replicas; returned {rep.returned} "
               f"(cost {c.cost:.0f}, success {c.success_share:.2f}, 95 % [{c.ci95[0]:.2f}, {c.ci95[1]:.2f}], "
               f"{rep.reason}); {rep.wall_time_s:.1f} s", flush=True)
+        for line in weak_lines(c.per_action or []):  # where the returned plan's failed replicas stopped
+            print(f"validation:   {line}", flush=True)
         if self.spec.logging.rerun:
             try:
                 log_validation(self.run_dir, rep.to_dict())

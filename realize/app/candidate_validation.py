@@ -8,7 +8,8 @@ same R worlds (``realize.tasks.worlds.draw_worlds`` of the task's perturbation m
 validation stream: other worlds than the search's) and once in the unperturbed world, K x (R + 1)
 copies in the run's shards on its workers (``realize.app.validation.simulate_worlds``), and reports for every
 candidate its search cost, nominal cost (re-simulated), success share, 95 % Wilson interval
-(``wilson_interval``), failure reasons and the mean cost of its successful replicas. The plan
+(``wilson_interval``), failure reasons, where in the plan its replicas failed (``per_action``,
+``per_segment``: ``realize.app.action_outcomes``) and the mean cost of its successful replicas. The plan
 to return is the cheapest candidate whose interval's lower bound is at least ``min_success``,
 else the most robust one (highest success share, then cheapest). ``write`` stores it in
 ``result.json`` under ``validation``. ``realize.app.run_config.ValidationSettings`` (the Hydra
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from realize.app.action_outcomes import plan_outcomes
 from realize.app.replay import ReplayError, saved_plan
 from realize.app.validation import (replica_spec, run_validation, simulate_worlds, validation_log_dir,
                                     validation_worlds)
@@ -62,6 +64,10 @@ class CandidateResult:
     cost_mean: float | None  # over its successful replicas
     nominal_cost: float | None = None  # re-simulated in the unperturbed world (None: it failed there)
     search_share: float | None = None  # a robust search's success share over its worlds (ce.replicas > 1)
+    # per action (then the goal) and per stitched segment: replicas that started, completed, failed and why
+    # (realize.app.action_outcomes; None in a block written before they were counted)
+    per_action: list[dict[str, Any]] | None = None
+    per_segment: list[dict[str, Any]] | None = None
 
 
 @dataclass
@@ -162,14 +168,17 @@ def validate_candidates(run_dir: str | Path, candidates: int | None = None, repl
     ok, cost = ok_all[:, 1:], cost_all[:, 1:]
     nominal_ok, nominal_cost = ok_all[:, 0], cost_all[:, 0]
     out = []
+    plan, cuts = [str(a) for a in spec.task.plan], spec.stitch.cuts if spec.stitch is not None else ()
     for j, (z, c, it, share) in enumerate(picked):
-        fails = Counter(f for f in res.failure[j * u + 1:(j + 1) * u] if f)
+        rows = slice(j * u + 1, (j + 1) * u)
+        fails = Counter(f for f in res.failure[rows] if f)
+        where = plan_outcomes(res.action_success[rows], res.goal[rows], res.failure[rows], plan, cuts).to_dict()
         good = cost[j][ok[j]]
         out.append(CandidateResult(z=[float(v) for v in z], cost=c, iteration=it, success_share=float(ok[j].mean()),
                                    ci95=wilson_interval(int(ok[j].sum()), replicas), failures=dict(sorted(fails.items())),
                                    cost_mean=float(good.mean()) if len(good) else None,
                                    nominal_cost=float(nominal_cost[j]) if nominal_ok[j] else None,
-                                   search_share=share))
+                                   search_share=share, **where))
     above = [j for j, r in enumerate(out) if r.ci95[0] >= min_success]
     if above:
         ret, reason = min(above, key=lambda j: (out[j].cost, j)), "cheapest above min_success"

@@ -6,8 +6,9 @@ perturbation model (``TaskSpec.perturbation``; any field can be overridden) by
 ``realize.tasks.worlds.draw_worlds`` (by default the run's seed and replica count: the worlds
 its candidates met, ``run_validation``): each object's xy and yaw, the robot start's xy, each
 object's friction and mass (CPU backend), realizes the plan the run returns in all K copies
-(``nominal``: ``best_z``), and reports the share that reaches the goal, the failure reasons
-and the cost of the successful ones. ``simulate_worlds`` (one world per copy, the copies in the run's shards on its workers) is
+(``nominal``: ``best_z``), and reports the share that reaches the goal, the failure reasons,
+where in the plan the replicas failed (``per_action``, ``per_segment``:
+``realize.app.action_outcomes``) and the cost of the successful ones. ``simulate_worlds`` (one world per copy, the copies in the run's shards on its workers) is
 shared with the candidates' validation.
 ``write_validation`` stores the report in ``result.json`` under ``plan_validation`` (read, add
 the key, write back atomically; the run's own candidates block, ``validation``, stays).
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from realize.app.action_outcomes import plan_outcomes
 from realize.app.replay import ReplayError, build_replay_spec, returned_z, saved_plan
 from realize.app.run_config import ValidationSettings
 from realize.config import ConfigError
@@ -59,6 +61,10 @@ class ValidationReport:
     wall_time_s: float
     plan: str = "best_z"  # which plan: "best_z" or "validation.returned" (realize.app.replay.returned_z)
     candidate: int | None = None  # its index in the run's validation candidates
+    # per action (then the goal) and per stitched segment: replicas that started, completed, failed and why
+    # (realize.app.action_outcomes; None in a report written before they were counted)
+    per_action: list[dict[str, Any]] | None = None
+    per_segment: list[dict[str, Any]] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,6 +112,8 @@ def validate(run_dir: str | Path, replicas: int | None = None, seed: int | None 
         cost_mean=float(costs.mean()) if len(costs) else None, cost_std=float(costs.std()) if len(costs) else None,
         saved_cost=plan.cost if math.isfinite(plan.cost) else None, backend=used_backend,
         wall_time_s=time.perf_counter() - t0, plan=plan.source, candidate=plan.candidate,
+        **plan_outcomes(res.action_success, res.goal, res.failure, [str(a) for a in spec.task.plan],
+                        spec.stitch.cuts if spec.stitch is not None else ()).to_dict(),
     )
     if write:
         write_validation(run.run_dir, report)
