@@ -4,7 +4,7 @@ The two-cubes plan with cube A turned by +-pi/4 and grasped 50 deg off vertical:
 fully open (null, today's default) the closing axis tilts with the turned cube, an open finger
 meets the table in the move in and the grasp times out; pre-shaped to the cube's width across the
 closing axis plus 1 cm, both grasps hold. Straight down on an upright 4.5 cm cube the fingers
-stand 4.5 + 1 cm apart before they close (fully open: ``robot.gripper.width_open``).
+stand 4.5 + 1 cm apart before they close (fully open: the finger joints at ``robot.gripper.open``).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def _rollout(margin: str) -> tuple[list[str], list[int], list[float], float]:
         realizer.action_hook = on_action
         scene.add_step_hook(on_step)
         res = realizer.rollout(torch.tensor(rows, dtype=torch.float64))
-    return list(res.failure), [int(p) for p in res.progress.tolist()], seen["w"], spec.robot.gripper.width_open
+    return list(res.failure), [int(p) for p in res.progress.tolist()], seen["w"], spec.robot.gripper.open * len(spec.robot.gripper.joints)
 
 
 @pytest.mark.parametrize("margin, held", [("null", False), ("0.01", True)])

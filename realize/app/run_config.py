@@ -259,12 +259,12 @@ def read_sim(d: Any, where: str = "sim") -> SimSettings:
 
 def read_robot(d: Any, where: str = "robot") -> RobotSpec:
     """The ``robot`` group -> ``RobotSpec`` (None: the default robot's config file), its joint and
-    link names checked against its URDF."""
+    link names and its gripper (``realize.robot.grip_geometry``) checked against its URDF."""
     from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
     from realize.robot.urdf_names import check_urdf_names
 
     spec = load_robot_spec(DEFAULT_ROBOT) if d is None else RobotSpec.from_mapping(as_mapping(d, where), where)
-    check_urdf_names(spec, where)  # a name the URDF lacks: one line now, not a KeyError from the agent build
+    check_urdf_names(spec, where)  # a name the URDF lacks, a gripper it cannot build: one line, not a traceback
     return spec
 
 
@@ -385,6 +385,9 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     stitch = read_stitch(d.get("stitch"), ce, task, planner.top_k, replan is not None, keys.warm_start is not None)
     rollout = _read_rollout(d.get("controller"))
     robot.fabric_exclusions(rollout.fabric.collision_exclude, [s.name for s in robot.spheres()])  # at the edge
+    from realize.realization.reach_check import check_reach_all
+
+    check_reach_all(candidates, geometry, robot, rollout, source)  # a region a fixed arm never reaches: one line
     return RunSpec(
         seed=keys.seed,
         resume=keys.resume,

@@ -109,17 +109,28 @@ class UpperSpec(Settings):
 @dataclass
 class GripperSpec(Settings):
     """A gripper's driven joints: one (driven alone: a one-sided jaw against a fixed one) or
-    several (``joints[0]`` driven, the others mimic it: a parallel gripper)."""
+    several (``joints[0]`` driven, the others mimic it: a parallel gripper), prismatic or revolute.
+    ``open`` and ``closed`` are in the joint's unit (m or rad, from the URDF); the gap between the
+    pads they leave, the pads' centre and the joint for a gap come from the fingers' kinematics
+    (``realize.robot.grip_geometry``), which also refuses a gripper the agent cannot build."""
 
     joints: tuple[str, ...] = ()
     finger_links: tuple[str, str] = ("", "")  # whose contact forces on an object mean "holding"
-    open: float = setting(0.05)  # finger joint target, m
-    closed: float = setting(-0.01)  # below the closed limit: the fingers squeeze
+    open: float = setting(0.05)  # finger joint target in the joint's unit: m (prismatic) or rad (revolute)
+    closed: float = setting(-0.01)  # the same unit, past the closed limit: the fingers squeeze
     stiffness: float = setting(1e3, ge=0)
     damping: float = setting(1e2, ge=0)
     force: float = setting(100.0, gt=0)
     fingertip_reach: float = setting(0.031, ge=0)  # m the fingertips reach beyond the TCP on the approach axis
     pad_half_width: float = setting(0.013, ge=0)  # m, half width of a finger pad across the closing axis
+    # the settle rule of grasp / place (the fingers close, or open, once the TCP has settled this close
+    # to its goal for this long): this robot's values; None: the controller's (controller.reach_tolerance,
+    # 15 mm; controller.settle_s, 0.5 s). reach_share scales a grasp's tolerance with the gripper and
+    # the object: at most this share of the clearance the open pads leave on each side of the object,
+    # (width_open - width) / 2 (None: not scaled, the fixed tolerance alone)
+    reach_tolerance: float | None = setting(None, gt=0)  # m
+    reach_share: float | None = setting(None, gt=0, le=1)
+    settle_s: float | None = setting(None, gt=0)  # s
     static_friction: float | None = setting(None, ge=0)  # finger material (None: the URDF loader's default)
     dynamic_friction: float | None = setting(None, ge=0)
     patch_radius: float | None = setting(None, ge=0)
@@ -132,11 +143,6 @@ class GripperSpec(Settings):
             raise ConfigError(f"{where}.closed = {self.closed} is invalid: must be < {where}.open = {self.open}")
         if (self.static_friction is None) != (self.dynamic_friction is None):
             raise ConfigError(f"{where}: give both static_friction and dynamic_friction, or neither")
-
-    @property
-    def width_open(self) -> float:
-        """Sum of the finger joints at the open target (m)."""
-        return self.open * len(self.joints)
 
 
 @dataclass

@@ -5,7 +5,9 @@ XML only, no meshes) and refuses, in one ``ConfigError`` line naming the key, a 
 drives or holds that the URDF does not have as a movable joint (``base.joints``,
 ``upper.joints``, ``gripper.joints``, ``held``, ``rest``) and a link it names that the URDF does
 not have (``base.link``, ``tcp.link``, ``gripper.finger_links``, ``collision.*``). Without it, a
-misspelt finger link surfaced as a bare ``KeyError`` from inside ManiSkill's agent build.
+misspelt finger link surfaced as a bare ``KeyError`` from inside ManiSkill's agent build. Then
+the gripper itself (``realize.robot.grip_geometry.check_gripper``: joint types, units, limits,
+what the fingers reach).
 What it doesn't: check geometry, limits or whether the simulated robot behaves (the agent build
 and the scene's own check of the driven joints do), or read the sphere file.
 """
@@ -51,3 +53,6 @@ def check_urdf_names(spec: RobotSpec, where: str = "robot") -> None:
                        (f"{where}.collision.lean_drop_links", c.lean_drop_links),
                        (f"{where}.collision.ignore_pairs", [n for pair in c.ignore_pairs for n in pair])):
         _refuse(key, "link", names, links, name)
+    from realize.robot.grip_geometry import check_gripper  # (it reads the finger meshes too)
+
+    check_gripper(spec, where)

@@ -249,7 +249,8 @@ class BatchedScene(ObjectProperties):
         return self._base_cmd.clone(), self._arm_target.clone(), self._grip_target == self._grip_closed
 
     def finger_width(self) -> torch.Tensor:
-        """(N,) sum of the finger joint positions (m): ``robot.gripper.width_open`` fully open."""
+        """(N,) sum of the finger joint positions (the joints' unit: m or rad; the gap between the pads
+        they leave is ``realize.robot.grip_geometry``'s)."""
         return self._read("qpos", self._impl.qpos)[:, self._finger_idx].sum(dim=1)
 
     def ee_pose(self) -> torch.Tensor:

@@ -42,6 +42,12 @@ class Hemisphere(Region, Settings):
     height range, the azimuth uniform). Yaw is uniform on ``[yaw_min, yaw_max]`` (default
     ``[-pi, pi)``, wrapped).
 
+    With ``azimuth`` (rad) and ``azimuth_half_width`` < pi, the cap is also limited to the
+    azimuth band ``|phi - azimuth| <= azimuth_half_width`` (``phi`` of ``p - center``), sampled
+    uniformly in it; ``facing: robot`` centres that band on the robot's start when the task is
+    placed in its scene (``realize.tasks.spec``): the approach of a 5-joint arm, which tilts only
+    in the vertical plane through its base.
+
     ``project`` gives the nearest point of the cap surface: keep the azimuth of ``p - center``,
     clamp its polar angle into the band, put it at ``radius``. (That is exactly the nearest
     point, since within a polar band the great-circle distance is minimised at equal azimuth.)
@@ -65,6 +71,13 @@ class Hemisphere(Region, Settings):
     yaw: bool = False
     yaw_min: float = -math.pi
     yaw_max: float = math.pi
+    # an azimuth band: p - center's azimuth within azimuth +- azimuth_half_width (rad, world frame);
+    # None: all around. facing: robot sets azimuth toward the robot's start (a fixed-base arm's
+    # base) when the task is placed in its scene: the pre-poses between the base and the centre,
+    # the approach pointing away from the base (a 5-joint arm tilts only in that vertical plane)
+    azimuth: float | None = None
+    azimuth_half_width: float = setting(math.pi, gt=0, le=math.pi)
+    facing: str | None = setting(None, choices=("robot",))
 
     def check(self, where: str) -> None:
         if self.polar_min > self.polar_max:
@@ -74,6 +87,11 @@ class Hemisphere(Region, Settings):
         if self.yaw_max - self.yaw_min > 2.0 * math.pi + 1e-12:
             raise ConfigError(f"{where}.yaw_max = {self.yaw_max} is invalid: yaw_max - yaw_min must be <= 2*pi, "
                               f"got {self.yaw_max - self.yaw_min}")
+
+    @property
+    def banded(self) -> bool:
+        """Whether the azimuth is limited to a band (``azimuth`` set, narrower than the circle)."""
+        return self.azimuth is not None and self.azimuth_half_width < math.pi
 
     @property
     def full_yaw(self) -> bool:
@@ -98,7 +116,10 @@ class Hemisphere(Region, Settings):
         cos_hi, cos_lo = math.cos(self.polar_min), math.cos(self.polar_max)
         cos_t = cos_lo + u[:, 0] * (cos_hi - cos_lo)
         sin_t = torch.sqrt((1.0 - cos_t * cos_t).clamp_min(0.0))
-        phi = (2.0 * math.pi) * u[:, 1] - math.pi
+        if self.banded:
+            phi = self.azimuth + self.azimuth_half_width * (2.0 * u[:, 1] - 1.0)
+        else:
+            phi = (2.0 * math.pi) * u[:, 1] - math.pi
         d = torch.stack([sin_t * torch.cos(phi), sin_t * torch.sin(phi), cos_t], dim=-1)
         p = self._c(u) + self.radius * d
         if not self.yaw:
@@ -119,6 +140,10 @@ class Hemisphere(Region, Settings):
         theta = self._polar(d)
         ang_tol = tol / self.radius
         ok = ((r - self.radius).abs() <= tol) & (theta >= self.polar_min - ang_tol) & (theta <= self.polar_max + ang_tol)
+        if self.banded:  # near the pole the azimuth does not matter
+            rho = torch.linalg.vector_norm(d[:, :2], dim=-1)
+            rel = wrap_angle(torch.atan2(d[:, 1], d[:, 0]) - self.azimuth).abs()
+            ok = ok & ((rel <= self.azimuth_half_width + tol / self.radius) | (rho <= tol))
         if self.yaw and not self.full_yaw:
             y = z[:, 3]
             ok = ok & (y >= self.yaw_min - tol) & (y <= self.yaw_max + tol)
@@ -134,6 +159,8 @@ class Hemisphere(Region, Settings):
         # p == center: atan2(0, 0) = 0 -> the top of the sphere, clamped into the band below
         theta = torch.atan2(rho, d[:, 2]).clamp(self.polar_min, self.polar_max)
         phi = torch.atan2(d[:, 1], d[:, 0])  # 0 on the z-axis (atan2(0, 0) = 0)
+        if self.banded:  # the azimuth clamped into its band
+            phi = self.azimuth + wrap_angle(phi - self.azimuth).clamp(-self.azimuth_half_width, self.azimuth_half_width)
         st = torch.sin(theta)
         p = c + self.radius * torch.stack([st * torch.cos(phi), st * torch.sin(phi), torch.cos(theta)], dim=-1)
         if not self.yaw:
@@ -217,4 +244,29 @@ class Hemisphere(Region, Settings):
         if self.yaw:
             d["yaw_min"] = self.yaw_min
             d["yaw_max"] = self.yaw_max
+        if self.azimuth is not None:
+            d["azimuth"] = self.azimuth
+            d["azimuth_half_width"] = self.azimuth_half_width
+        if self.facing is not None:
+            d["facing"] = self.facing
         return d
+
+    def turn_toward(self, pre: Tensor, centre: Tensor, point: Tensor) -> Tensor:
+        """(n, 3) pre-poses ``pre`` (n, 3) sampled on this region, carried to a region centred at
+        ``centre`` (n, 3) (the object where it lies) and turned about the vertical so that the
+        middle of the azimuth band points at ``point`` (n, 2) (a ``facing: robot`` region, at the
+        arm's base axis where it stands). An unbanded region: only carried."""
+        rel = pre - self._c(pre)
+        if self.azimuth is None:
+            return centre + rel
+        d = point - centre[:, :2]
+        turn = torch.atan2(d[:, 1], d[:, 0]) - self.azimuth
+        c, s = torch.cos(turn), torch.sin(turn)
+        x, y = c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]
+        return centre + torch.stack([x, y, rel[:, 2]], dim=1)
+
+    def facing_from(self, x: float, y: float) -> "Hemisphere":
+        """This region with ``azimuth`` toward the point (x, y) (``facing: robot``: the robot's start)."""
+        from dataclasses import replace
+
+        return replace(self, azimuth=math.atan2(y - self.center[1], x - self.center[0]))

@@ -23,6 +23,7 @@ from typing import Any, Mapping, Sequence
 
 from realize.config import ConfigError, check_unknown, did_you_mean
 from realize.tasks.frames import WORLD, object_frames, place_region
+from realize.tasks.hemisphere import Hemisphere
 from realize.world.geometry import SceneGeometry
 from realize.tasks.goal_spec import GoalSpec, goal_from_dict
 from realize.tasks.param_layout import ParamLayout, region_from_dict
@@ -200,7 +201,10 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
             raise
         except (ValueError, TypeError, KeyError) as e:
             raise ConfigError(str(e)) from None
-        regions[str(name)] = place_region(region, known_frames[frame], where)
+        region = place_region(region, known_frames[frame], where)
+        if isinstance(region, Hemisphere) and region.facing == "robot":  # the band toward the robot's start
+            region = region.facing_from(*scene.robot_start[:2])
+        regions[str(name)] = region
         if frame != WORLD:
             frames[str(name)] = frame
     layout = ParamLayout(regions)

@@ -21,6 +21,7 @@ from realize.realization.actions.base import Template
 from realize.realization.context import StepContext
 from realize.tasks.regions import Region
 from realize.scene import quat_to_matrix
+from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import GripperSpec
 
 
@@ -40,6 +41,23 @@ def tcp_target(centre: Tensor, approach: Tensor, support_z: Tensor, hand: Grippe
     back = (support_z + clearance - centre[:, 2] - lowest) / (-a_z)
     back = back.clamp(min=0.0) + offset
     return centre - approach * back[:, None]
+
+
+def base_axis_xy(kin: RobotKinematics, q: Tensor) -> Tensor:
+    """(n, 2) where the axis of the arm's first joint (a 5-joint arm's pan) stands, for whole-body
+    ``q`` (n, n_dof): the origin of the link that joint moves, which lies on its axis."""
+    link = {j.name: j for j in kin.joints.values()}[kin.spec.upper.joints[0]].child
+    return kin.link_positions(q.to(kin.dtype), [link])[:, 0, :2]
+
+
+def _bearing(v: Tensor) -> Tensor:
+    return torch.atan2(v[:, 1], v[:, 0])
+
+
+def turn_about_z(v: Tensor, angle: Tensor) -> Tensor:
+    """(n, 3) vectors ``v`` turned by ``angle`` (n,) rad about the vertical."""
+    c, s = torch.cos(angle), torch.sin(angle)
+    return torch.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1], v[:, 2]], dim=1)
 
 
 def square_approach(approach: Tensor, face: Tensor, max_turn: float) -> Tensor:
@@ -72,6 +90,7 @@ class Manipulate(Template):
         self.approach = torch.zeros(n, 3, device=device)
         self.closing = torch.zeros(n, 3, device=device)
         self.obj = torch.zeros(n, dtype=torch.long, device=device)  # the object each plan handles
+        self.reach_tol = torch.zeros(n, device=device)  # m: the settle rule's tolerance of each plan
 
     @classmethod
     def accepts(cls, region: Region) -> bool:
@@ -93,22 +112,36 @@ class Manipulate(Template):
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
               shift: Tensor | None = None, support: int = -1) -> Tensor:
         centre, pre = self._centre_and_pre(ctx, params, region, shift)
+        near = ctx.closing[rows]  # the goal closing axis: the face normal nearest the gripper's now
+        if isinstance(region, Hemisphere) and region.facing == "robot":  # in the plane through the arm's base axis
+            axis = base_axis_xy(ctx.fabric.kin, ctx.q[rows]).to(pre.dtype)
+            pre = region.turn_toward(pre, centre, axis)
+            # an arm that turns only about that axis carries its closing axis round with it: the
+            # face normal nearest the closing axis turned as the arm turns from its TCP to the centre
+            near = turn_about_z(near, _bearing(centre[:, :2] - axis) - _bearing(ctx.tcp[rows, :2] - axis))
         d = centre - pre
         approach = d / d.norm(dim=1, keepdim=True).clamp(min=1e-6)
         turn = self._approach_turn(ctx, obj)
         if turn is not None:  # the approach turned toward the plane of the face the fingers will close on
-            approach = square_approach(approach, self._closing_axis(ctx, rows, approach, obj, raw=True), turn)
+            approach = square_approach(approach, self._closing_axis(ctx, rows, approach, obj, raw=True, near=near), turn)
             pre = centre - approach * d.norm(dim=1, keepdim=True)
         self.obj[rows] = obj
         self.pre[rows] = pre
         self.approach[rows] = approach
-        self.closing[rows] = self._closing_axis(ctx, rows, approach, obj)
+        self.closing[rows] = self._closing_axis(ctx, rows, approach, obj, near=near)
         self.target[rows] = self._target(ctx, rows, centre, approach, obj)
+        self.reach_tol[rows] = self._reach_tolerance(ctx, rows, obj)
         self.phase[rows] = APPROACH
         self.phase_t[rows] = 0
         self.t[rows] = 0
         ctx.start_fabric(rows)
         return torch.zeros(len(rows), dtype=torch.long, device=self.device)
+
+    def _reach_tolerance(self, ctx: StepContext, rows: Tensor, obj: int) -> Tensor:
+        """(len(rows),) m: how close a settled TCP must be to its goal: the robot's
+        ``gripper.reach_tolerance``, else ``controller.reach_tolerance``."""
+        tol = ctx.scene.robot.gripper.reach_tolerance
+        return torch.full((len(rows),), ctx.cfg.reach_tolerance if tol is None else tol, device=self.device)
 
     def _approach_turn(self, ctx: StepContext, obj: int) -> float | None:
         """rad the approach may turn toward its closing face (``square_approach``); None: as sampled."""
@@ -122,7 +155,8 @@ class Manipulate(Template):
         return tcp_target(centre, approach, support, ctx.scene.robot.gripper, ctx.cfg.grasp_clearance,
                           ctx.cfg.grasp_offset)
 
-    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor, obj: int, raw: bool = False) -> Tensor:
+    def _closing_axis(self, ctx: StepContext, rows: Tensor, approach: Tensor, obj: int, raw: bool = False,
+                      near: Tensor | None = None) -> Tensor:
         """Closing axis of the goal pose: the object's face normal (perpendicular to the
         approach) nearest to the gripper's current closing axis, so the fingers close on two
         faces; a cylinder offers only the axes across its own (it is never squeezed end to end).
@@ -130,7 +164,7 @@ class Manipulate(Template):
         frame = quat_to_matrix(ctx.objects[rows, obj, 3:7])  # (n, 3, 3), columns = object axes
         if ctx.scene.geometry.objects[obj].shape == "cylinder":
             frame = frame[:, :, :2]
-        return self._face_axis(frame, approach, ctx.closing[rows], raw)
+        return self._face_axis(frame, approach, ctx.closing[rows] if near is None else near, raw)
 
     def _face_axis(self, frame: Tensor, approach: Tensor, near: Tensor, raw: bool = False) -> Tensor:
         """(n, 3): of the axes ``frame`` (n, 3, k) and their opposites, projected perpendicular
@@ -191,10 +225,10 @@ class Manipulate(Template):
         err = (tcp - self._goal(rows)).norm(dim=1)
         axis_ok = (ctx.approach[rows] * self.approach[rows]).sum(dim=1) >= math.cos(cfg.axis_tolerance)
         to_descend = (ph == APPROACH) & (err <= cfg.pregrasp_tolerance) & axis_ok
-        # close when at the target, or when settled within reach_tolerance of it (the fingers
-        # or the robot's own collision terms may hold the TCP a few mm off)
+        # close when at the target, or when settled within the reach tolerance of it (the fingers
+        # or the robot's own collision terms may hold the TCP a few mm off; _reach_tolerance)
         ramp_done = self.phase_t[rows] * ctx.dt * cfg.approach_speed >= (self.pre[rows] - self.target[rows]).norm(dim=1)
-        settled = ramp_done & (self.phase_t[rows] >= self._settle_steps(ctx, rows)) & (err <= cfg.reach_tolerance)
+        settled = ramp_done & (self.phase_t[rows] >= self._settle_steps(ctx, rows)) & (err <= self.reach_tol[rows])
         to_grip = (ph == DESCEND) & ((err <= cfg.grip_tolerance) | settled)
         new = torch.where(to_descend, DESCEND, torch.where(to_grip, GRIP, ph))
         changed = new != ph
@@ -220,7 +254,8 @@ class Manipulate(Template):
 
     def _settle_steps(self, ctx: StepContext, rows: Tensor) -> Tensor:
         ramp = (self.pre[rows] - self.target[rows]).norm(dim=1) / (ctx.cfg.approach_speed * ctx.dt)
-        return ramp.ceil().long() + ctx.steps(ctx.cfg.settle_s)
+        settle = ctx.scene.robot.gripper.settle_s
+        return ramp.ceil().long() + ctx.steps(ctx.cfg.settle_s if settle is None else settle)
 
     def distance(self, ctx: StepContext, rows: Tensor) -> Tensor:
         return (ctx.tcp[rows] - self.target[rows]).norm(dim=1)
