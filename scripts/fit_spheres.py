@@ -9,7 +9,10 @@ Usage::
 ROBOT names ``configs/robot/ROBOT.yaml`` (``realize.robot.spec.load_robot_spec``); its URDF is
 read as the source file (collision meshes only, so no derived URDF is needed). ``--urdf`` reads a
 URDF directly instead. Each link gets ``--count LINK=N`` spheres, or else the fewest (up to
-``--max-spheres``) whose radii are all at most ``--max-radius`` (``realize.robot.sphere_fit``).
+``--max-spheres``) whose radii are all at most ``--max-radius`` (``realize.robot.sphere_fit``);
+without ``--max-radius``, each link's own bound: half the middle edge of its collision geometry's
+bounding box (its thickness: a long 20 x 15 x 10 cm arm link gets 7.5 cm, a 10 x 5 x 3 cm jaw
+2.5 cm), so a small arm's spheres are sized to its links, not to a Panda's.
 The file goes to ``realize/robot/spheres/ROBOT.yaml`` unless ``--out`` says otherwise; a coverage
 report (per link: spheres, share of fresh surface samples inside the link's own spheres, how
 far the worst sample is outside, largest overshoot; and in total) is printed. ``--compare FILE``
@@ -184,6 +187,13 @@ def borrowed_coverage(joints: dict[str, JointSpec], geoms: dict[str, LinkGeometr
 # ----------------------------------------------------------------------------- main
 
 
+def link_radius_bound(geometry: LinkGeometry) -> float:
+    """The default sphere radius bound of a link (m): half the middle edge of its collision
+    geometry's axis-aligned bounding box (in its own frame)."""
+    edges = sorted(float(e) for e in geometry.bounds[1] - geometry.bounds[0])
+    return 0.5 * edges[1]
+
+
 def _parse_counts(items: list[str]) -> dict[str, int]:
     counts = {}
     for item in items:
@@ -200,7 +210,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--urdf", help="read this URDF instead of the robot config's")
     ap.add_argument("--links", nargs="+", help="fit only these links (default: every link with collision geometry)")
     ap.add_argument("--count", action="append", default=[], metavar="LINK=N", help="spheres for one link")
-    ap.add_argument("--max-radius", type=float, default=0.09, help="radius bound for links without --count (m)")
+    ap.add_argument("--max-radius", type=float, default=None,
+                    help="radius bound for links without --count (m); default: half the middle edge of each link's "
+                         "bounding box")
     ap.add_argument("--max-spheres", type=int, default=4, help="sphere bound per link without --count")
     ap.add_argument("--samples", type=int, default=3000, help="surface samples fitted per link")
     ap.add_argument("--seed", type=int, default=0)
@@ -242,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
         if link in counts:
             spheres = fit_spheres(g, n_spheres=counts[link], n_samples=args.samples, seed=args.seed)
         else:
-            spheres = fit_spheres(g, max_radius=args.max_radius, max_spheres=args.max_spheres,
+            bound = link_radius_bound(g) if args.max_radius is None else args.max_radius
+            spheres = fit_spheres(g, max_radius=bound, max_spheres=args.max_spheres,
                                   n_samples=args.samples, seed=args.seed)
         checks = floor_checks(joints, g, spheres, args.floor_tol)
         fitted += [SphereSpec(f"{link}_{i}", link, s.centre, s.radius, c)
