@@ -2,7 +2,7 @@
 
 Usage: python scripts/execute.py RUN_DIR [--disturbance FAMILY|FILE.yaml] [--worlds W] [--seed S]
             [--max-replans N] [--noise PRESET] [--think measured|frozen|STEPS] [--check-copies K]
-            [--open-only | --closed-only] [--n-envs N] [--iterations T]
+            [--open-only | --closed-only] [--n-envs N] [--iterations T] [--validation R]
             [--video] [--no-rerun] [--out DIR] [--json] [--export ros2,lerobot] [--accel-limit A]
 
 FAMILY is a preset of configs/execute/ (none, cube_moved, table_moved, knocked_out, obstacle) or a
@@ -56,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
                         f"given, {ReplanBudget.elites_for(32)} of 32: an eighth from 32 on, a quarter below)")
     p.add_argument("--iterations", type=int, default=None,
                    help=f"most CE iterations per replan (default {budget.iterations})")
+    p.add_argument("--validation", type=int, default=None,
+                   help=f"replicas each replan validates its candidates in, returning the most robust "
+                        f"(default {budget.validation}: none, the first plan that reaches the goal)")
     p.add_argument("--video", action="store_true", help="an MP4 per world")
     p.add_argument("--no-rerun", action="store_true", help="no .rrd per world")
     p.add_argument("--out", default=None, help="output directory (default RUN_DIR/execution/FAMILY)")
@@ -90,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
             changed["precheck"] = {**dataclasses.asdict(settings.precheck), "copies": a.check_copies}
         if changed:
             settings = type(settings).from_mapping({**dataclasses.asdict(settings), **changed}, "execute")
-        kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations)) if v is not None}
+        kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations), ("validation", a.validation))
+              if v is not None}
         if a.n_envs is not None:
             kw["n_elite"] = ReplanBudget.elites_for(a.n_envs)
         budget = ReplanBudget(**kw)

@@ -30,8 +30,9 @@ from realize.execution.disturbances import Scheduled
 from realize.execution.monitor import Deviation, check, expectation
 from realize.execution.in_hand import square_in_hand
 from realize.execution.layout_updates import apply_geometry_updates, geometry_updates
-from realize.execution.perception import Belief, Sensor
+from realize.execution.perception import Noise
 from realize.execution.precheck import Precheck
+from realize.execution.robot_view import RobotView
 from realize.execution.schedule import Schedule
 from realize.execution.settings import ExecuteSettings
 from realize.execution.world import ExecutionWorld, Observation
@@ -88,9 +89,8 @@ class Executor:
         self.clock = 0  # control steps of the world's timeline (segments and holds)
         self.holding = False  # the robot holds while the planner thinks: no monitor
         self.tries = 0  # replans in a row that found no plan (the next one searches longer)
-        noise = settings.noise
-        self.sensor = None if noise.off or not closed else Sensor(noise, self.world.scene.control_dt, world_seed)
-        self.belief = None if noise.off or not closed else Belief(noise)
+        self.view = RobotView(self.world, settings.noise if closed else Noise(), world_seed)  # open loop sees nothing
+        self.belief = self.view.belief
         self.precheck = Precheck(spec, settings.precheck, world_seed) if closed else None
         self.world.scene.add_step_hook(self._on_step)
 
@@ -101,37 +101,7 @@ class Executor:
 
     def _observe(self) -> Observation:
         """What the robot decides from: the world itself (no noise) or its filtered belief."""
-        truth = self.world.observe()
-        if self.belief is None:
-            return truth
-        return self.belief.observation(dataclasses.replace(truth, step=self.now()))
-
-    def _seen_objects(self) -> torch.Tensor:
-        """(1, n_objects, 3) where the robot believes each object's centre is (the scene's order)."""
-        seen = self._observe().state.objects
-        return torch.tensor([[seen[n].position for n in self.world.scene.object_names]], dtype=torch.float32)
-
-    def _base_error(self) -> torch.Tensor:
-        """(1, 3) how far off the localizer has the base (x, y, yaw)."""
-        assert self.belief is not None
-        return torch.tensor([self.belief.base_error], dtype=torch.float32)
-
-    def _sense(self, step0: bool = False) -> None:
-        if self.sensor is None or self.belief is None:
-            return
-        now = self.now()
-        if step0:  # the robot looks before it moves: the first reading needs no wait
-            if self.belief.readings == 0:
-                r = self.sensor.read(dataclasses.replace(self.world.observe(), step=now))
-                while r is None:  # a dropped first look: look again
-                    r = self.sensor.read(dataclasses.replace(self.world.observe(), step=now))
-                self.sensor.deliver(now + self.sensor.latency_steps)
-                self.belief.update(r)
-            return
-        if now % self.settings.noise.every == 0:
-            self.sensor.read(dataclasses.replace(self.world.observe(), step=now))
-        for r in self.sensor.deliver(now):
-            self.belief.update(r)
+        return self.view.observe(self.now())
 
     def _on_action(self, a: int, rows: torch.Tensor) -> None:
         if not bool((rows == 0).any()) or self.seg is None:
@@ -150,11 +120,11 @@ class Executor:
         if self.seg is None:
             return
         if step == 0:
-            self._sense(step0=True)
+            self.view.sense(self.now(), first=True)
             return
         self.clock += 1
         scene, now = self.world.scene, self.now()
-        self._sense()
+        self.view.sense(self.now())
         self._record()
         for s in self.schedule.due(now, held=self.world.held()):
             text = self.world.apply(s)
@@ -175,8 +145,7 @@ class Executor:
         a = seg.action
         text = HOLD_TEXT if self.holding else str(seg.task.plan[a]) if a < len(seg.task.plan) else ""
         q = scene.whole_body_q()[0]  # what the encoders and the localizer read (the belief's base where it drifts)
-        x, y, yaw = (q[BASE].double() + torch.tensor(self.belief.base_error if self.belief is not None else (0.0,) * 3,
-                                                     dtype=torch.float64)).tolist()
+        x, y, yaw = (q[BASE].double() + self.view.base_error()[0].double()).tolist()
         self.traj.append(self.now(), len(self.log.actions) - 1, text, dict(zip(scene.robot.upper.joints, arm[0].tolist())),
                          base[0].tolist(), bool(grip[0]), q[UPPER].tolist() + [x, y, yaw])
 
@@ -225,9 +194,9 @@ class Executor:
                                         geometry=seg.belief)
                 realizer.action_hook = self._on_action
                 if self.belief is not None:  # the controllers act on the belief: objects and base where it has them
-                    realizer.seen_objects = self._seen_objects
+                    realizer.seen_objects = lambda: self.view.seen_objects(self.now())
                     if self.world.scene.robot.base.joints:
-                        realizer.base_error = self._base_error
+                        realizer.base_error = self.view.base_error
                 reasons, obs, a_fail, done = self._segment(seg, realizer, resume)
                 if done:
                     self.log.success = True

@@ -9,7 +9,8 @@ Modules:
   * ``world``: ``ExecutionWorld`` (the world copy, disturbed on cue) and ``Observation``;
     ``layout_updates``: an observation as changes of the planner's scene config;
   * ``perception``: the observation model (noise, base drift, latency, drops) and the
-    filtered ``Belief`` the executor decides from;
+    filtered ``Belief`` the executor decides from; ``robot_view``: the world or that belief,
+    as the executor and the controllers read it;
   * ``monitor``: the ``Deviation`` checks of a belief against what the plan expects;
   * ``precheck``: the rest of the plan simulated from the belief in perturbed copies;
     ``in_hand``: a held object squared in the hand where a restore of its grip slips;

@@ -335,11 +335,9 @@ class PlanRealizer:
         self.start = start  # every rollout starts from this state (None: the task's initial state)
         # hook(a, rows) when plans ``rows`` (copies) are about to begin action a (replay captures states)
         self.action_hook: Callable[[int, Tensor], None] | None = None
-        # where the robot sees the objects (n_envs, n_objects, >= 3), read when an action aims at a
-        # region framed by one (controller.track_objects); None: the scene's own poses (exact)
+        # what an executor's robot believes (None: the scene's exact state): the objects (n_envs, n_objects, >= 3),
+        # read as an action aims at a region framed by one; its base's error (n_envs, 3), read every control step
         self.seen_objects: Callable[[], Tensor] | None = None
-        # how far off the robot's localization has its base (n_envs, 3: x, y, yaw), read every
-        # control step: the controllers then steer the believed base; None: the exact one
         self.base_error: Callable[[], Tensor] | None = None
         self.cfg = cfg or RolloutConfig()  # checked when it was built
         self.seed = seed
