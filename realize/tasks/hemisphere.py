@@ -48,8 +48,8 @@ class Hemisphere(Region, Settings):
     placed in its scene (``realize.tasks.spec``): the approach of a 5-joint arm, which tilts only
     in the vertical plane through its base.
 
-    ``project`` gives the nearest point of the cap surface: keep the azimuth of ``p - center``,
-    clamp its polar angle into the band, put it at ``radius``. (That is exactly the nearest
+    ``project`` gives the nearest point of the cap surface: keep the azimuth of ``p - center``
+    (with an azimuth band: clamped into it), clamp its polar angle into the band, put it at ``radius``. (That is exactly the nearest
     point, since within a polar band the great-circle distance is minimised at equal azimuth.)
     ``p == center`` goes to the point of the cap closest to the top (+z) at azimuth 0; a point on
     the z-axis keeps azimuth 0. Yaw is wrapped to ``[-pi, pi)`` when the range is the full circle,
@@ -252,13 +252,14 @@ class Hemisphere(Region, Settings):
         return d
 
     def turn_toward(self, pre: Tensor, centre: Tensor, point: Tensor) -> Tensor:
-        """(n, 3) pre-poses ``pre`` (n, 3) sampled on this region, carried to a region centred at
-        ``centre`` (n, 3) (the object where it lies) and turned about the vertical so that the
-        middle of the azimuth band points at ``point`` (n, 2) (a ``facing: robot`` region, at the
-        arm's base axis where it stands). An unbanded region: only carried."""
-        rel = pre - self._c(pre)
+        """(n, 3) pre-poses ``pre`` (n, 3) of this region centred at ``centre`` (n, 3) (its own
+        centre, or the object's where it lies now, the pre-poses moved with it) turned about the
+        vertical through ``centre`` so that the middle of the azimuth band points at ``point``
+        (n, 2) (a ``facing: robot`` region: the arm's base axis where it stands). An unbanded
+        region's are returned as they are."""
+        rel = pre - centre
         if self.azimuth is None:
-            return centre + rel
+            return pre
         d = point - centre[:, :2]
         turn = torch.atan2(d[:, 1], d[:, 0]) - self.azimuth
         c, s = torch.cos(turn), torch.sin(turn)
