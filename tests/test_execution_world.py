@@ -303,6 +303,35 @@ def test_a_box_drawn_onto_the_robot_slides_on_until_it_is_clear(spec) -> None:
         assert w.observe().state.base[:2] == pytest.approx(base[:2], abs=0.01)  # nothing was thrown
 
 
+def test_a_firm_grip_survives_the_shake_and_an_open_hand_does_not(spec) -> None:
+    """Precheck.grip_holds restores the grip and, on the mobile base, drives it back and forth
+    at the PID's top speed: the fixture's grip (the cube square between the fingers) holds
+    through it; a grip of a measured world (table_moved, world 6), askew in the fingers, holds
+    at rest but not through the shake, which a replan's move_to(Table2) then found in all 32
+    of its rows (place: not_holding); squared in the hand and centred between the pads it holds."""
+    from realize.execution.in_hand import square_in_hand
+    from realize.execution.precheck import GRIP_STEPS, Precheck
+    from realize.execution.settings import ExecuteSettings
+
+    check = Precheck(spec, ExecuteSettings().precheck, 0)
+    try:
+        assert check.grip_holds(load_state(FIXTURE), spec.geometry_cfg)
+        askew = load_state(FIXTURE.parent / "state_grip_askew.json")
+        assert not check.grip_holds(askew, spec.geometry_cfg)
+        scene, _ = check._scene(spec.geometry_cfg)
+        scene.reset(seed=spec.seed, state=askew)
+        scene.hold_still()
+        for _ in range(GRIP_STEPS):
+            scene.step()
+        assert int(scene.held_object()[0]) == 0  # at rest it holds: only the shake tells
+        hand = scene.ee_pose()[0].tolist()
+        cube = spec.geometry.object("cube")
+        assert not check.grip_holds(square_in_hand(askew, hand, cube), spec.geometry_cfg)  # squared is not enough
+        assert check.grip_holds(square_in_hand(askew, hand, cube, spec.robot.tcp.approach_axis), spec.geometry_cfg)
+    finally:
+        check.close()
+
+
 def test_knock_out_leaves_the_object_on_the_table_below_not_held(spec) -> None:
     with ExecutionWorld(spec, 0, perturb=False) as w:
         w.scene.reset(state=load_state(FIXTURE))

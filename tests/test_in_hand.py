@@ -69,3 +69,15 @@ def test_nothing_changes_where_the_object_is_not_in_hand() -> None:
     tilt = Rotation.from_euler("x", 0.1)
     s = held(CUBE, tilt, held_name="other")
     assert square_in_hand(s, HAND_POSE, CUBE) is s
+
+
+def test_given_the_approach_the_centre_moves_onto_its_line_at_the_same_depth() -> None:
+    approach = (0.0, 0.0, 1.0)  # in the hand's frame
+    a = HAND.apply(approach)
+    side = HAND.apply((0.0, 1.0, 0.0))
+    centre = np.array(HAND_POSE[:3]) + 0.03 * a + 0.02 * side  # 3 cm deep, 2 cm off the line
+    state = SceneState(base=(0.0, 0.0, 0.0), objects={"cube": ObjectPose(tuple(centre), HAND_POSE[3:])}, held="cube",
+                       gripper_closed=True)
+    out = square_in_hand(state, HAND_POSE, CUBE, approach).objects["cube"].position
+    assert np.allclose(out, np.array(HAND_POSE[:3]) + 0.03 * a, atol=1e-9)
+    assert square_in_hand(state, HAND_POSE, CUBE).objects["cube"].position == tuple(centre)  # without: kept

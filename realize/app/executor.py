@@ -314,15 +314,16 @@ class Executor:
 
     def _firm_grip(self, obs: Observation) -> Observation:
         """The state the planner starts from, with a grip its restore keeps: where the object in
-        the hand, restored as observed, falls out of the fingers within a few steps (a grip a
-        few degrees askew), it is squared with the hand (``realize.execution.in_hand``); a grip
-        that holds is left as observed."""
+        the hand, restored as observed, falls out of the fingers at rest or on a short drive (a
+        grip askew or off the pads' middle, ``Precheck.grip_holds``), it is squared with the hand
+        and centred between the pads (``realize.execution.in_hand``); a grip that holds is left
+        as observed."""
         s = obs.state
         if s.held is None or obs.hand is None or self.precheck is None:
             return obs
         if self.precheck.grip_holds(s, self.layout(obs)):
             return obs
-        squared = square_in_hand(s, obs.hand, self.spec.geometry.object(s.held))
+        squared = square_in_hand(s, obs.hand, self.spec.geometry.object(s.held), self.spec.robot.tcp.approach_axis)
         log.info("world %d: the grip of %s as observed slips in a restore: the planner assumes it square", self.k,
                  s.held)
         return dataclasses.replace(obs, state=squared)

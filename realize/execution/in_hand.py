@@ -3,18 +3,22 @@
 What it does: ``square_in_hand(state, hand, obj)`` returns ``state`` with its held object turned,
 about its own centre, to the nearest orientation that sits square with the hand: a box's axes
 along the hand's axes (the nearest of the 24 such turns, ``SQUARE``), a cylinder's axis along
-the nearest hand axis (its turn about that axis kept).
+the nearest hand axis (its turn about that axis kept). Given the hand's ``approach`` axis, the
+centre also moves onto the approach line through the TCP link (its depth along it kept):
+centred between the pads, as a grasp aims it.
 
 Why: a state captured from a world holds the object as it slipped into the grip, a few degrees
 tilted between the finger pads. Restored at rest into the planner's scenes, such a grip can let
 go in the first steps (measured: the seed task's worlds 6 and 11 at seed 0, the cube tilted about
 5 degrees in the hand, fell out within 3 control steps of every restore, so every replan and
 check failed with ``place:not_holding`` although the world's hand held it; squared, it held in
-both, and in the worlds that held before). A robot does not see the in-hand tilt either: its
+both, and in the worlds that held before). A cube held 2.7 cm to one side of the pads' middle
+(``table_moved`` world 6 with realistic noise) held at rest but left the hand on every replan's
+drive, squared too; centred as well, it holds (tests/test_execution_world.py). A robot does not see the in-hand tilt either: its
 planner assumes the grasp it commanded. The world itself is never changed: only what is planned
 from.
-What it doesn't: read a simulator (the hand's pose comes with the observation), move the object's
-centre, or touch an object not in hand.
+What it doesn't: read a simulator (the hand's pose comes with the observation), change the
+object's depth in the hand, or touch an object not in hand.
 """
 
 from __future__ import annotations
@@ -52,10 +56,13 @@ def _square_turns() -> list[np.ndarray]:
 SQUARE = _square_turns()
 
 
-def square_in_hand(state: SceneState, hand: Sequence[float], obj: SceneObject) -> SceneState:
+def square_in_hand(state: SceneState, hand: Sequence[float], obj: SceneObject,
+                   approach: Sequence[float] | None = None) -> SceneState:
     """``state`` with its held object ``obj`` squared in the hand (module docstring); ``hand``:
-    the hand link's pose (x, y, z, qw, qx, qy, qz) in the same frame. A state that holds
-    nothing, or another object, is returned as it is."""
+    the TCP link's pose (x, y, z, qw, qx, qy, qz) in the same frame (``BatchedScene.ee_pose``);
+    ``approach``: the approach axis in that link's frame (given: the object also centred on the
+    approach line through the link's origin, where the TCP offsets of the robots here lie). A state that holds nothing,
+    or another object, is returned as it is."""
     if state.held != obj.name:
         return state
     pose = state.objects[obj.name]
@@ -71,5 +78,11 @@ def square_in_hand(state: SceneState, hand: Sequence[float], obj: SceneObject) -
         turn, _ = Rotation.align_vectors([target], [axis])
         best = (turn * Rotation.from_matrix(rel)).as_matrix()
     q = (r_hand * Rotation.from_matrix(best)).as_quat()
-    squared = ObjectPose(pose.position, (float(q[3]), float(q[0]), float(q[1]), float(q[2])), where=f"objects.{obj.name}")
+    centre = np.asarray(pose.position, dtype=np.float64)
+    if approach is not None:  # onto the approach line through the TCP link, at the same depth
+        a = r_hand.apply(np.asarray(approach, dtype=np.float64) / np.linalg.norm(approach))
+        tcp = np.asarray(hand[:3], dtype=np.float64)
+        centre = tcp + a * float(np.dot(centre - tcp, a))
+    squared = ObjectPose(tuple(float(v) for v in centre), (float(q[3]), float(q[0]), float(q[1]), float(q[2])),
+                         where=f"objects.{obj.name}")
     return dataclasses.replace(state, objects={**state.objects, obj.name: squared})

@@ -13,8 +13,8 @@ own stream, ``PRECHECK_STREAM``; the same draws for every check of a study's wor
 controllers plan in the believed layout. It returns a ``PrecheckResult``: how many copies
 reached the goal, the failures, the wall time and whether the scene was built for it.
 ``grip_holds(state, geometry_cfg)`` tells whether the object in the hand of ``state``, restored
-at rest, stays in the fingers for ``GRIP_STEPS`` control steps (the executor squares a grip that
-does not: ``realize.execution.in_hand``).
+at rest, stays in the fingers for ``GRIP_STEPS`` control steps and, on a mobile base, through a
+short drive back and forth (the executor squares a grip that does not: ``realize.execution.in_hand``).
 What it doesn't: decide (the executor compares the share with ``min_success``), observe the
 world, or search.
 """
@@ -39,6 +39,7 @@ from realize.world.state import ObjectPose, SceneState
 __all__ = ["PRECHECK_STREAM", "PrecheckResult", "Precheck"]
 
 GRIP_STEPS = 5  # control steps a restored grip must hold (the slipping ones let go within 3)
+SHAKE_S = 0.5  # s of each leg of the drive a restored grip is shaken with (a mobile base)
 PRECHECK_STREAM = 4  # draw_worlds stream of the checks' copies (search 1, validation 2, execution 3)
 assert PRECHECK_STREAM not in (SEARCH_STREAM, VALIDATION_STREAM, 3)
 
@@ -123,12 +124,23 @@ class Precheck:
 
     def grip_holds(self, state: SceneState, geometry_cfg: GeometryCfg, steps: int = GRIP_STEPS) -> bool:
         """Whether ``state``'s held object, restored at rest in this check's scene (every copy),
-        is still in the hand after ``steps`` control steps with every target holding (copy 0)."""
+        is still in the hand after ``steps`` control steps with every target holding, and, on a
+        mobile base, after a shake as a drive gives it: ``SHAKE_S`` backwards then as long
+        forwards at the PID's top speed, from rest and back to rest (copy 0). A restore makes
+        the grip's contacts anew: one a few degrees askew may hold at rest and let go on the way."""
         scene, _ = self._scene(geometry_cfg)
+        n = scene.n_envs
+        speed = float(self.spec.rollout.pid.max_lin_speed)
+        shake = round(SHAKE_S / scene.control_dt) if scene.robot.base.joints else 0
         with torch.inference_mode():
             scene.reset(seed=self.spec.seed, state=state)
             scene.hold_still()
-            for _ in range(steps):
+            for k in range(steps + 2 * shake + steps * bool(shake)):
+                leg = (k - steps) // shake if shake and k >= steps else None
+                if leg in (0, 1):
+                    scene.set_base_velocity_robot_frame(torch.tensor([[(2 * leg - 1) * speed, 0.0, 0.0]] * n))
+                elif leg == 2:
+                    scene.set_base_velocity(torch.zeros(n, 3))
                 scene.step()
             k = int(scene.held_object()[0])
         return k >= 0 and scene.object_names[k] == state.held
