@@ -11,7 +11,7 @@ Modules, by what you look for (docs/architecture.md draws the path through them)
   run's task and candidate plans), ``resume_config`` (what a resumed run takes from the command line).
 * One run: ``planner`` (the importable ``Planner``), ``plan_result`` (what its calls take and
   return), ``run`` (one run in one call), ``assembly`` (searcher and sinks picked), ``loop`` (ask ->
-  rollout -> tell), ``guard`` (how a run ends), ``stitched`` (a run of stitched segments),
+  rollout -> tell), ``guard`` (how a run ends), ``stitched`` (a run of stitched segments), ``stitch_settings`` (the ``stitch`` node),
   ``realizers`` (the scene and realizers of a run), ``workers/`` (rollout workers: this process,
   local processes or Ray actors).
 * Validation and replay: ``candidate_validation`` (the K best plans in perturbed worlds, one
