@@ -30,7 +30,6 @@ from realize.execution.disturbances import Scheduled
 from realize.execution.monitor import Deviation, check, expectation
 from realize.execution.in_hand import square_in_hand
 from realize.execution.layout_updates import apply_geometry_updates, geometry_updates
-from realize.execution.perception import Noise
 from realize.execution.precheck import Precheck
 from realize.execution.robot_view import RobotView
 from realize.execution.schedule import Schedule
@@ -89,7 +88,8 @@ class Executor:
         self.clock = 0  # control steps of the world's timeline (segments and holds)
         self.holding = False  # the robot holds while the planner thinks: no monitor
         self.tries = 0  # replans in a row that found no plan (the next one searches longer)
-        self.view = RobotView(self.world, settings.noise if closed else Noise(), world_seed)  # open loop sees nothing
+        # the robot perceives the same way open loop or closed: its controllers act on what it sees either way
+        self.view = RobotView(self.world, settings.noise, world_seed)
         self.belief = self.view.belief
         self.precheck = Precheck(spec, settings.precheck, world_seed) if closed else None
         self.world.scene.add_step_hook(self._on_step)
