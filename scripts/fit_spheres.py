@@ -55,8 +55,9 @@ import torch
 from realize.paths import REPO_ROOT
 from realize.robot.sphere_file import SPHERE_DIR, SphereSpec, load_spheres, sphere_file_path, write_spheres
 from realize.robot.sphere_fit import (Coverage, LinkGeometry, Sphere, collision_links, coverage, fit_spheres,
-                                      link_geometry, origin_matrix)
-from realize.robot.urdf import JointSpec, axis_rotation, parse_urdf_joints
+                                      link_geometry)
+from realize.robot.link_geometry import joint_transform
+from realize.robot.urdf import JointSpec, parse_urdf_joints
 
 FITTED_MARK = "fitted by scripts/fit_spheres.py"
 PRISMATIC_RANGE = 2.0  # m: prismatic joints of at most this range are a lift, torso or finger; wider ones a planar base
@@ -73,20 +74,6 @@ class LinkReport:
 # ----------------------------------------------------------------------------- kinematics (numpy, once)
 
 
-def _joint_transform(j: JointSpec, value: float) -> np.ndarray:
-    t = origin_matrix(j.xyz, j.rpy)
-    if j.type not in ("prismatic", "revolute", "continuous"):
-        return t
-    axis = np.asarray(j.axis, dtype=np.float64)
-    axis = axis / np.linalg.norm(axis)
-    m = np.eye(4)
-    if j.type == "prismatic":
-        m[:3, 3] = axis * value
-    else:
-        m[:3, :3] = axis_rotation(torch.as_tensor(axis), value).numpy()
-    return t @ m
-
-
 def link_poses(joints: dict[str, JointSpec], values: dict[str, float], links: list[str]) -> dict[str, np.ndarray]:
     """4x4 pose of each link in the URDF root frame, joints at ``values`` (absent: 0)."""
     out: dict[str, np.ndarray] = {}
@@ -94,7 +81,7 @@ def link_poses(joints: dict[str, JointSpec], values: dict[str, float], links: li
     def pose(link: str) -> np.ndarray:
         if link not in out:
             j = joints.get(link)
-            out[link] = np.eye(4) if j is None else pose(j.parent) @ _joint_transform(j, values.get(j.name, 0.0))
+            out[link] = np.eye(4) if j is None else pose(j.parent) @ joint_transform(j, values.get(j.name, 0.0))
         return out[link]
 
     return {l: pose(l) for l in links}

@@ -40,9 +40,9 @@ import torch
 from torch import Tensor
 
 from realize.config import ConfigError
-from realize.robot.link_geometry import link_geometry, origin_matrix
+from realize.robot.link_geometry import joint_transform, link_geometry
 from realize.robot.spec import RobotSpec
-from realize.robot.urdf import JointSpec, axis_rotation, parse_urdf_joints, source_urdf
+from realize.robot.urdf import JointSpec, parse_urdf_joints, source_urdf
 
 __all__ = ["GripGeometry", "grip_geometry", "check_gripper", "UNITS"]
 
@@ -108,20 +108,6 @@ def _interp(x: Tensor, xs: tuple[float, ...], ys: tuple[float, ...]) -> Tensor:
     return yt[i - 1] + t * (yt[i] - yt[i - 1])
 
 
-def _joint_transform(j: JointSpec, value: float) -> np.ndarray:
-    t = origin_matrix(j.xyz, j.rpy)
-    if j.type not in ("prismatic", "revolute", "continuous"):
-        return t
-    axis = np.asarray(j.axis, dtype=np.float64)
-    axis = axis / np.linalg.norm(axis)
-    m = np.eye(4)
-    if j.type == "prismatic":
-        m[:3, 3] = axis * value
-    else:
-        m[:3, :3] = axis_rotation(torch.as_tensor(axis), value).numpy()
-    return t @ m
-
-
 def _pose_in(joints: dict[str, JointSpec], link: str, frame: str, values: dict[str, float]) -> np.ndarray:
     """4x4 pose of ``link`` in ``frame``'s frame (every joint at ``values``, absent 0)."""
     def chain(l: str) -> list[JointSpec]:
@@ -134,7 +120,7 @@ def _pose_in(joints: dict[str, JointSpec], link: str, frame: str, values: dict[s
     def pose(l: str) -> np.ndarray:
         t = np.eye(4)
         for j in chain(l):
-            t = t @ _joint_transform(j, values.get(j.name, 0.0))
+            t = t @ joint_transform(j, values.get(j.name, 0.0))
         return t
 
     return np.linalg.inv(pose(frame)) @ pose(link)

@@ -19,9 +19,11 @@ from typing import Sequence
 import numpy as np
 import trimesh
 
-from realize.robot.urdf import element_origin, mesh_path, rpy_matrix, urdf_floats
+import torch
 
-__all__ = ["LinkGeometry", "collision_links", "link_geometry", "origin_matrix"]
+from realize.robot.urdf import JointSpec, axis_rotation, element_origin, mesh_path, rpy_matrix, urdf_floats
+
+__all__ = ["LinkGeometry", "collision_links", "link_geometry", "origin_matrix", "joint_transform"]
 
 
 class LinkGeometry:
@@ -96,6 +98,22 @@ def origin_matrix(xyz: Sequence[float], rpy: Sequence[float]) -> np.ndarray:
     t[:3, :3] = rpy_matrix(rpy).numpy()
     t[:3, 3] = [float(v) for v in xyz]
     return t
+
+
+def joint_transform(j: JointSpec, value: float) -> np.ndarray:
+    """The 4x4 transform from a URDF joint's parent link to its child at joint value ``value``
+    (m for a prismatic joint, rad for a revolute one; a fixed joint's origin alone)."""
+    t = origin_matrix(j.xyz, j.rpy)
+    if j.type not in ("prismatic", "revolute", "continuous"):
+        return t
+    axis = np.asarray(j.axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    m = np.eye(4)
+    if j.type == "prismatic":
+        m[:3, 3] = axis * value
+    else:
+        m[:3, :3] = axis_rotation(torch.as_tensor(axis), value).numpy()
+    return t @ m
 
 
 _CYLINDER_SECTIONS = 64
