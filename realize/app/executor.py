@@ -145,7 +145,8 @@ class Executor:
         a = seg.action
         text = HOLD_TEXT if self.holding else str(seg.task.plan[a]) if a < len(seg.task.plan) else ""
         q = scene.whole_body_q()[0]  # what the encoders and the localizer read (the belief's base where it drifts)
-        x, y, yaw = (q[BASE].double() + self.view.base_error()[0].double()).tolist()
+        drift = self.view.base_error()[0].double() if scene.robot.base.joints else torch.zeros(3, dtype=torch.float64)
+        x, y, yaw = (q[BASE].double() + drift).tolist()
         self.traj.append(self.now(), len(self.log.actions) - 1, text, dict(zip(scene.robot.upper.joints, arm[0].tolist())),
                          base[0].tolist(), bool(grip[0]), q[UPPER].tolist() + [x, y, yaw])
 
