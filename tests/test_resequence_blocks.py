@@ -250,3 +250,19 @@ def test_a_pick_place_resequence_turns_the_tasks_planner_off(tmp_path) -> None:
     new = resequence_task(task_cfg, geometry, state, tmp_path)
     assert new["plan"][0].startswith("grasp(cube") and new["planner"]["enabled"] is False
     assert task_cfg["planner"]["enabled"] is True  # the caller's mapping is left as it was
+
+
+def test_a_new_plan_that_starts_by_placing_the_held_block_builds_from_a_state_that_holds_it(tower3, tmp_path) -> None:
+    """A re-sequence from a state that holds cube B (grasp_slip's worlds 10 and 13: cube C in
+    hand, cube B knocked down) begins with a place: its task builds where the plan starts with
+    the block in hand, and is refused in one line where it starts empty."""
+    from realize.app.task_plans import build_task_candidates
+
+    task, g = tower3
+    new = resequence_task(task, g, _state("cube_b", cube_a=(0.0, 1.2, Z0), cube_b=(0.0, 1.1, 0.9),
+                                          cube_c=(0.0, 1.4, Z0)), tmp_path)
+    assert new["plan"][0].startswith("place(cube_b")
+    built, _ = build_task_candidates(new, g, "task", held="cube_b")
+    assert str(built.plan[0]).startswith("place(cube_b")
+    with pytest.raises(ConfigError, match=r"task:plan\[0\]: .* places cube_b, but the hand is empty there"):
+        build_task_candidates(new, g, "task")

@@ -246,6 +246,17 @@ def _read_rollout(d: Any) -> Any:
         raise ConfigError(msg if msg.startswith("controller") else f"controller: {msg}") from None
 
 
+def _replan_start_held(keys: Any, d: Mapping[str, Any]) -> str | None:
+    """What the hand holds where the task's plan starts: a replan of a whole new plan (replan.action
+    0, a re-sequence) from a state holding an object may begin with its place; else nothing."""
+    r = d.get("replan")
+    if keys.replan_from is None or not isinstance(r, Mapping) or r.get("action") != 0 or not r.get("state"):
+        return None
+    from realize.world.state import load_state
+
+    return load_state(r["state"], "replan.state").held
+
+
 def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     """Validate a whole resolved run config (plain data). Raises ``ConfigError``."""
     d = as_mapping(d, "config")
@@ -287,7 +298,7 @@ def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
     if keys.warm_start is not None and planner.top_k > 1:
         raise ConfigError(f"warm_start = {keys.warm_start!r}: a warm start seeds one plan's search; "
                           f"{source}:planner.top_k = {planner.top_k} searches several (set it to 1)")
-    task, candidates = build_task_candidates(task_d, geometry, source, planner)
+    task, candidates = build_task_candidates(task_d, geometry, source, planner, held=_replan_start_held(keys, d))
     if robot.base.fixed:
         from realize.realization.actions import TEMPLATES
         from realize.tasks.spec import check_fixed_base

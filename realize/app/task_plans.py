@@ -157,7 +157,8 @@ def build_task(d: Mapping[str, Any], geometry: SceneGeometry, source: str) -> Ta
 
 
 def build_task_candidates(
-    d: Mapping[str, Any], geometry: SceneGeometry, source: str, planner: PlannerSettings | None = None
+    d: Mapping[str, Any], geometry: SceneGeometry, source: str, planner: PlannerSettings | None = None,
+    held: str | None = None,
 ) -> tuple[TaskSpec, list[TaskSpec]]:
     """The task (its plan: the given one, or the planner's first) and the candidate tasks.
 
@@ -168,7 +169,7 @@ def build_task_candidates(
     from realize.tasks.spec import plan_from_actions, task_for_plan, task_from_dict
 
     try:
-        task = task_from_dict(d, geometry, TEMPLATES, source=source)
+        task = task_from_dict(d, geometry, TEMPLATES, source=source, held=held)  # held: where the plan starts
     except ConfigError:
         raise
     except ValueError as e:

@@ -174,8 +174,9 @@ def check_fixed_base(plan: Sequence[ActionSpec], templates: Mapping[str, Any], r
 
 
 def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mapping[str, Any],
-                   source: str = "task") -> TaskSpec:
-    """Build and check a TaskSpec. ``source`` names the file for error messages."""
+                   source: str = "task", held: str | None = None) -> TaskSpec:
+    """Build and check a TaskSpec. ``source`` names the file for error messages; ``held``: what
+    the hand holds where the plan starts (a replan of a whole new plan from an observed state)."""
     if not isinstance(d, Mapping):
         raise ConfigError(f"{source}: a task config is a mapping, got {type(d).__name__}")
     allowed = {"name", "params", "plan", "goal", "final_cost", "planner", "perturbation"}
@@ -216,7 +217,7 @@ def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mappin
     plan = [parse_action(it, f"{source}:plan[{i}]") for i, it in enumerate(plan_items or [])]
     plan = bind_objects(plan, templates, objects, f"{source}:plan")
     if plan:
-        check_plan(plan, layout, templates, f"{source}:plan", objects)
+        check_plan(plan, layout, templates, f"{source}:plan", objects, held=held)
     goal = goal_from_dict(d["goal"], scene, regions, source)
     final_cost = float(d.get("final_cost", 0.0))
     perturbation = Perturbation.from_mapping(d.get("perturbation"), f"{source}:perturbation")
