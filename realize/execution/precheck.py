@@ -132,16 +132,14 @@ class Precheck:
         n = scene.n_envs
         speed = float(self.spec.rollout.pid.max_lin_speed)
         shake = round(SHAKE_S / scene.control_dt) if scene.robot.base.joints else 0
+        legs = [(0.0, steps)] + ([(-speed, shake), (speed, shake), (0.0, steps)] if shake else [])
         with torch.inference_mode():
             scene.reset(seed=self.spec.seed, state=state)
             scene.hold_still()
-            for k in range(steps + 2 * shake + steps * bool(shake)):
-                leg = (k - steps) // shake if shake and k >= steps else None
-                if leg in (0, 1):
-                    scene.set_base_velocity_robot_frame(torch.tensor([[(2 * leg - 1) * speed, 0.0, 0.0]] * n))
-                elif leg == 2:
-                    scene.set_base_velocity(torch.zeros(n, 3))
-                scene.step()
+            for v, n_steps in legs:  # at rest, then back, forward and at rest again
+                scene.set_base_velocity_robot_frame(torch.tensor([[v, 0.0, 0.0]] * n))
+                for _ in range(n_steps):
+                    scene.step()
             k = int(scene.held_object()[0])
         return k >= 0 and scene.object_names[k] == state.held
 
