@@ -9,7 +9,7 @@ FAMILY is a preset of configs/execute/ (none, cube_moved, table_moved, knocked_o
 YAML file of the same keys; --worlds, --seed and --max-replans override it. Each world is its own
 one-copy scene drawn from the task's perturbation model with seed S * 1000 + k, plus the family's
 disturbances; the replans search --n-envs copies for at most --iterations iterations and stop at
-the first plan that reaches the goal (realize.app.planner.ReplanBudget). Results go to
+the first plan that reaches the goal (the preset's budget: realize.execution.replan_budget). Results go to
 RUN_DIR/execution/FAMILY/ (summary.json, world-K-{open,closed}.json/.npz/.rrd; format of the .npz in
 docs/execution_format.md). The last lines print the study's table row.
 
@@ -27,10 +27,11 @@ from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
-    from realize.app.planner import ReplanBudget
+    from realize.execution.replan_budget import ReplanBudget
     from realize.execution.settings import ExecuteSettings
 
-    study, budget = ExecuteSettings(), ReplanBudget()  # the defaults the help names (written once, there)
+    study = ExecuteSettings()  # the defaults the help names (written once, there)
+    budget = study.budget
 
     p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()), epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -52,13 +53,14 @@ def main(argv: list[str] | None = None) -> int:
     mode.add_argument("--open-only", action="store_true", help="no replanning")
     mode.add_argument("--closed-only", action="store_true", help="no open-loop baseline")
     p.add_argument("--n-envs", type=int, default=None,
-                   help=f"copies per replan iteration (default {budget.n_envs}, {budget.n_elite} elites; with N "
-                        f"given, {ReplanBudget.elites_for(32)} of 32: an eighth from 32 on, a quarter below)")
+                   help=f"copies per replan iteration (default: the preset's, else {budget.n_envs}, {budget.n_elite} "
+                        f"elites; with N given, {ReplanBudget.elites_for(32)} of 32: an eighth from 32 on, a quarter "
+                        f"below)")
     p.add_argument("--iterations", type=int, default=None,
-                   help=f"most CE iterations per replan (default {budget.iterations})")
+                   help=f"most CE iterations per replan (default: the preset's, else {budget.iterations})")
     p.add_argument("--validation", type=int, default=None,
-                   help=f"replicas each replan validates its candidates in, returning the most robust "
-                        f"(default {budget.validation}: none, the first plan that reaches the goal)")
+                   help=f"replicas each replan validates its candidates in, returning the most robust (default: the "
+                        f"preset's, else {budget.validation}; 0: none, the first plan that reaches the goal)")
     p.add_argument("--video", action="store_true", help="an MP4 per world")
     p.add_argument("--no-rerun", action="store_true", help="no .rrd per world")
     p.add_argument("--out", default=None, help="output directory (default RUN_DIR/execution/FAMILY)")
@@ -91,17 +93,17 @@ def main(argv: list[str] | None = None) -> int:
             changed["think"] = int(a.think) if a.think.lstrip("-").isdigit() else a.think
         if a.check_copies is not None:
             changed["precheck"] = {**dataclasses.asdict(settings.precheck), "copies": a.check_copies}
-        if changed:
-            settings = type(settings).from_mapping({**dataclasses.asdict(settings), **changed}, "execute")
         kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations), ("validation", a.validation))
               if v is not None}
         if a.n_envs is not None:
             kw["n_elite"] = ReplanBudget.elites_for(a.n_envs)
-        budget = ReplanBudget(**kw)
+        if kw:
+            changed["budget"] = {**dataclasses.asdict(settings.budget), **kw}
+        if changed:
+            settings = type(settings).from_mapping({**dataclasses.asdict(settings), **changed}, "execute")
         name = Path(a.disturbance).stem
         s = execute(a.run_dir, settings, name=name, open_loop=not a.closed_only, closed_loop=not a.open_only,
-                    out=a.out, budget=budget, rerun=not a.no_rerun, video=a.video, export=formats,
-                    export_acceleration=accel)
+                    out=a.out, rerun=not a.no_rerun, video=a.video, export=formats, export_acceleration=accel)
     except ConfigError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

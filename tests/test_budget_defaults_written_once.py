@@ -1,7 +1,8 @@
 """The replan budget's and the execution study's defaults are written once, in their dataclasses
-(``realize.app.plan_result.ReplanBudget``, ``realize.execution.settings.ExecuteSettings``):
-``scripts/execute.py --help`` is built from them, and the docs that name them say the same
-numbers."""
+(``realize.execution.replan_budget.ReplanBudget``, ``realize.execution.settings.ExecuteSettings``,
+whose ``budget`` it is): ``scripts/execute.py --help`` is built from them, the docs that name the
+budget point to its module instead of repeating its numbers, and the check's numbers the docs
+give are the dataclass's."""
 
 from __future__ import annotations
 
@@ -15,10 +16,10 @@ from typing import Any
 
 import pytest
 
-import realize.app.planner
 import realize.execution.settings
-from realize.app.planner import ReplanBudget
-from realize.execution.settings import ExecuteSettings, PrecheckSettings
+from realize.config import ConfigError
+from realize.execution.replan_budget import ReplanBudget
+from realize.execution.settings import ExecuteSettings, PrecheckSettings, load_preset
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -37,39 +38,55 @@ def _execute_help() -> str:
 def test_the_execute_help_names_the_dataclasses_defaults(monkeypatch: pytest.MonkeyPatch) -> None:
     """Other defaults in the dataclasses, other numbers in the help: none is written there."""
 
-    @dataclasses.dataclass(frozen=True)
+    @dataclasses.dataclass
     class OtherBudget(ReplanBudget):
         n_envs: int = 40
         n_elite: int = 5
         iterations: int = 7
+        validation: int = 2
 
     @dataclasses.dataclass
     class OtherStudy(ExecuteSettings):
         precheck: PrecheckSettings = dataclasses.field(default_factory=lambda: PrecheckSettings(copies=3))
         think: Any = "frozen"
+        budget: ReplanBudget = dataclasses.field(default_factory=OtherBudget)
 
-    monkeypatch.setattr(realize.app.planner, "ReplanBudget", OtherBudget)
     monkeypatch.setattr(realize.execution.settings, "ExecuteSettings", OtherStudy)
     text = _execute_help()
-    assert "(default 40, 5 elites;" in text and "(default 7)" in text, text
+    assert "else 40, 5 elites;" in text and "(default: the preset's, else 7)" in text, text
+    assert "(default: the preset's, else 2;" in text, text
     assert "default: the preset's, else 3)" in text and "(default: the preset's, else frozen)" in text, text
 
 
-def test_the_docs_name_the_replan_budgets_defaults() -> None:
+def test_a_preset_sets_the_budget_where_it_differs(tmp_path: Path) -> None:
+    """The budget is a group of the execute schema: a preset writes the keys it changes, the rest
+    are ReplanBudget's; a bad key or value is one line naming it."""
+    path = tmp_path / "slow.yaml"
+    path.write_text("budget:\n  iterations: 5\n")
+    s = load_preset(path)
+    assert s.budget == dataclasses.replace(ReplanBudget(), iterations=5)
+    assert load_preset("none").budget == ReplanBudget()
+    for text, needle in (("budget: {n_env: 8}", r"execute\[bad\]\.budget: unknown key\(s\) \['n_env'\]"),
+                         ("budget: {n_envs: 2, n_elite: 3}", r"execute\[bad\]\.budget\.n_elite = 3 is invalid"),
+                         ("budget: {iterations: 0}", r"execute\[bad\]\.budget\.iterations = 0 is invalid")):
+        (tmp_path / "bad.yaml").write_text(text + "\n")
+        with pytest.raises(ConfigError, match=needle):
+            load_preset(tmp_path / "bad.yaml")
+
+
+def test_the_docs_point_to_the_replan_budget_instead_of_repeating_it() -> None:
+    """Where a page's prose names ``ReplanBudget`` (its code examples aside), the module that
+    holds the defaults follows within a few lines, and no default copies or iterations do."""
     b = ReplanBudget()
-    found = 0
     for page in ("python_api.md", "replanning.md"):
-        text = " ".join((REPO / "docs" / page).read_text().split())
-        for said in re.findall(r"`ReplanBudget` \(([^)]*)\)", text):
-            found += 1
-            assert f"{b.n_envs} copies" in said and f"at most {b.iterations} iterations" in said, (page, said)
-            m = re.search(r"in (\w+) scenes of (\d+)", said)
-            if m:
-                assert b.shard_rows is not None and int(m[2]) == b.shard_rows, (page, said)
-                assert {"two": 2}.get(m[1]) == -(-b.n_envs // b.shard_rows), (page, said)
-            assert ("stopped at the first plan that reaches" in said) == b.stop_when_feasible, (page, said)
-            assert b.validation == 0 or "no validation" not in said, (page, said)
-    assert found == 2
+        prose = re.sub(r"```.*?```", "", (REPO / "docs" / page).read_text(), flags=re.S)
+        text = " ".join(prose.split())
+        spots = [m.start() for m in re.finditer("`ReplanBudget`", text)]
+        assert spots, page
+        for at in spots:
+            said = text[at:at + 300]
+            assert "realize/execution/replan_budget.py" in said, (page, said)
+            assert not re.search(rf"\b({b.n_envs} copies|{b.iterations} iterations)", said), (page, said)
 
 
 def test_the_docs_name_the_checks_defaults() -> None:

@@ -94,8 +94,9 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
     files are written as it ends (a killed study keeps what it has); ``summary.json`` after
     each world. Bad disturbances are refused before anything is simulated. ``export``: formats
     (``ros2``, ``lerobot``: ``realize.execution.export``) each world is also written in, after its
-    files, with ``export_acceleration`` the arm's acceleration limit; bad names are refused first."""
-    from realize.app.planner import Planner, ReplanBudget
+    files, with ``export_acceleration`` the arm's acceleration limit; bad names are refused first.
+    ``budget``: the replans' search, in place of ``settings.budget``."""
+    from realize.app.planner import Planner
     from realize.app.replay import build_replay_spec, saved_plan
 
     t0 = time.perf_counter()
@@ -112,7 +113,9 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
     label = name or "default"
     where = Path(out) if out is not None else Path(run_dir) / EXECUTION_DIR / label
     where.mkdir(parents=True, exist_ok=True)
-    budget = budget or ReplanBudget()
+    if budget is not None:  # (summary.json's settings say the budget the replans ran on)
+        settings = dataclasses.replace(settings, budget=budget)
+    budget = settings.budget
     logs: dict[str, list[WorldLog]] = {"open": [], "closed": []}
     files: list[str] = []
     planner = Planner.from_run(run_dir) if closed_loop else None

@@ -11,7 +11,8 @@ before a repair (``precheck``: ``PrecheckSettings``) and what the world does whi
 (``think``: ``measured``, the replan's own wall time in control steps; ``frozen``, the world
 waits; or a number of control steps, fixed, so that a study repeats bit for bit), and
 ``pickup_m``, the radii of the base annulus from which a re-sequence picks an object off the
-floor (``realize.app.resequence``). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
+floor (``realize.app.resequence``), and ``budget``, the search of each replan
+(``realize.execution.replan_budget.ReplanBudget``). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
 key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file).
 What it doesn't: check disturbances against a scene (that needs the run's geometry and plan), or
 execute anything.
@@ -25,6 +26,7 @@ from typing import Any, ClassVar
 
 from realize.config import Settings, read_preset, setting
 from realize.execution.perception import Noise
+from realize.execution.replan_budget import ReplanBudget
 from realize.paths import CONFIG_DIR
 
 __all__ = ["Tolerance", "PrecheckSettings", "ExecuteSettings", "PRESET_DIR", "presets", "load_preset"]
@@ -90,6 +92,7 @@ class ExecuteSettings(Settings):
     precheck: PrecheckSettings = field(default_factory=PrecheckSettings)
     pickup_m: list[float] = setting(default_factory=lambda: [0.45, 0.75], check=_pickup)  # base annulus around an object on the floor
     think: Any = setting("measured", check=_think)  # the world while the planner thinks (module docstring)
+    budget: ReplanBudget = field(default_factory=ReplanBudget)  # each replan's search
     disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
 
 
