@@ -4,7 +4,9 @@ What it does: ``parse_overrides`` (Hydra ``Override`` objects; one ``ConfigError
 that does not parse), ``override_values`` (the values an override gives, a sweep's listed ones),
 ``compose_or_error`` (Hydra's compose of ``configs/config.yaml``; a composition error becomes one
 ``ConfigError`` line; see "Composing once per set of group choices" below), ``register_resolvers``
-(``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import) and
+(``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import),
+``register_schema`` (the settings dataclasses whose defaults Hydra composes from the class
+itself, registered on import: ``task/perturbation/default``, ``Perturbation``) and
 ``resolution_error`` (a resolver's ``ConfigError`` as one line). ``realize.app.compose`` and
 ``realize.app.cli_keys`` build on these; neither imports the other.
 What it doesn't: check keys or group choices (``realize.app.cli_keys``, ``realize.app.compose``)
@@ -34,7 +36,7 @@ from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 
 __all__ = ["parse_overrides", "override_values", "compose_or_error", "split_overrides", "register_resolvers",
-           "scaled_count", "resolution_error"]
+           "register_schema", "scaled_count", "resolution_error"]
 
 
 def parse_overrides(overrides: Sequence[str]) -> list[Any]:
@@ -181,4 +183,17 @@ def register_resolvers() -> None:
         OmegaConf.register_new_resolver("realize_scaled", scaled_count)
 
 
+def register_schema() -> None:
+    """Settings dataclasses as Hydra config groups (idempotent): ``task/perturbation/default`` is
+    ``realize.tasks.perturbation.Perturbation``, so its defaults are written in the class only; a
+    task file takes the node in its defaults list (``- perturbation: default``) and writes the
+    keys it changes under ``perturbation:``."""
+    from hydra.core.config_store import ConfigStore
+
+    from realize.tasks.perturbation import Perturbation
+
+    ConfigStore.instance().store(group="task/perturbation", name="default", node=Perturbation)
+
+
 register_resolvers()
+register_schema()

@@ -173,14 +173,22 @@ def check_fixed_base(plan: Sequence[ActionSpec], templates: Mapping[str, Any], r
                               "(robot.base.joints = []): its plans have no move_to")
 
 
+# the Hydra defaults list a task of configs/task/ may have (read as a task file it changes
+# nothing): the perturbation model's defaults, which the task's perturbation keys change
+TASK_DEFAULTS = ({"perturbation": "default"}, "_self_")
+
+
 def task_from_dict(d: Mapping[str, Any], scene: SceneGeometry, templates: Mapping[str, Any],
                    source: str = "task", held: str | None = None) -> TaskSpec:
     """Build and check a TaskSpec. ``source`` names the file for error messages; ``held``: what
     the hand holds where the plan starts (a replan of a whole new plan from an observed state)."""
     if not isinstance(d, Mapping):
         raise ConfigError(f"{source}: a task config is a mapping, got {type(d).__name__}")
-    allowed = {"name", "params", "plan", "goal", "final_cost", "planner", "perturbation"}
+    allowed = {"name", "params", "plan", "goal", "final_cost", "planner", "perturbation", "defaults"}
     check_unknown(d, sorted(allowed), source)
+    if "defaults" in d and (not isinstance(d["defaults"], list) or any(e not in TASK_DEFAULTS for e in d["defaults"])):
+        raise ConfigError(f"{source}:defaults = {d['defaults']!r} is invalid: a task's defaults list names only "
+                          f"{list(TASK_DEFAULTS)}")
     for key in ("params", "goal"):
         if key not in d:
             raise ConfigError(f"{source}: missing key {key!r}")
