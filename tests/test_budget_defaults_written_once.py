@@ -95,23 +95,3 @@ def test_the_docs_name_the_checks_defaults() -> None:
     for said in (f"`copies` ({p.copies}) copies", f"`scatter_m` ({p.scatter_m * 100:g} cm)",
                  f"`min_success` ({p.min_success:g})"):
         assert said in text, said
-
-
-def _leaves(x: Any, path: str = "") -> dict[str, Any]:
-    if isinstance(x, dict):
-        return {k: v for key, sub in x.items() for k, v in _leaves(sub, f"{path}.{key}" if path else key).items()}
-    return {path: x}
-
-
-def test_no_execute_preset_repeats_a_default() -> None:
-    """A preset of configs/execute/ writes only what it changes: a key set to ExecuteSettings'
-    default would be that default written a second time."""
-    import yaml
-
-    defaults = _leaves(dataclasses.asdict(ExecuteSettings()))
-    repeated = []
-    for path in sorted((REPO / "configs" / "execute").glob("*.yaml")):
-        preset = _leaves(yaml.safe_load(path.read_text()) or {})
-        repeated += [f"{path.name}: {k}" for k, v in preset.items() if k in defaults and k != "disturbances"
-                     and (v == defaults[k] or (isinstance(v, (list, tuple)) and list(v) == list(defaults[k])))]
-    assert not repeated, f"presets that repeat ExecuteSettings' default: {repeated}"

@@ -158,31 +158,52 @@ def _names_code_uses(source: str) -> set[str]:
     return out
 
 
+def _names_interpolated(text: str) -> set[str]:
+    """The last names of the keys a YAML file's values interpolate (``${ce.batch_scale}`` ->
+    ``batch_scale``, nested in a resolver's arguments too); its comments do not count."""
+    import re
+
+    import yaml
+
+    def strings(x: Any) -> Iterator[str]:
+        if isinstance(x, dict):
+            for v in x.values():
+                yield from strings(v)
+        elif isinstance(x, list):
+            for v in x:
+                yield from strings(v)
+        elif isinstance(x, str):
+            yield x
+
+    return {m.rsplit(".", 1)[-1] for s in strings(yaml.safe_load(text)) for m in re.findall(r"\$\{([\w.]+)\}", s)}
+
+
 def test_a_name_in_prose_is_not_a_use() -> None:
-    """The key-use test below cannot be fooled by a docstring, a field's docstring or a comment."""
+    """The key-use test below cannot be fooled by a docstring, a field's docstring or a comment,
+    in the code or in a config file."""
     src = ('"""batch_scale in a module docstring."""\n'
            'class C:\n    """batch_scale in a class docstring."""\n    x: int = 1\n    """batch_scale below a field."""\n'
            'def f(d):\n    """batch_scale in a function docstring."""\n    # batch_scale in a comment\n'
            '    return d["n_envs"], d.shard_rows, g(pool=1)\n')
     used = _names_code_uses(src)
     assert "batch_scale" not in used and {"n_envs", "shard_rows", "pool"} <= used
+    yaml_text = ("# n_envs: ${realize_scaled:200,${ce.batch_scale}} in a comment\n"
+                 "ce:\n  n_envs: ${realize_scaled:200,${ce.scale}}  # ${ce.knn_robust}\n  iterations: 3\n")
+    assert _names_interpolated(yaml_text) == {"scale"}
 
 
 def test_every_config_key_is_read_somewhere() -> None:
     """A settings field that no code reads would be a key that changes nothing: each one is used
     by the code of ``realize/`` or ``envs/`` (an attribute, a string key, a keyword argument; a
     docstring or a comment that names it does not count), or by a config's interpolation
-    (``${ce.batch_scale}`` in configs/). Unknown keys are refused by the readers themselves."""
-    import re
-
+    (``${ce.batch_scale}`` in a value of configs/, not in a comment). Unknown keys are refused by the readers themselves."""
     from helpers import REPO
 
     used: set[str] = set()
     for d in ("realize", "envs"):
         for p in (REPO / d).rglob("*.py"):
             used |= _names_code_uses(p.read_text())
-    interpolated = {m.rsplit(".", 1)[-1] for p in (REPO / "configs").rglob("*.yaml")
-                    for m in re.findall(r"\$\{[^}:]*?([\w.]+)\}", p.read_text())}
+    interpolated = {name for p in (REPO / "configs").rglob("*.yaml") for name in _names_interpolated(p.read_text())}
     unread = []
     for cls in _settings_classes():
         if not cls.__module__.startswith(("realize", "envs")):
