@@ -1,0 +1,47 @@
+"""``scripts/bench_long_plans.py``'s tables (issue 57): the ratios to tower3 and the line through
+search time against plan length, on rows whose answer is known by construction (no run)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import bench_long_plans as blp  # noqa: E402
+
+
+def _row(preset: str, actions: int, search_s: float, validated: float, seed: int = 0,
+         variant: str = "plain") -> dict[str, str]:
+    return {"preset": preset, "variant": variant, "seed": str(seed), "actions": str(actions),
+            "search_s": str(search_s), "validated": str(validated)}
+
+
+def test_time_linear_in_length_passes_and_reads_the_ratios(capsys) -> None:
+    # 20 s per action + 10 s: tower4 / tower3 = 130 / 90, tower5 / tower3 = 170 / 90
+    rows = [_row("tower3", 4, 90, 0.95), _row("tower4", 6, 130, 0.92), _row("tower5", 8, 170, 0.91)]
+    assert blp.report(rows)
+    out = capsys.readouterr().out
+    assert "20.0 s per action + 10.0 s" in out
+    assert "x tower3 1.44 [ok <= 1.6]" in out and "x tower3 1.89 [ok <= 2.2]" in out
+    assert "grows linearly (each within 25 % of the line): yes" in out
+
+
+def test_a_slow_tower_a_weak_plan_and_a_bent_line_are_marked() -> None:
+    slow = [_row("tower3", 4, 90, 0.95), _row("tower4", 6, 150, 0.95)]  # 1.67 > 1.6
+    assert not blp.report(slow)
+    weak = [_row("tower3", 4, 90, 0.95), _row("tower4", 6, 130, 0.75)]
+    assert not blp.report(weak)
+
+
+def test_growth_far_from_a_line_is_not_called_linear(capsys) -> None:
+    rows = [_row("seed_paper", 5, 60, 1.0), _row("tower3", 4, 90, 0.95), _row("tower4", 6, 130, 0.95),
+            _row("tower5", 8, 800, 0.95)]
+    blp.report(rows)
+    assert "grows linearly (each within 25 % of the line): no" in capsys.readouterr().out
+
+
+def test_the_chain_is_compared_with_tower3_searched_the_plain_way(capsys) -> None:
+    rows = [_row("tower3", 4, 100, 0.95), _row("tower3", 4, 300, 0.95, variant="chain"),
+            _row("tower4", 6, 150, 0.95, variant="chain")]
+    blp.report(rows)
+    assert "x tower3 1.50" in capsys.readouterr().out
