@@ -185,14 +185,27 @@ def register_resolvers() -> None:
 
 def register_schema() -> None:
     """Settings dataclasses as Hydra config groups (idempotent): ``task/perturbation/default`` is
-    ``realize.tasks.perturbation.Perturbation``, so its defaults are written in the class only; a
-    task file takes the node in its defaults list (``- perturbation: default``) and writes the
-    keys it changes under ``perturbation:``."""
+    the defaults of ``realize.tasks.perturbation.Perturbation``, so they are written in the class
+    only; a task file takes the node in its defaults list (``- perturbation: default``) and writes
+    the keys it changes under ``perturbation:``. The node is plain data, as a YAML file's would
+    be: the values are checked by the class's reader (``build_run_spec``), with its messages."""
     from hydra.core.config_store import ConfigStore
 
     from realize.tasks.perturbation import Perturbation
 
-    ConfigStore.instance().store(group="task/perturbation", name="default", node=Perturbation)
+    ConfigStore.instance().store(group="task/perturbation", name="default", node=_plain_data(Perturbation()))
+
+
+def _plain_data(settings: Any) -> dict[str, Any]:
+    """A settings dataclass's values as YAML would give them (tuples as lists)."""
+    import dataclasses
+
+    def plain(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: plain(x) for k, x in v.items()}
+        return [plain(x) for x in v] if isinstance(v, (list, tuple)) else v
+
+    return plain(dataclasses.asdict(settings))
 
 
 register_resolvers()
