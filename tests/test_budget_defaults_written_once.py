@@ -25,13 +25,9 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def _execute_help() -> str:
-    spec = importlib.util.spec_from_file_location("execute_script", REPO / "scripts" / "execute.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     out = io.StringIO()
     with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
-        module.main(["--help"])
+        _execute_script().main(["--help"])
     return " ".join(out.getvalue().split())
 
 
@@ -95,3 +91,39 @@ def test_the_docs_name_the_checks_defaults() -> None:
     for said in (f"`copies` ({p.copies}) copies", f"`scatter_m` ({p.scatter_m * 100:g} cm)",
                  f"`min_success` ({p.min_success:g})"):
         assert said in text, said
+
+
+def _execute_script() -> Any:
+    spec = importlib.util.spec_from_file_location("execute_script", REPO / "scripts" / "execute.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_command_line_changes_the_presets_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--n-envs`` (with its elites), ``--iterations`` and ``--validation`` change the preset's
+    budget key by key; without them the study runs on the preset's budget."""
+    import realize.app.execute
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "result.json").write_text("{}")
+    preset = tmp_path / "slow.yaml"
+    preset.write_text("budget: {iterations: 5, validation: 2}\n")
+    seen: list[ExecuteSettings] = []
+
+    def study(run_dir: Any, settings: ExecuteSettings, **kw: Any) -> Any:
+        assert "budget" not in kw  # the study's budget is the settings'
+        seen.append(settings)
+        raise ConfigError("stop here")
+
+    monkeypatch.setattr(realize.app.execute, "execute", study)
+    script = _execute_script()
+    assert script.main([str(run), "--disturbance", str(preset)]) == 2
+    assert script.main([str(run), "--disturbance", str(preset), "--n-envs", "8"]) == 2
+    assert script.main([str(run), "--disturbance", str(preset), "--iterations", "1", "--validation", "0"]) == 2
+    preset_budget = dataclasses.replace(ReplanBudget(), iterations=5, validation=2)
+    assert [s.budget for s in seen] == [preset_budget,
+                                        dataclasses.replace(preset_budget, n_envs=8, n_elite=ReplanBudget.elites_for(8)),
+                                        dataclasses.replace(preset_budget, iterations=1, validation=0)]
