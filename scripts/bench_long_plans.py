@@ -22,6 +22,7 @@ What it doesn't: run presets in parallel (timings would interfere) or compare ro
 
     python scripts/bench_long_plans.py --seeds 0-2 --out long.csv
     python scripts/bench_long_plans.py --seeds 0 --presets tower3,tower4 --chain --out long.csv
+    python scripts/bench_long_plans.py --seeds 0 --presets tower4 --only-chain --out long.csv  # add the chain
     python scripts/bench_long_plans.py --summary long.csv
 """
 
@@ -135,6 +136,7 @@ def main() -> None:
     ap.add_argument("--presets", default=",".join(PRESETS), help=f"comma-separated, of {', '.join(PRESETS)}")
     ap.add_argument("--seeds", default="0", help="e.g. 0-2 or 0,3")
     ap.add_argument("--chain", action="store_true", help="also search each preset as a chain cut after each place")
+    ap.add_argument("--only-chain", action="store_true", help="search each preset as a chain only (no plain run)")
     ap.add_argument("--extra", default="", help="comma-separated overrides added to every run")
     ap.add_argument("--keep", type=Path, help="keep each run's directory under this folder")
     ap.add_argument("--out", type=Path, help="CSV to append rows to")
@@ -149,7 +151,7 @@ def main() -> None:
         if p not in PRESETS:
             ap.error(f"--presets: unknown preset {p!r} (known: {', '.join(PRESETS)})")
     extra = [o for o in args.extra.split(",") if o]
-    variants = {"plain": []} | ({"chain": CHAIN} if args.chain else {})
+    variants = ({} if args.only_chain else {"plain": []}) | ({"chain": CHAIN} if args.chain or args.only_chain else {})
     keep = args.keep or Path(os.environ.get("TMPDIR", "/tmp")) / "bench_long_plans"
     new_file = not args.out.exists() or args.out.stat().st_size == 0
     with open(args.out, "a", newline="") as f:

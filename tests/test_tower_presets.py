@@ -55,7 +55,10 @@ def test_after_each_place_cuts_the_tower_into_grasp_place_segments(n: int) -> No
     parts, cols = chain_tasks(task, list(st.cuts))
     assert [p.n_actions for p in parts] == [2] * (n - 1)
     assert sorted(c for cs in cols for c in cs) == list(range(task.layout.dim))
-    assert parts[-1].goal == task.goal and not parts[0].goal.on
+    # each earlier segment must leave its tower so far standing: the blocks it placed on their supports
+    assert parts[-1].goal == task.goal
+    for j, part in enumerate(parts[:-1]):
+        assert dict(part.goal.on) == {f"cube_{u}": f"cube_{lo}" for lo, u in zip(BLOCKS[:j + 1], BLOCKS[1:j + 2])}
     # the default stitched search of the same tower: one cut, after the first grasp
     one = read_stitch(compose_config(f"experiment=tower{n}", "levers=stitched")["stitch"], ce, task)
     assert one is not None and not one.chain and one.cuts == (1,)
@@ -109,6 +112,24 @@ def test_hand_chosen_top_down_plans_build_the_tower(n: int) -> None:
     for lower, upper in zip(blocks, blocks[1:]):
         assert math.dist(lower[:2].tolist(), upper[:2].tolist()) <= 0.015
         assert abs(float(upper[2] - lower[2]) - 0.045) <= 0.003
+
+
+def test_the_settled_goal_leaves_out_what_a_later_action_moves() -> None:
+    """A block placed and grasped again later, or placed on one that a later action grasps, is not
+    settled; the default cut after the first grasp settles nothing (the golden stitched search)."""
+    import dataclasses
+
+    from realize.tasks.goal_spec import GoalSpec
+    from realize.tasks.split import settled_goal
+    _, _, task = _task("experiment=tower4")
+    assert not settled_goal(task, 1).on and not settled_goal(task, 1).inside
+    assert dict(settled_goal(task, 4).on) == {"cube_b": "cube_a", "cube_c": "cube_b"}
+    # the same plan read as if cube B were taken off cube A again at the end
+    again = dataclasses.replace(task, plan=[*task.plan, task.plan[0]],
+                                goal=GoalSpec(on={**task.goal.on, "cube_e": "cube_c"}))
+    assert dict(settled_goal(again, 4).on) == {}  # B is grasped later, C stands on B
+    assert dict(settled_goal(again, 6).on) == {"cube_d": "cube_c"}  # D on C holds; C on B may not
+    assert dict(settled_goal(task, 6).on) == {k: v for k, v in task.goal.on.items() if k != "cube_a"}
 
 
 def test_a_chain_refuses_a_parameter_bound_in_two_segments_and_a_plan_without_a_place_to_cut_after() -> None:

@@ -1,14 +1,16 @@
 """A plan cut in two at an action boundary: the prefix's and the suffix's tasks (stitched segments).
 
 What it does:
-  * ``split_task(task, split)``: the prefix task (actions ``0 .. split - 1``, no goal, no final
-    cost: its cost counts its own control steps), the suffix task (``realize.tasks.suffix``:
+  * ``split_task(task, split)``: the prefix task (actions ``0 .. split - 1``, no final cost: its
+    cost counts its own control steps; its goal the part of the task's that it settles for good,
+    ``settled_goal``: none for a cut after a grasp), the suffix task (``realize.tasks.suffix``:
     actions ``split ..``, the goal and the final cost) and the full layout's columns of each; a
     parameter both segments bind (a plan that comes back to a region) is one ``ConfigError``;
   * ``default_split(task)``: the action after the plan's first grasp (the seed's example);
   * ``chain_tasks(task, cuts)``: the plan cut before each action of ``cuts`` (a chain of
-    stitched segments): each segment's task (only the last has the goal and the final cost) and
-    the full layout's columns of each; ``place_cuts(task)``: after every place that another
+    stitched segments): each segment's task (only the last has the whole goal and the final cost;
+    an earlier one the part of the goal its places settle for good, ``settled_goal``) and the full
+    layout's columns of each; ``place_cuts(task)``: after every place that another
     action follows (the hand is empty, the object at rest: a stable symbolic state).
 What it doesn't: search or simulate the segments (``realize.search.stitched``, ``realize.app.stitched``).
 """
@@ -16,13 +18,14 @@ What it doesn't: search or simulate the segments (``realize.search.stitched``, `
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 
 from realize.config import ConfigError
 from realize.tasks.goal_spec import GoalSpec
 from realize.tasks.spec import TaskSpec, task_for_plan
 from realize.tasks.suffix import part_columns, task_suffix
 
-__all__ = ["split_task", "default_split", "chain_tasks", "place_cuts", "CUT_RULES"]
+__all__ = ["split_task", "default_split", "chain_tasks", "place_cuts", "settled_goal", "CUT_RULES"]
 
 CUT_RULES = ("after_grasp", "after_each_place")  # stitch.cut
 
@@ -34,7 +37,8 @@ def split_task(task: TaskSpec, split: int) -> tuple[TaskSpec, TaskSpec, list[int
         actions = "; ".join(f"{i}: {a}" for i, a in enumerate(task.plan))
         raise ConfigError(f"stitch.split = {split!r} is invalid: the second segment's first action, 1 .. {n - 1} "
                           f"({actions})")
-    prefix = task_for_plan(dataclasses.replace(task, goal=GoalSpec(), final_cost=0.0), task.plan[:split])
+    prefix = task_for_plan(dataclasses.replace(task, goal=settled_goal(task, split), final_cost=0.0),
+                           task.plan[:split])
     prefix.name = f"{task.name}[:{split}]"
     suffix = task_suffix(task, split, key="stitch.split")
     shared = sorted(set(prefix.layout.names) & set(suffix.layout.names))
@@ -51,6 +55,22 @@ def default_split(task: TaskSpec) -> int:
             return i + 1
     raise ConfigError(f"stitch.split: the plan of {task.source} has no grasp followed by another action; give "
                       "the second segment's first action (0-based)")
+
+
+def settled_goal(task: TaskSpec, upto: int) -> GoalSpec:
+    """The part of ``task``'s goal that the actions before ``upto`` settle for good: the ``rests_on``
+    and ``rests_in`` conditions of each object placed there that no later action grasps again, on a
+    support no later action grasps. A chain's segment that ends before the plan does must leave
+    them holding (a cube dropped beside the tower is not a start the next segment can finish
+    from). ``rests_at`` and ``base_in`` read regions of their own and stay with the last segment."""
+    placed = {a.obj for a in task.plan[:upto] if a.template == "place" and a.obj is not None}
+    moved_later = {a.obj for a in task.plan[upto:] if a.template == "grasp" and a.obj is not None}
+    done = placed - moved_later
+
+    def keep(m: Mapping[str, str]) -> dict[str, str]:
+        return {o: s for o, s in m.items() if o in done and s not in moved_later}
+
+    return GoalSpec(on=keep(task.goal.on), inside=keep(task.goal.inside))
 
 
 def place_cuts(task: TaskSpec) -> list[int]:
@@ -73,13 +93,12 @@ def chain_tasks(task: TaskSpec, cuts: list[int], key: str = "stitch.splits") -> 
         raise ConfigError(f"{key} = {list(cuts)!r} is invalid: increasing first actions of the segments after the "
                           f"first, each 1 .. {n - 1} ({actions})")
     bounds = [0, *cuts, n]
-    free = dataclasses.replace(task, goal=GoalSpec(), final_cost=0.0)
     tasks = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         if b == n:
             t = task_suffix(task, a, key=key)
         else:
-            t = task_for_plan(free, task.plan[a:b])
+            t = task_for_plan(dataclasses.replace(task, goal=settled_goal(task, b), final_cost=0.0), task.plan[a:b])
             t.name = f"{task.name}[{a or ''}:{b}]"
         tasks.append(t)
     seen: dict[str, int] = {}
