@@ -3,12 +3,16 @@ that documents it.
 
 The rule this file checks:
 
-* A settings dataclass (``realize.config.Settings``) is where a default is written.
-* The files Hydra composes a run from by default (``configs/config.yaml`` and the option
-  its defaults list picks in each group: ``sim/default.yaml``, ``ce/seed_paper.yaml``, ...)
+* A settings dataclass (``realize.config.Settings``) is where a default is written. Where the
+  class is registered as its group's option (``realize.app.hydra_edge.register_schema``: ``sim``,
+  ``workers``, a task's ``perturbation``) no YAML file says its values at all
+  (``test_a_registered_group_has_no_yaml``).
+* The other files Hydra composes a run from by default (``configs/config.yaml`` and the option
+  its defaults list picks in each group: ``controller/default.yaml``, ``ce/seed_paper.yaml``, ...)
   exist to document every key of their group: they are what ``realize --help`` and
   ``realize --cfg job`` show, and what a command line overrides without ``+``. They may say the
-  dataclass's value again, and tests/test_defaults.py fails when they say another.
+  dataclass's value again, and tests/test_defaults.py fails when they say another (until their
+  class is registered as well).
 * Every other YAML file writes only what differs from what it is merged over: a preset
   (``configs/experiment/``, ``configs/ablation/``), a group option built on another one
   (``defaults: [plain, _self_]``), a node built on a registered dataclass (a task's
@@ -146,3 +150,21 @@ def test_a_repeated_value_is_found(tmp_path: Path) -> None:
     assert sorted(f.split(" =")[0] for f in found) == [
         "execute/again.yaml: worlds", "experiment/wall.yaml: controller.move_tolerance",
         "task/tower3.yaml: task.perturbation.object_xy"], found
+
+
+def test_a_registered_group_has_no_yaml() -> None:
+    """A group whose option is a registered dataclass has no YAML option beside it (Hydra would
+    take the file and leave the class's values unread), and the composed group is the class's
+    defaults."""
+    from realize.app.compose import compose_config
+    from realize.app.hydra_edge import registered_options
+    from realize.app.workers.settings import WorkersSettings
+    from realize.scene.settings import SimSettings
+
+    for group, cls in (("sim", SimSettings), ("workers", WorkersSettings)):
+        assert registered_options(group) == ["default"], group
+        assert not list((CONFIG_DIR / group).glob("*.yaml")), group
+        composed, defaults = compose_config([])[group], dataclasses.asdict(cls())
+        assert sorted(composed) == sorted(defaults), group
+        assert all(_plain(v) == _plain(defaults[k]) for k, v in composed.items()), group
+    assert not list((CONFIG_DIR / "task" / "perturbation").glob("*.yaml"))

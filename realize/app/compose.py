@@ -19,7 +19,7 @@ from typing import Any
 
 from realize.app.cli_keys import check_override_keys
 from realize.app.hydra_edge import (compose_or_error, override_values, parse_overrides, register_resolvers,
-                                    resolution_error)
+                                    registered_options, resolution_error)
 from realize.config import ConfigError, did_you_mean
 from realize.paths import CONFIG_DIR
 
@@ -31,9 +31,11 @@ CONFIG_GROUPS = ("task", "scene", "robot", "sim", "controller", "ce", "logging",
 
 
 def group_options(group: str) -> list[str]:
-    """The options of a config group (its files in ``configs/GROUP/``)."""
+    """The options of a config group: its files in ``configs/GROUP/`` and the settings
+    dataclasses registered as its options (``realize.app.hydra_edge.register_schema``)."""
     d = CONFIG_DIR / group
-    return sorted(p.stem for p in d.glob("*.yaml")) if d.is_dir() else []
+    files = [p.stem for p in d.glob("*.yaml")] if d.is_dir() else []
+    return sorted({*files, *registered_options(group)})
 
 
 def check_group_choices(parsed: Sequence[Any]) -> None:

@@ -6,7 +6,8 @@ that does not parse), ``override_values`` (the values an override gives, a sweep
 ``ConfigError`` line; see "Composing once per set of group choices" below), ``register_resolvers``
 (``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import),
 ``register_schema`` (the settings dataclasses whose defaults Hydra composes from the class
-itself, registered on import: ``task/perturbation/default``, ``Perturbation``) and
+itself, registered on import: ``sim/default``, ``workers/default``, ``task/perturbation/default``;
+``registered_options``) and
 ``resolution_error`` (a resolver's ``ConfigError`` as one line). ``realize.app.compose`` and
 ``realize.app.cli_keys`` build on these; neither imports the other.
 What it doesn't: check keys or group choices (``realize.app.cli_keys``, ``realize.app.compose``)
@@ -36,7 +37,7 @@ from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 
 __all__ = ["parse_overrides", "override_values", "compose_or_error", "split_overrides", "register_resolvers",
-           "register_schema", "scaled_count", "resolution_error"]
+           "register_schema", "registered_options", "scaled_count", "resolution_error"]
 
 
 def parse_overrides(overrides: Sequence[str]) -> list[Any]:
@@ -184,16 +185,36 @@ def register_resolvers() -> None:
 
 
 def register_schema() -> None:
-    """Settings dataclasses as Hydra config groups (idempotent): ``task/perturbation/default`` is
-    the defaults of ``realize.tasks.perturbation.Perturbation``, so they are written in the class
-    only; a task file takes the node in its defaults list (``- perturbation: default``) and writes
-    the keys it changes under ``perturbation:``. The node is plain data, as a YAML file's would
-    be: the values are checked by the class's reader (``build_run_spec``), with its messages."""
+    """Settings dataclasses as Hydra config groups (idempotent), so that their defaults are written
+    in the class only: ``sim/default`` is ``realize.scene.settings.SimSettings``' defaults,
+    ``workers/default`` ``realize.app.workers.settings.WorkersSettings``' (configs/sim/ and
+    configs/workers/ hold no YAML: a preset or the command line changes a key over them), and
+    ``task/perturbation/default`` ``realize.tasks.perturbation.Perturbation``'s (a task file takes
+    it in its defaults list, ``- perturbation: default``, and writes the keys it changes under
+    ``perturbation:``). Each node is plain data, as a YAML file's would be: the values are checked
+    by the class's reader (``build_run_spec``), with its messages. The classes' modules import
+    nothing heavy (a refused command line stays quick)."""
     from hydra.core.config_store import ConfigStore
 
+    from realize.app.workers.settings import WorkersSettings
+    from realize.scene.settings import SimSettings
     from realize.tasks.perturbation import Perturbation
 
-    ConfigStore.instance().store(group="task/perturbation", name="default", node=_plain_data(Perturbation()))
+    store = ConfigStore.instance()
+    for group, settings in (("sim", SimSettings()), ("workers", WorkersSettings()),
+                            ("task/perturbation", Perturbation())):
+        store.store(group=group, name="default", node=_plain_data(settings))
+
+
+def registered_options(group: str) -> list[str]:
+    """The options of ``group`` that ``register_schema`` registered (``["default"]`` or none)."""
+    from hydra.core.config_store import ConfigStore
+
+    try:
+        names = ConfigStore.instance().list(group)
+    except OSError:  # (no such group in the store)
+        return []
+    return sorted(n.removesuffix(".yaml") for n in names if n.endswith(".yaml"))
 
 
 def _plain_data(settings: Any) -> dict[str, Any]:

@@ -27,27 +27,46 @@ ROBOT_COLLISIONS = ("all", "no_self", "hand")  # envs.robot_agent.ROBOT_COLLISIO
 
 @dataclass
 class SimSettings(Settings):
-    """Physics settings (the Hydra ``sim`` group). Every field is a config key."""
+    """Physics settings (the Hydra ``sim`` group: this class's defaults are its one option,
+    ``realize.app.hydra_edge.register_schema``). Every field is a config key."""
 
     config_key: ClassVar[str] = "sim"
 
-    backend: str = setting("auto", choices=BACKENDS)  # auto: cpu (gpu, not verified on a GPU yet, only where asked for)
-    sim_freq: int = setting(60, ge=1)
-    control_freq: int = setting(20, ge=1)
+    # auto | cpu | gpu. auto: cpu (gpu, not verified on a GPU yet, only where asked for; see also the
+    # top-level `device`)
+    backend: str = setting("auto", choices=BACKENDS)
+    sim_freq: int = setting(60, ge=1)  # physics steps per second
+    control_freq: int = setting(20, ge=1)  # controller updates per second (sim_freq must be a multiple)
     solver_position_iterations: int = setting(10, ge=1)
     solver_velocity_iterations: int = setting(1, ge=0)
-    solver_position_iterations_robot: int | None = setting(None, ge=1)  # robots' own count (None: as above); breaks copy independence (a woken cube in one copy changes the others' robots), so off by default
-    lean_robot: bool = True  # simulate the robot without its collision.lean_drop_links (envs.robot_agent)
-    robot_collisions: str = setting("all", choices=ROBOT_COLLISIONS)  # all | no_self (links never touch each other) | hand (only gripper and fingers have shapes)
-    cpu_workers: int | None = setting(None, ge=0)  # None: from the core count
+    # robots' own count (None: as above); breaks copy independence (a woken cube in one copy
+    # changes the others' robots), so off by default
+    solver_position_iterations_robot: int | None = setting(None, ge=1)
+    # the robot without its collision.lean_drop_links (envs.robot_agent; Fetch: the 11 links nothing
+    # touches: wheels, laser, e-stop, bellows, head camera frames)
+    lean_robot: bool = True
+    # all | no_self (robot links never touch each other) | hand (only the gripper link and the
+    # fingers have collision shapes: 0.84-0.87x PhysX time, seed-task fidelity held; off by
+    # default: with no base shape the base would drive through walls and tables)
+    robot_collisions: str = setting("all", choices=ROBOT_COLLISIONS)
+    cpu_workers: int | None = setting(None, ge=0)  # PhysX CPU threads of each scene (every worker's); None: a worker's share of the cores
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the object"
-    torch_threads_cpu: int | None = setting(1, ge=1)  # torch threads beside PhysX CPU workers (None: leave as is)
-    shard_rows: int = setting(100, ge=1)  # CPU: at most this many copies per PhysX scene (realize.app.workers.blocks)
+    torch_threads_cpu: int | None = setting(1, ge=1)  # torch intra-op threads beside PhysX CPU workers (None: leave as is)
+    # CPU: at most this many copies per PhysX scene (a shard; realize.app.workers.blocks): a run's
+    # numbers depend on it, never on workers.n
+    shard_rows: int = setting(100, ge=1)
     # PhysX scene settings (ManiSkill's SceneConfig; defaults are ManiSkill's)
-    contact_offset: float = setting(0.02, gt=0)  # m: shapes closer than the sum of their offsets get contacts
-    solver: str = setting("tgs", choices=SOLVERS)  # tgs: temporal Gauss-Seidel; pgs: projected Gauss-Seidel
+    # m: shapes closer than the sum of their offsets get (speculative) contacts. 0.005: 0.905x PhysX
+    # time and equal seed-task fidelity, but push-scene rollouts then stop being reset-deterministic
+    # and batch-invariant (tests/test_push.py), so it stays 0.02
+    contact_offset: float = setting(0.02, gt=0)
+    # tgs: temporal Gauss-Seidel; pgs: projected Gauss-Seidel (0.73x PhysX time, but late-batch
+    # feasible 0.925 -> 0.065: grasps slip)
+    solver: str = setting("tgs", choices=SOLVERS)
     friction_every_iteration: bool = True  # friction solved in every position iteration (False: the last ones only)
-    enable_pcm: bool = True  # persistent contact manifolds
+    # persistent contact manifolds (False: ~0.94x PhysX time; with hand collisions late-batch
+    # feasible fell to 0.285)
+    enable_pcm: bool = True
     sleep_threshold: float = setting(0.005, ge=0)  # mass-normalised kinetic energy below which a body may sleep
     bounce_threshold: float = setting(2.0, ge=0)  # m/s: slower impacts do not bounce
 

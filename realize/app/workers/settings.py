@@ -24,12 +24,13 @@ WORKER_BACKENDS = ("process", "ray")
 
 @dataclass
 class WorkersSettings(Settings):
-    """Rollout workers (the Hydra ``workers`` group). Every field is a config key."""
+    """Rollout workers (the Hydra ``workers`` group: this class's defaults are its one option,
+    ``realize.app.hydra_edge.register_schema``). Every field is a config key."""
 
     config_key: ClassVar[str] = "workers"
 
     n: int | None = setting(None, ge=1)  # None: min(cores, shards)
-    backend: str = setting("process", choices=WORKER_BACKENDS)
+    backend: str = setting("process", choices=WORKER_BACKENDS)  # process (local) | ray (actors; pip install -e '.[ray]')
     ray_address: str | None = None  # ray backend: "auto", "host:port", or None (start a local Ray instance)
     start_timeout_s: float = setting(600.0, gt=0)  # a worker that has not built its scenes by then fails
 
