@@ -9,8 +9,11 @@ experiment=tower3``, ``tower4``, ``tower5`` and ``rearrange3``, each searched th
 ``levers=stitched stitch.cut=after_each_place stitch.credit=3``). Per run it appends a CSV row to
 ``--out`` as soon as the run ends: ``scripts/bench_levers.py``'s columns, plus ``actions`` (the
 returned plan's length), ``segment_s`` (a stitched run's seconds per segment, ``;``-separated),
-``validation_s`` and ``load`` (the host's 1-minute load average when the run started: a run beside
-other jobs reads high).
+``validation_s``, ``load`` (the host's 1-minute load average when the run started: a run beside
+other jobs reads high) and ``copy_steps``: the control steps the scene's copies were stepped,
+summed over the batches (a batch steps all its copies until its longest plan ends). Wall time
+follows ``copy_steps`` on one host (``--summary`` prints both ratios): it is the load-free
+measure of the search's work where the host is shared.
 
 Then it prints, per preset, the seeds' search time, its ratio to ``tower3``'s of the same
 seed searched the plain way (the issue's bounds: tower4 <= 1.6, tower5 <= 2.2) and the returned plan's validated share
@@ -37,6 +40,8 @@ import statistics
 import sys
 from pathlib import Path
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
 from bench_levers import FIELDS as LEVER_FIELDS  # noqa: E402  (the same run and columns)
@@ -53,8 +58,20 @@ PRESETS = {
 CHAIN = ["levers=stitched", "stitch.cut=after_each_place", "stitch.credit=3"]
 RATIO_BOUND = {"tower4": 1.6, "tower5": 2.2}
 MIN_VALIDATED = 0.90
-FIELDS = ["preset", "variant", "actions", "segment_s", "validation_s", "load",
+FIELDS = ["preset", "variant", "actions", "segment_s", "validation_s", "load", "copy_steps",
           *(f for f in LEVER_FIELDS if f != "experiment")]
+
+
+def copy_steps(run_dir: Path) -> int:
+    """Control steps of every copy of every batch of the run in ``run_dir``: each batch's rows
+    times its longest plan, over every history file (a stitched run has one per segment)."""
+    total = 0
+    for path in sorted(run_dir.glob("history*.npz")):
+        with np.load(path) as h:
+            for k in h.files:
+                if k.startswith("steps_"):
+                    total += int(h[k].size) * int(h[k].max(initial=0))
+    return total
 
 
 def measure(preset: str, overrides: list[str], seed: int, run_dir: Path) -> dict[str, object]:
@@ -70,7 +87,7 @@ def measure(preset: str, overrides: list[str], seed: int, run_dir: Path) -> dict
     return {**row, "actions": plan.count("(") if plan else "",
             "segment_s": ";".join(f"{s:.1f}" for s in seg),
             "validation_s": round(float((doc.get("validation") or {}).get("wall_time_s") or 0.0), 1),
-            "load": round(load, 2)}
+            "load": round(load, 2), "copy_steps": copy_steps(run_dir)}
 
 
 def read(path: Path) -> list[dict[str, str]]:
@@ -96,17 +113,21 @@ def report(rows: list[dict[str, str]]) -> bool:
                 continue
             times = [float(r["search_s"]) for _, r in mine]
             vals = [float(r["validated"] or "nan") for _, r in mine]
-            ratios = []
+            ratios, work = [], []
             for seed, r in mine:
                 ref = by.get(("tower3", "plain", seed))  # tower3 as it is searched today
                 if ref is not None and preset != "tower3":
                     ratios.append(float(r["search_s"]) / float(ref["search_s"]))
+                    if r.get("copy_steps") and ref.get("copy_steps"):
+                        work.append(float(r["copy_steps"]) / float(ref["copy_steps"]))
             bound = RATIO_BOUND.get(preset)
             line = (f"{preset:>11}: {int(mine[0][1]['actions'] or 0):2d} actions, seeds {[s for s, _ in mine]}, "
                     f"search {', '.join(f'{t:.0f}' for t in times)} s (mean {_mean(times):.0f}), "
                     f"validated {', '.join(f'{v:.2f}' for v in vals)}")
             if ratios:
                 line += f", x tower3 {', '.join(f'{q:.2f}' for q in ratios)}"
+            if work:
+                line += f" (copy steps x tower3 {', '.join(f'{q:.2f}' for q in work)})"
             if bound is not None and ratios:
                 ok = all(q <= bound for q in ratios)
                 ok_all &= ok
@@ -138,12 +159,18 @@ def main() -> None:
     ap.add_argument("--chain", action="store_true", help="also search each preset as a chain cut after each place")
     ap.add_argument("--only-chain", action="store_true", help="search each preset as a chain only (no plain run)")
     ap.add_argument("--extra", default="", help="comma-separated overrides added to every run")
-    ap.add_argument("--keep", type=Path, help="keep each run's directory under this folder")
+    ap.add_argument("--keep", type=Path, help="keep each run's directory under this folder (--summary: read "
+                    "copy_steps missing from the CSV from there)")
     ap.add_argument("--out", type=Path, help="CSV to append rows to")
     ap.add_argument("--summary", type=Path, help="only print the tables of this CSV")
     args = ap.parse_args()
     if args.summary:
-        sys.exit(0 if report(read(args.summary)) else 1)
+        rows = read(args.summary)
+        for r in rows:  # rows written before the column: read it from the kept run directory
+            d = (args.keep or Path()) / f"{r['preset']}-{r['variant']}-s{r['seed']}"
+            if not r.get("copy_steps") and args.keep and d.is_dir():
+                r["copy_steps"] = str(copy_steps(d))
+        sys.exit(0 if report(rows) else 1)
     if args.out is None:
         ap.error("--out is required unless --summary is given")
     presets = [p for p in args.presets.split(",") if p]

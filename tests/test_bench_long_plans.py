@@ -45,3 +45,16 @@ def test_the_chain_is_compared_with_tower3_searched_the_plain_way(capsys) -> Non
             _row("tower4", 6, 150, 0.95, variant="chain")]
     blp.report(rows)
     assert "x tower3 1.50" in capsys.readouterr().out
+
+
+def test_copy_steps_count_every_copy_of_every_batch_to_its_longest_plan(tmp_path: Path) -> None:
+    import numpy as np
+    np.savez(tmp_path / "history.npz", steps_000=np.array([10, 30, 20]), steps_001=np.array([5, 5]), Z_000=np.zeros(3))
+    np.savez(tmp_path / "history_c1.npz", steps_000=np.array([7]))
+    assert blp.copy_steps(tmp_path) == 3 * 30 + 2 * 5 + 1 * 7
+
+
+def test_the_work_ratio_is_printed_beside_the_time_ratio(capsys) -> None:
+    rows = [{**_row("tower3", 4, 100, 0.95), "copy_steps": "1000"}, {**_row("tower4", 6, 150, 0.95), "copy_steps": "1500"}]
+    blp.report(rows)
+    assert "x tower3 1.50 (copy steps x tower3 1.50)" in capsys.readouterr().out
