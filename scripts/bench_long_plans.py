@@ -11,8 +11,10 @@ experiment=tower3``, ``tower4``, ``tower5`` and ``rearrange3``, each searched th
 returned plan's length), ``segment_s`` (a stitched run's seconds per segment, ``;``-separated),
 ``validation_s``, ``load`` (the host's 1-minute load average when the run started: a run beside
 other jobs reads high) and ``copy_steps``: the control steps the scene's copies were stepped,
-summed over the batches (a batch steps all its copies until its longest plan ends). Wall time
-follows ``copy_steps`` on one host (``--summary`` prints both ratios): it is the load-free
+summed over the batches (a batch steps all its copies until its longest plan ends). On one
+host, wall time is mostly ``copy_steps`` times a cost per copy-step, plus a part per control step
+that does not grow with the batch (tower4's chain, 2-core Xeon under load: about 30 ms per step
+and 1.2 ms per copy-step); ``--summary`` prints both ratios, the copy steps being the load-free
 measure of the search's work where the host is shared.
 
 Then it prints, per preset, the seeds' search time, its ratio to ``tower3``'s of the same
