@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 from realize.app.candidate_validation import pick_candidates, validate_candidates, wilson_interval
+from realize.app.run_settings import ValidationSettings
 from realize.app.validation import run_validation
 from realize.run_dir.directory import BestPlan
 from realize.run_dir.history import History
@@ -111,7 +113,7 @@ def test_a_later_check_defaults_to_the_runs_validation_and_seed() -> None:
 
     v, seed = run_validation(run_with({"seed": 7, "validation": {"replicas": 8, "candidates": 2, "min_success": 0.5}}))
     assert (v.replicas, v.candidates, v.min_success, seed) == (8, 2, 0.5, 7)
-    group = yaml.safe_load((CONFIG_DIR / "validation" / "default.yaml").read_text())
+    group = dataclasses.asdict(ValidationSettings())  # the group's defaults
     for off in ({"seed": 2, "validation": {"replicas": 0}}, {"seed": 2}):  # off, or recorded before validation
         v, seed = run_validation(run_with(off))
         assert (v.replicas, v.candidates, seed) == (group["replicas"], group["candidates"], 2)

@@ -9,17 +9,16 @@ import re
 from pathlib import Path
 
 import pytest
-import yaml
 
 from helpers import REPO, realize_cli, tiny
 from realize.app.execute import EXECUTION_DIR
-from realize.paths import CONFIG_DIR
+from realize.app.run_settings import LoggingSettings
 from realize.recording.validation_log import VALIDATION_RRD
 from realize.run_dir.names import (CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE, SCENE_FILE,
                                    WORKER_LOG_DIR, candidate_file, trajectories_name)
 from realize.sinks.rerun import recording_name
 
-RRD = yaml.safe_load((CONFIG_DIR / "logging" / "default.yaml").read_text())["rrd"]
+RRD = LoggingSettings().rrd  # the logging group's default file name
 # what the code names: one example of every kind of entry a run directory can hold
 WRITTEN_BY_THE_CODE = [
     RESULT_FILE, HISTORY_FILE, CHECKPOINT_FILE, SCENE_FILE, trajectories_name(3), RRD, recording_name(RRD, None, 2),

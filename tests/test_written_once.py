@@ -5,7 +5,7 @@ The rule this file checks:
 
 * A settings dataclass (``realize.config.Settings``) is where a default is written. Where the
   class is registered as its group's option (``realize.app.hydra_edge.register_schema``: ``sim``,
-  ``workers``, a task's ``perturbation``) no YAML file says its values at all
+  ``workers``, ``logging``, ``validation``, a task's ``perturbation``) no YAML file says its values
   (``test_a_registered_group_has_no_yaml``).
 * The other files Hydra composes a run from by default (``configs/config.yaml`` and the option
   its defaults list picks in each group: ``controller/default.yaml``, ``ce/seed_paper.yaml``, ...)
@@ -153,18 +153,21 @@ def test_a_repeated_value_is_found(tmp_path: Path) -> None:
 
 
 def test_a_registered_group_has_no_yaml() -> None:
-    """A group whose option is a registered dataclass has no YAML option beside it (Hydra would
+    """A group whose option is a registered dataclass has no YAML file of that option (Hydra would
     take the file and leave the class's values unread), and the composed group is the class's
     defaults."""
     from realize.app.compose import compose_config
     from realize.app.hydra_edge import registered_options
+    from realize.app.run_settings import LoggingSettings, ValidationSettings
     from realize.app.workers.settings import WorkersSettings
     from realize.scene.settings import SimSettings
 
-    for group, cls in (("sim", SimSettings), ("workers", WorkersSettings)):
+    composed = compose_config([])
+    for group, cls in (("sim", SimSettings), ("workers", WorkersSettings), ("logging", LoggingSettings),
+                       ("validation", ValidationSettings)):
         assert registered_options(group) == ["default"], group
-        assert not list((CONFIG_DIR / group).glob("*.yaml")), group
-        composed, defaults = compose_config([])[group], dataclasses.asdict(cls())
-        assert sorted(composed) == sorted(defaults), group
-        assert all(_plain(v) == _plain(defaults[k]) for k, v in composed.items()), group
-    assert not list((CONFIG_DIR / "task" / "perturbation").glob("*.yaml"))
+        assert not (CONFIG_DIR / group / "default.yaml").exists(), group
+        defaults = dataclasses.asdict(cls())
+        assert sorted(composed[group]) == sorted(defaults), group
+        assert all(_plain(v) == _plain(defaults[k]) for k, v in composed[group].items()), group
+    assert not (CONFIG_DIR / "task" / "perturbation").exists()

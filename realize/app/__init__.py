@@ -7,7 +7,8 @@ Modules, by what you look for (docs/architecture.md draws the path through them)
   ``sweep_check`` (every job of a sweep checked first), ``sweep_summary`` (a sweep's
   ``summary.csv``), ``objective`` (the number a sweep minimizes), ``prebuild`` (the compiled
   fabric step, built once per machine).
-* The config edge: ``run_config`` (Hydra's config checked into a ``RunSpec``), ``task_plans`` (a
+* The config edge: ``run_config`` (Hydra's config checked into a ``RunSpec``), ``run_settings`` (the
+  ``logging`` and ``validation`` groups), ``task_plans`` (a
   run's task and candidate plans), ``resume_config`` (what a resumed run takes from the command line).
 * One run: ``planner`` (the importable ``Planner``), ``plan_result`` (what its calls take and
   return), ``run`` (one run in one call), ``assembly`` (searcher and sinks picked), ``loop`` (ask ->

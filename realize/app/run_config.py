@@ -29,13 +29,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import torch
 
 from realize.search.budget import HalvingBudget, plan_budget
 from realize.search.ce.config import CEConfig
+from realize.app.run_settings import LoggingSettings, ValidationSettings
 from realize.app.stitch_settings import StitchSettings, read_stitch
 from realize.search.stitched import StitchConfig
 from realize.config import ConfigError, Settings, as_mapping, check_unknown, setting
@@ -64,24 +64,6 @@ _DEVICE_BACKEND = {"cpu": "cpu", "cuda": "gpu"}  # device -> scene backend
 _BACKEND_DEVICE = {"cpu": "cpu", "gpu": "cuda"}
 
 
-def _check_rrd(name: str) -> str | None:
-    if Path(name).is_absolute() or ".." in Path(name).parts or not name.endswith(".rrd"):
-        return "a file name ending in .rrd inside the run directory"
-    return None
-
-
-@dataclass
-class LoggingSettings(Settings):
-    """Hydra ``logging`` group: what a run writes besides result.json/history/checkpoint."""
-
-    config_key = "logging"
-
-    rerun: bool = True  # write a rerun recording (.rrd) in the run directory
-    rrd: str = setting("realize.rrd", check=_check_rrd)  # its file name (relative to the run directory)
-    record: bool = True  # record sample trajectories in the rollout (rerun scene view, figure files)
-    progress: bool = True  # tqdm progress bar per CE iteration
-
-
 @dataclass
 class _TopLevel(Settings):
     """The run config's own keys (the groups are read by their own classes)."""
@@ -105,22 +87,6 @@ class Placement:
     backend: str
     device: torch.device
     dtype: torch.dtype
-
-
-@dataclass
-class ValidationSettings(Settings):
-    """Hydra ``validation`` group: validate the run's candidates after its search
-    (``realize.app.candidate_validation``, called by ``realize.app.run``); ``replicas: 0`` turns it off.
-    These defaults are the ones a config without the group gets (the group file,
-    ``configs/validation/default.yaml``, agrees: test_defaults.py); a run saved before the group
-    existed reads as ``replicas: 0`` (``realize.run_dir.upgrade``), as it ran."""
-
-    config_key = "validation"
-
-    replicas: int = setting(64, ge=0)  # R replicas of the task's perturbations per candidate (0: off)
-    candidates: int = setting(5, ge=1)  # K cheapest distinct feasible samples of the last iterations
-    min_success: float = setting(0.9, ge=0, le=1)  # return the cheapest whose 95 % lower bound reaches this
-    iterations: int = setting(3, ge=1)  # the last iterations the candidates come from
 
 
 @dataclass

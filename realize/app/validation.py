@@ -123,11 +123,11 @@ def validate(run_dir: str | Path, replicas: int | None = None, seed: int | None 
 def run_validation(run: BestPlan) -> tuple[ValidationSettings, int]:
     """The ``validation`` settings the run validated its candidates with, and its seed: the
     defaults that put a later check in the worlds the run's candidates met. A run with
-    validation off (or recorded before it existed) gets the group file's settings
-    (``configs/validation/default.yaml``)."""
+    validation off (or recorded before it existed) gets the group's default settings
+    (``ValidationSettings``')."""
     v = ValidationSettings.from_mapping(run.config.get("validation"))
     if v.replicas == 0:
-        v = ValidationSettings()  # the group file's defaults (test_defaults.py)
+        v = ValidationSettings()  # the group's defaults
     return v, int(run.config.get("seed", 0))
 
 
