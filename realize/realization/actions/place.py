@@ -4,7 +4,8 @@ What it does: ``Place`` runs the shared manipulation phases (``manipulate``) ope
 gripper, aims the TCP so that the held object's centre lands on the place point, and decides
 success from the fingers letting go and the object coming to rest.
 With ``controller.place_align_yaw`` it turns a held box about the approach so that it lands
-square on its support (the region's frame), modulo 90 degrees.
+square on its support (the region's frame), modulo 90 degrees; with ``controller.place_level``
+it turns the hand so the held box lands level (``realize.realization.actions.level``).
 What it doesn't: check where the object came to rest (the plan's goal does, ``goals``).
 """
 
@@ -15,6 +16,7 @@ from torch import Tensor
 
 from realize.tasks.hemisphere import Hemisphere
 from realize.realization.actions.base import Outcome
+from realize.realization.actions.level import hand_frame, level_turn
 from realize.realization.actions.manipulate import GRIP, RETREAT, Manipulate
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
@@ -50,8 +52,25 @@ class Place(Manipulate):
         code = super().begin(ctx, rows, params, region, obj, shift, support)
         if ctx.cfg.place_align_yaw and ctx.scene.geometry.objects[obj].shape == "box":
             self.closing[rows] = self._square_on(ctx, rows, obj, support)
+        if ctx.cfg.place_level is not None and ctx.scene.geometry.objects[obj].shape == "box" \
+                and isinstance(region, Hemisphere):
+            self._level(ctx, rows, params, region, obj, shift)
         held = ctx.holds(rows, obj)
         return torch.where(held, code, Failure.NOT_HOLDING)
+
+    def _level(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int,
+               shift: Tensor | None) -> None:
+        """``controller.place_level``: the goal axes turned so the held box lands level
+        (``level_turn``; the pre-pose stays the sampled one), and the TCP target that puts the box's centre on that point (plus
+        ``place_drop``) with the box's whole offset from the TCP as the hand will hold it there."""
+        centre, _ = self._centre_and_pre(ctx, params, region, shift)
+        box = quat_to_matrix(ctx.objects[rows, obj, 3:7])
+        now = hand_frame(ctx.approach[rows], ctx.closing[rows])
+        offset = ctx.objects[rows, obj, :3] - ctx.tcp[rows]
+        a, c, off, _ = level_turn(box, now, self.approach[rows], self.closing[rows], offset, ctx.cfg.place_level)
+        lift = torch.tensor([0.0, 0.0, ctx.cfg.place_drop], device=centre.device)
+        self.approach[rows], self.closing[rows] = a, c
+        self.target[rows] = centre + lift - off
 
     def _square_on(self, ctx: StepContext, rows: Tensor, obj: int, support: int) -> Tensor:
         """(len(rows), 3): the goal closing axis that sets the held box down square on its
