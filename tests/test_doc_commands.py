@@ -79,6 +79,8 @@ def quickstart_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return where / "outputs" / "api_example"
 
 
+@pytest.mark.slow  # a whole stitched run: make test keeps one (tests/test_golden.py, seed_paper_default) and
+# the Python API's (tests/test_stitched_run.py)
 def test_python_quickstart_runs(quickstart_run: Path) -> None:
     """README.md's Python quickstart writes its run; docs/python_api.md shows the same code."""
     doc = json.loads((quickstart_run / RESULT_FILE).read_text())

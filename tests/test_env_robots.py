@@ -21,11 +21,27 @@ def _flat(obs) -> np.ndarray:
     return np.asarray(obs.cpu() if isinstance(obs, torch.Tensor) else obs, dtype=np.float64).ravel()
 
 
+@pytest.fixture(scope="module")
+def warm_renderer():
+    """One env that has rendered, open for the module: lavapipe builds its renderer (about 12 s on
+    a 2-core host) for the first frame and frees it with the last env that renders, so without it
+    each robot's first frame would pay that again; with it, a robot's frame costs under a second."""
+    env = gym.make(ENV_IDS[0], robot_uids=known_robots()[0], render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        env.render()
+        yield
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("robot", known_robots())
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_every_task_with_every_robot(env_id: str, robot: str) -> None:
-    # each robot renders in one task (a first frame costs about 3 s with lavapipe); test_scene.py renders too
+def test_every_task_with_every_robot(env_id: str, robot: str, request: pytest.FixtureRequest) -> None:
+    # each robot renders in one task, beside the module's warm renderer; test_scene.py renders too
     render = env_id == ENV_IDS[0]
+    if render:
+        request.getfixturevalue("warm_renderer")
     env = gym.make(env_id, robot_uids=robot, render_mode="rgb_array" if render else None)
     try:
         u = env.unwrapped

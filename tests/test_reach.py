@@ -187,9 +187,9 @@ def _report(name: str, out: ReachOutcome) -> str:
 
 
 def test_whole_body_fabric_reaches_goals_above_table1() -> None:
-    """>= 50 goals in one batch: >= 90 % within 2 cm within 10 s, no robot-table penetration."""
-    out = run_reach(100, seed=0)
-    print(_report("reach N=100", out))
+    """50 goals in one batch: >= 90 % within 2 cm within 10 s, no robot-table penetration."""
+    out = run_reach(50, seed=0)  # 0.96 reached (100 goals: 26 s on a busy 2-core host, 50: 8 s)
+    print(_report("reach N=50", out))
     assert bool(out.valid.all()), "the fabric flagged a plan invalid"
     assert float(out.reached.float().mean()) >= 0.9, _report("reach", out)
     assert out.max_penetration < PENETRATION_TOL, _report("reach", out)
