@@ -200,6 +200,7 @@ def test_checked_commands_are_accepted(quickstart_run: Path, tmp_path: Path) -> 
     assert not problems, "\n".join(problems)
 
 
+@pytest.mark.slow  # the guard of test_checked_commands_are_accepted (slow), on the quickstart's run
 def test_a_wrong_command_is_caught(quickstart_run: Path) -> None:
     """The check can fail: a misspelled key, a missing run, an unknown script flag."""
     assert "did you mean" in _check_realize(["ce.n_envz=3"])

@@ -123,6 +123,8 @@ def test_the_docs_trajectory_example_runs(table_study) -> None:
     assert [ln.rsplit(" ", 2)[0] for ln in lines] == list(t.action_text)
 
 
+@pytest.mark.slow  # a second closed-loop world (24 s on a busy 2-core host), beside the noisy world's repeat
+# (tests/test_closed_loop.py); make test keeps the study (table_study) and the golden runs' bit for bit
 def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp_path: Path) -> None:
     """A second execution of the closed-loop world (a new planner) repeats the study's, bit for bit."""
     _, where = table_study

@@ -277,6 +277,9 @@ def test_fetch_without_network_fails_in_one_line(tmp_path: Path) -> None:
     assert "\n" not in str(e.value) and time.monotonic() - t0 < 5
 
 
+@pytest.mark.slow  # a realize process (15 s on a busy 2-core host): make test keeps the message
+# (test_check_library_fails_in_one_line_naming_file_and_url) and the command's one line, exit 2
+# (tests/test_app.py, test_cli_bad_input_exit_code_and_one_line)
 def test_realize_device_cuda_without_the_library_exits_in_one_line(tmp_path: Path) -> None:
     """``realize device=cuda``, CUDA mocked as available, HOME an empty folder, no network used."""
     home = tmp_path / "home"

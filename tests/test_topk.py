@@ -200,6 +200,8 @@ def test_topk_replay_spec_is_the_leaders_plan(topk_run: Path, no_sim: None) -> N
     assert spec.task.layout.column_names == saved.columns
 
 
+@pytest.mark.slow  # a second top-k run (10 s on a busy 2-core host): make test keeps the whole top-k run
+# (topk_run) and an interrupted run resumed (tests/test_app.py)
 def test_topk_interrupted_in_round_0(tmp_path: Path) -> None:
     def stop(i: int) -> None:
         if i == 0:

@@ -145,6 +145,8 @@ def test_a_robust_run_meets_its_worlds_and_repeats(tmp_path: Path) -> None:
         assert np.array_equal(h["share_000"], h["world_feasible_000"].mean(1))
 
 
+@pytest.mark.slow  # a worker process (23 s on a busy 2-core host): make test keeps the worlds per copy
+# (test_each_copy_starts_in_its_world) and their folding (test_folding_worlds_equals_a_per_sample_loop)
 def test_a_robust_pool_realizes_each_sample_in_every_world() -> None:
     from realize.app.workers.pool import open_pool
 
