@@ -72,6 +72,8 @@ def test_replay_after_the_file_changed_gets_the_runs_cost(edited_run: tuple[Path
         assert rep["exact"]["iteration"] == 0 and rep["exact"]["shard_stop"] == 3
 
 
+@pytest.mark.slow  # three runs (17 s on a busy 2-core host): make test keeps the run's copy read by replay
+# (test_replay_after_the_file_changed_gets_the_runs_cost) and a resume (tests/test_app.py)
 def test_resume_and_replan_config_use_the_runs_copy(tmp_path: Path) -> None:
     """Interrupted after iteration 0 of 2, the file edited, resumed: the run ends as an
     uninterrupted run of the original file does (its own copy), and a replan's config starts

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = REPO / "scripts" / "check_same_seed.py"
 RECORD = REPO / "scripts" / "bench_data" / "same_seed.json"
@@ -29,6 +31,8 @@ def _check(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(SCRIPT), *args], cwd=REPO, capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow  # two script processes (13 s on a busy 2-core host): make test keeps the record's check
+# and a script's one-line refusal (tests/test_execute.py, test_script_refuses_an_unknown_family_in_one_line)
 def test_a_seed_outside_the_record_is_refused_before_any_run(tmp_path: Path) -> None:
     p = _check("--seeds", "0,7")
     assert p.returncode == 2 and p.stderr.count("\n") == 1

@@ -90,6 +90,8 @@ def test_same_seed_gives_identical_states_after_200_steps() -> None:
     assert torch.equal(run(), run())
 
 
+@pytest.mark.slow  # a first frame builds lavapipe's renderer (22 s on a busy 2-core host): make test keeps
+# every robot's frame through env.render, as BatchedScene.render calls it (tests/test_env_robots.py)
 def test_renders_a_frame_to_png(tmp_path) -> None:
     from PIL import Image
 

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 # make_fabrics_fixtures.py runs in its own environment (the fabrics package and casadi)
 OWN_ENVIRONMENT = {"make_fabrics_fixtures.py"}
@@ -36,6 +38,8 @@ def _description(help_text: str) -> str:
     return " ".join(paragraphs[1].split())
 
 
+@pytest.mark.slow  # a process that imports every script (15 s on a busy 2-core host): make test keeps a
+# script's argument parser in a process (tests/test_execute.py, test_script_refuses_an_unknown_family_in_one_line)
 def test_script_help_descriptions_are_whole_sentences() -> None:
     scripts = sorted(str(p.relative_to(REPO)) for p in (REPO / "scripts").glob("*.py")
                      if p.name not in OWN_ENVIRONMENT)

@@ -156,6 +156,9 @@ def test_replay_script_nominal_flag(run_dir: Path, rollouts: list[torch.Tensor],
     assert rollouts[-1].tolist() == [list(GOOD)]
 
 
+@pytest.mark.slow  # three top-k PDDL plannings (17 s on a busy 2-core host): make test keeps the returned
+# candidate's replay (test_returned_z_picks_the_returned_candidate) and the leader's plan
+# (tests/test_topk.py, test_topk_replay_spec_is_the_leaders_plan)
 def test_topk_replays_the_returned_plan_of_the_leader(tmp_path: Path, rollouts: list[torch.Tensor]) -> None:
     """A top-k run: best_z and the validation's candidates belong to the leader's plan (here 1)."""
     config = compose_config("task.planner.enabled=true", "task.planner.top_k=2", cpu=False)
