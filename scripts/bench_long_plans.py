@@ -140,7 +140,9 @@ def report(rows: list[dict[str, str]]) -> bool:
                 line += f" [{mark(ok)} validated >= {MIN_VALIDATED}]"
             print(line)
             means.append((float(mine[0][1]["actions"] or 0), _mean(times), preset))
-        if len(means) >= 2:
+        if len(means) < 3:
+            print("  time against plan length: needs three presets or more")
+        else:
             xs, ys = [m[0] for m in means], [m[1] for m in means]
             slope, icpt = statistics.linear_regression(xs, ys)
             print(f"  time against plan length: {slope:.1f} s per action + {icpt:.1f} s")
