@@ -5,17 +5,18 @@ The rule this file checks:
 
 * A settings dataclass (``realize.config.Settings``) is where a default is written. Where the
   class is registered as its group's option (``realize.app.hydra_edge.register_schema``: ``sim``,
-  ``workers``, ``logging``, ``validation``, a task's ``perturbation``) no YAML file says its values
+  ``workers``, ``logging``, ``validation``, ``ce``, a task's ``perturbation``) no YAML file says its values
   (``test_a_registered_group_has_no_yaml``).
 * The other files Hydra composes a run from by default (``configs/config.yaml`` and the option
-  its defaults list picks in each group: ``controller/default.yaml``, ``ce/seed_paper.yaml``, ...)
+  its defaults list picks in each group: ``controller/default.yaml``, ``scene/plain.yaml``, ...)
   exist to document every key of their group: they are what ``realize --help`` and
   ``realize --cfg job`` show, and what a command line overrides without ``+``. They may say the
   dataclass's value again, and tests/test_defaults.py fails when they say another (until their
   class is registered as well).
 * Every other YAML file writes only what differs from what it is merged over: a preset
   (``configs/experiment/``, ``configs/ablation/``), a group option built on another one
-  (``defaults: [plain, _self_]``), a node built on a registered dataclass (a task's
+  (``defaults: [plain, _self_]``), a global option in place of its group's default one (the
+  ``levers`` options, over the run config without them), a node built on a registered dataclass (a task's
   ``perturbation:`` over ``Perturbation``, ``realize.app.hydra_edge.register_schema``) and the
   presets read without Hydra (``configs/execute/`` over ``ExecuteSettings``, ``configs/noise/``
   over ``Noise``). A value equal to the one it overrides is the default written a second time:
@@ -95,6 +96,8 @@ def _bases(path: Path) -> tuple[dict[str, Any], str, list[dict[str, Any]]]:
         bases.append(OmegaConf.to_container(compose_or_error(choices), resolve=False))
     elif siblings:  # built on another option of its group
         bases.append(OmegaConf.to_container(compose_or_error([f"{group}={siblings[0]}", *choices]), resolve=False))
+    elif package == "":  # a global option in place of its group's default (levers): over the run config without it
+        bases.append(OmegaConf.to_container(compose_or_error([f"~{group}"]), resolve=False))
     for e in listed:  # a node of a registered dataclass (task/perturbation/default)
         if isinstance(e, dict):
             for k, v in e.items():
@@ -162,12 +165,16 @@ def test_a_registered_group_has_no_yaml() -> None:
     from realize.app.workers.settings import WorkersSettings
     from realize.scene.settings import SimSettings
 
-    composed = compose_config([])
-    for group, cls in (("sim", SimSettings), ("workers", WorkersSettings), ("logging", LoggingSettings),
-                       ("validation", ValidationSettings)):
-        assert registered_options(group) == ["default"], group
-        assert not (CONFIG_DIR / group / "default.yaml").exists(), group
-        defaults = dataclasses.asdict(cls())
+    from realize.search.ce.config import CEConfig
+
+    composed = compose_config(["levers=exact"])  # (levers=exact turns ce's two default levers off)
+    for group, option, cls in (("sim", "default", SimSettings), ("workers", "default", WorkersSettings),
+                               ("logging", "default", LoggingSettings), ("validation", "default", ValidationSettings),
+                               ("ce", "seed_paper", CEConfig)):
+        assert option in registered_options(group), group
+        assert not (CONFIG_DIR / group / f"{option}.yaml").exists(), group
+        defaults = {k: v for k, v in dataclasses.asdict(cls()).items() if k != "seed"}  # (ce.seed: the run's seed)
         assert sorted(composed[group]) == sorted(defaults), group
-        assert all(_plain(v) == _plain(defaults[k]) for k, v in composed[group].items()), group
+        differ = {k for k, v in composed[group].items() if _plain(v) != _plain(defaults[k])}
+        assert differ == ({"prune", "patience"} if group == "ce" else set()), (group, differ)
     assert not (CONFIG_DIR / "task" / "perturbation").exists()

@@ -6,7 +6,7 @@ that does not parse), ``override_values`` (the values an override gives, a sweep
 ``ConfigError`` line; see "Composing once per set of group choices" below), ``register_resolvers``
 (``${realize_sqlite:DIR,NAME}`` and ``${realize_scaled:N,SCALE}``, registered on import),
 ``register_schema`` (the settings dataclasses whose defaults Hydra composes from the class
-itself, registered on import: ``sim``, ``workers``, ``logging``, ``validation``, ``task/perturbation``;
+itself, registered on import: ``sim``, ``workers``, ``logging``, ``validation``, ``ce``, ``task/perturbation``;
 ``registered_options``) and
 ``resolution_error`` (a resolver's ``ConfigError`` as one line). ``realize.app.compose`` and
 ``realize.app.cli_keys`` build on these; neither imports the other.
@@ -188,8 +188,9 @@ def register_schema() -> None:
     """Settings dataclasses as Hydra config groups (idempotent), so that their defaults are written
     in the class only: ``sim/default`` is ``realize.scene.settings.SimSettings``' defaults,
     ``workers/default`` ``realize.app.workers.settings.WorkersSettings``', ``logging/default`` and
-    ``validation/default`` those of ``realize.app.run_settings`` (these groups' directories hold no
-    YAML for them: a preset or the command line changes a key over them), and
+    ``validation/default`` those of ``realize.app.run_settings``, ``ce/seed_paper``
+    ``realize.search.ce.config.CEConfig``'s but its ``seed`` (the run's top-level key; these groups'
+    directories hold no YAML for them: a preset or the command line changes a key over them), and
     ``task/perturbation/default`` ``realize.tasks.perturbation.Perturbation``'s (a task file takes
     it in its defaults list, ``- perturbation: default``, and writes the keys it changes under
     ``perturbation:``). Each node is plain data, as a YAML file's would be: the values are checked
@@ -200,12 +201,16 @@ def register_schema() -> None:
     from realize.app.run_settings import LoggingSettings, ValidationSettings
     from realize.app.workers.settings import WorkersSettings
     from realize.scene.settings import SimSettings
+    from realize.search.ce.config import CEConfig
     from realize.tasks.perturbation import Perturbation
 
     store = ConfigStore.instance()
     for group, settings in (("sim", SimSettings()), ("workers", WorkersSettings()), ("logging", LoggingSettings()),
                             ("validation", ValidationSettings()), ("task/perturbation", Perturbation())):
         store.store(group=group, name="default", node=_plain_data(settings))
+    ce = _plain_data(CEConfig())
+    del ce["seed"]  # (the run's top-level seed)
+    store.store(group="ce", name="seed_paper", node=ce)
 
 
 def registered_options(group: str) -> list[str]:

@@ -10,23 +10,25 @@ the run's top-level ``seed`` key (``realize.app.run_config`` puts it into ``CECo
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
-
-import torch
+from typing import TYPE_CHECKING, ClassVar
 
 from realize.config import ConfigError, Settings, setting
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = ["CEConfig", "FALLBACKS", "SCHEDULES", "DTYPES", "RISKS"]
 
 FALLBACKS = ("progress", "feasible_only", "keep")
 SCHEDULES = ("constant", "linear")
-DTYPES = {"float32": torch.float32, "float64": torch.float64}
+DTYPES = ("float32", "float64")  # torch dtypes by name (torch is imported where one is asked for)
 RISKS = ("mean", "cvar")
 
 
 @dataclass
 class CEConfig(Settings):
-    """Cross-entropy settings. Defaults follow the seed paper (200 samples, 10 elites, 10 its).
+    """Cross-entropy settings. Defaults follow the seed paper (200 samples, 10 elites, 10 its);
+    they are the Hydra ``ce`` group's default option, ``seed_paper`` (``realize.app.hydra_edge``).
 
     Fallback when fewer than ``n_elite`` samples are feasible (``fallback``):
 
@@ -86,20 +88,20 @@ class CEConfig(Settings):
     iterations: int = setting(10, ge=1)
     schedule: str = setting("constant", choices=SCHEDULES)
     n_envs_end: int | None = setting(None, ge=1)
-    min_std: float = setting(1e-3, ge=0)
-    alpha: float = setting(1.0, gt=0, le=1)
+    min_std: float = setting(1e-3, ge=0, help="floor of every refitted std")
+    alpha: float = setting(1.0, gt=0, le=1, help="smoothing of the refit (1 = none, as the paper)")
     fallback: str = setting("progress", choices=FALLBACKS)
     min_feasible_refit: int = setting(2, ge=1)
-    converge_std: float | None = setting(None, gt=0)
+    converge_std: float | None = setting(None, gt=0, help="stop early once every std is below this (null = off)")
     seed: int = 0
-    uniform_share: float = setting(0.0, ge=0, lt=1)
+    uniform_share: float = setting(0.0, ge=0, lt=1, help="share of each batch drawn uniformly over the regions again")
     rank_weighted: bool = False
     n_modes: int = setting(1, ge=1, help="1 = a single Gaussian")
     knn_robust: int = setting(0, ge=0, help="0 = off")
     failure_cost: float | None = None
     warm_widen: float = setting(2.0, ge=1, help="warm start: the earlier run's std times this")
     warm_uniform_share: float = setting(0.2, ge=0, lt=1, help="warm start: share of iteration 0 drawn uniformly")
-    dtype: str = setting("float64", choices=tuple(DTYPES))
+    dtype: str = setting("float64", choices=DTYPES)
     keep_samples: bool = True
     replicas: int = setting(1, ge=1, help="robust search: each sample in this many perturbed worlds (1 = off)")
     risk: str = setting("mean", choices=RISKS, help="robust search: a sample's cost over its successful worlds")
@@ -196,4 +198,6 @@ class CEConfig(Settings):
 
     @property
     def torch_dtype(self) -> torch.dtype:
-        return DTYPES[self.dtype]
+        import torch
+
+        return getattr(torch, self.dtype)
