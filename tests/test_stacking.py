@@ -62,9 +62,11 @@ def test_cube_b_ends_square_on_cube_a(a_shift: tuple[float, float]) -> None:
     assert math.dist(a[:2].tolist(), (configured[0] + a_shift[0], configured[1] + a_shift[1])) <= 0.005  # not pushed
 
 
-# make test stacks with the mobile robot and the fixed-base Panda; the Panda at scene=tabletop (about
-# 19 s on a busy 2-core host) in make test-slow
-@pytest.mark.parametrize("overrides", ["experiment=tower3", "robot=panda experiment=tower3",
+# make test stacks with the mobile robot, and the fixed-base Panda places cube C on its tower in
+# tests/test_level_place.py; the Panda's whole tower here and at scene=tabletop (14 and 19 s on a busy
+# 2-core host) in make test-slow
+@pytest.mark.parametrize("overrides", ["experiment=tower3",
+                                       pytest.param("robot=panda experiment=tower3", marks=pytest.mark.slow),
                                        pytest.param("experiment=tower3_tabletop", marks=pytest.mark.slow)])
 def test_three_blocks_end_in_a_tower(overrides: str) -> None:
     """``experiment=tower3`` for the mobile robot parked at table 1, and for the fixed-base Panda
