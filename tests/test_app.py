@@ -365,6 +365,8 @@ def test_interrupt_after_iteration_2_then_resume(tmp_path: Path, uninterrupted: 
     _compare(uninterrupted, tmp_path)
 
 
+@pytest.mark.slow  # a whole run (7 s on a busy 2-core host): make test keeps an interrupted run resumed
+# (test_interrupt_after_iteration_2_then_resume)
 def test_sigterm_marks_the_run_interrupted(tmp_path: Path) -> None:
     def term(i: int) -> None:
         if i == 0:
@@ -388,6 +390,8 @@ def test_resume_refuses_changed_settings(uninterrupted: Path, no_sim: None) -> N
     assert (uninterrupted / RESULT_FILE).read_text() == before  # the run's result is untouched
 
 
+@pytest.mark.slow  # a whole run and its resume (10 s on a busy 2-core host): make test keeps an
+# interrupted run resumed (test_interrupt_after_iteration_2_then_resume)
 def test_resume_keeps_the_runs_own_groups(tmp_path: Path) -> None:
     """A run made with ``validation=off`` (and its logging), interrupted, resumes with its saved
     groups, though the composed default validates: only what the command line names goes on top."""

@@ -25,6 +25,9 @@ OVER = ["levers=stitched", "ce.n_envs=12", "stitch.n_prefix=8", "ce.n_elite=3", 
 SEGMENTS = ["prefix", "prefix", "suffix", "prefix", "suffix", "full"]
 
 
+# stitched_run, a whole run (20 s on a busy 2-core host), and the tests that read it are in make
+# test-slow; make test keeps a stitched run of the realize command, bit for bit (tests/test_golden.py,
+# seed_paper_default), and this file's config checks
 @pytest.fixture(scope="module")
 def stitched_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = tmp_path_factory.mktemp("stitched")
@@ -39,6 +42,7 @@ def _rows(h: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]
             np.concatenate([h[f"feasible_{i}"] for i in its]))
 
 
+@pytest.mark.slow  # reads stitched_run (see the fixture)
 def test_a_stitched_run_writes_each_segment_and_returns_the_cheapest_confirmed_plan(stitched_run: Path) -> None:
     doc = json.loads((stitched_run / "result.json").read_text())
     st = doc["stitched"]
@@ -63,6 +67,7 @@ def test_a_stitched_run_writes_each_segment_and_returns_the_cheapest_confirmed_p
     assert doc["best_cost"] == float(cf[best]) and doc["best_z"] == zf[best].tolist()
 
 
+@pytest.mark.slow  # reads stitched_run (see the fixture)
 def test_the_paper_figures_draw_a_stitched_run(stitched_run: Path, tmp_path: Path) -> None:
     """Fig. 2 draws the confirmation's whole plans (the run's only whole-plan batch); Fig. 3 each
     parameter's distribution per round from its segment's history: the prefix's from round 0,
@@ -80,6 +85,7 @@ def test_the_paper_figures_draw_a_stitched_run(stitched_run: Path, tmp_path: Pat
     assert rounds["Table1"] == [0, 1, 2, 3] and rounds["Table2"] == [1, 2, 3]  # 3 rounds and the final refit
 
 
+@pytest.mark.slow  # reads stitched_run (see the fixture)
 def test_the_stitched_runs_plan_puts_the_cube_on_table_2_replayed_alone(stitched_run: Path) -> None:
     rep = replay(stitched_run, exact=True)
     assert rep.feasible, rep.failure  # the goal: the cube on table 2, the robot at the exit

@@ -216,6 +216,8 @@ def test_topk_interrupted_in_round_0(tmp_path: Path) -> None:
     assert (tmp_path / CHECKPOINT_FILE).is_file()
 
 
+@pytest.mark.slow  # a second whole run (8 s on a busy 2-core host): make test keeps the top-k run and
+# history-free restores (tests/test_stitched_segments.py, test_a_restore_is_history_free)
 def test_candidate_0_equals_a_single_plan_run_in_the_shared_scene(topk_run: Path, tmp_path: Path) -> None:
     """Candidate 0 (the planner's first plan, the run's seed) draws the samples of a single-plan
     run; its second iteration runs after candidate 1 used the same scene, and still gives the
