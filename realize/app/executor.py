@@ -40,7 +40,7 @@ from realize.robot.layout import BASE, UPPER
 __all__ = ["Executor", "EXECUTION_BACKEND"]
 
 HOLD_TEXT = "hold"  # the trajectory's action text while the robot holds for the planner
-WAIT_FOR_REST_S = 3.0  # s of control time at most a dropped object is waited for to land before deciding
+WAIT_FOR_REST_S = 3.0  # s of control time at most a dropped or knocked object is waited for to land before deciding
 
 log = logging.getLogger("realize")
 
@@ -217,7 +217,7 @@ class Executor:
             if elapsed >= s.time_limit_s:
                 self.log.failure = f"{reasons[0]} (time limit {s.time_limit_s:g} s reached)"
                 break
-            if any(r.startswith("grasp_lost") for r in reasons):  # see where it lands before deciding
+            if any(r.startswith(("grasp_lost", "support_moved")) for r in reasons):  # see where it lands first
                 held = self._hold_steps(int(round(WAIT_FOR_REST_S / self.world.scene.control_dt)), until_rest=True)
                 obs = self._observe() if held else obs
             obs = self._firm_grip(obs)
