@@ -8,7 +8,8 @@ experiment=tower3``, ``tower4``, ``tower5`` and ``rearrange3``, each searched th
 (``plain``) and, with ``--chain``, also as a chain of segments cut after each place (``chain``:
 ``levers=stitched stitch.cut=after_each_place stitch.credit=3``). Per run it appends a CSV row to
 ``--out`` as soon as the run ends: ``scripts/bench_levers.py``'s columns, plus ``actions`` (the
-returned plan's length), ``segment_s`` (a stitched run's seconds per segment, ``;``-separated),
+returned plan's length), ``segment_s`` (a stitched run's seconds per segment, ``name:s`` and
+``;``-separated),
 ``validation_s``, ``load`` (the host's 1-minute load average when the run started: a run beside
 other jobs reads high) and ``copy_steps``: the control steps the scene's copies were stepped,
 summed over the batches (a batch steps all its copies until its longest plan ends). On one
@@ -85,9 +86,9 @@ def measure(preset: str, overrides: list[str], seed: int, run_dir: Path) -> dict
     row = run_one(experiment, seed, rest, run_dir)
     doc = json.loads((run_dir / "result.json").read_text())
     plan = doc.get("plan") or ""
-    seg = (doc.get("stitched") or {}).get("segment_s") or []
+    seg = (doc.get("stitched") or {}).get("segment_s") or {}  # segment name -> seconds
     return {**row, "actions": plan.count("(") if plan else "",
-            "segment_s": ";".join(f"{s:.1f}" for s in seg),
+            "segment_s": ";".join(f"{name}:{float(t):.1f}" for name, t in seg.items()),
             "validation_s": round(float((doc.get("validation") or {}).get("wall_time_s") or 0.0), 1),
             "load": round(load, 2), "copy_steps": copy_steps(run_dir)}
 
