@@ -21,8 +21,8 @@ measure of the search's work where the host is shared.
 Then it prints, per preset, the seeds' search time, its ratio to ``tower3``'s of the same
 seed searched the plain way (the issue's bounds: tower4 <= 1.6, tower5 <= 2.2) and the returned plan's validated share
 (>= 0.90); and a table of search time against plan length, with the least-squares line through
-the presets' mean times and how far each preset lies from it (linear growth: every preset within
-25 % of the line).
+the presets' mean times, the same for the copy steps (below), and whether they grow in
+proportion to the plan: time per action within 25 % across presets.
 
 What it doesn't: run presets in parallel (timings would interfere) or compare rows of two hosts.
 
@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import shutil
 import statistics
@@ -62,7 +63,7 @@ CHAIN = ["levers=stitched", "stitch.cut=after_each_place", "stitch.credit=3"]
 RATIO_BOUND = {"tower4": 1.6, "tower5": 2.2}
 MIN_VALIDATED = 0.90
 FIELDS = ["preset", "variant", "actions", "segment_s", "validation_s", "load", "copy_steps",
-          *(f for f in LEVER_FIELDS if f != "experiment")]
+          *(f for f in LEVER_FIELDS if f not in ("experiment", "variant"))]
 
 
 def copy_steps(run_dir: Path) -> int:
@@ -100,6 +101,23 @@ def read(path: Path) -> list[dict[str, str]]:
 
 def _mean(xs: list[float]) -> float:
     return statistics.fmean(xs) if xs else float("nan")
+
+
+def _line(points: list[tuple[float, float, str]], unit: str, what: str) -> None:
+    """The least-squares line through (plan length, value) points and each point's distance from it."""
+    if len(points) < 3:
+        print(f"  {what} against plan length: needs three presets or more")
+        return
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    slope, icpt = statistics.linear_regression(xs, ys)
+    print(f"  {what} against plan length: {slope:.4g} {unit} per action + {icpt:.4g} {unit}")
+    for x, y, name in points:
+        fit = slope * x + icpt
+        off = (y - fit) / fit if fit > 0 else float("inf")
+        print(f"    {name:>11}: {x:.0f} actions, {y:.4g} {unit} ({y / x:.4g} per action), line {fit:.4g} ({off:+.0%})")
+    per = [y / x for x, y, _ in points]
+    print(f"  in proportion to plan length (the most per action within 25 % of the least): "
+          f"{'yes' if max(per) <= 1.25 * min(per) else 'no'} ({max(per) / min(per):.2f}x)")
 
 
 def report(rows: list[dict[str, str]]) -> bool:
@@ -141,19 +159,10 @@ def report(rows: list[dict[str, str]]) -> bool:
                 line += f" [{mark(ok)} validated >= {MIN_VALIDATED}]"
             print(line)
             means.append((float(mine[0][1]["actions"] or 0), _mean(times), preset))
-        if len(means) < 3:
-            print("  time against plan length: needs three presets or more")
-        else:
-            xs, ys = [m[0] for m in means], [m[1] for m in means]
-            slope, icpt = statistics.linear_regression(xs, ys)
-            print(f"  time against plan length: {slope:.1f} s per action + {icpt:.1f} s")
-            linear = True
-            for x, y, name in means:
-                fit = slope * x + icpt
-                off = (y - fit) / fit if fit > 0 else float("inf")
-                linear &= abs(off) <= 0.25
-                print(f"    {name:>11}: {x:.0f} actions, {y:.0f} s, line {fit:.0f} s ({off:+.0%})")
-            print(f"  grows linearly (each within 25 % of the line): {'yes' if linear else 'no'}")
+        _line(means, "s", "search time")
+        steps = [(x, _mean([float(r["copy_steps"]) for k, r in by.items() if k[:2] == (name, variant)
+                            and r.get("copy_steps")]), name) for x, _, name in means]
+        _line([m for m in steps if math.isfinite(m[1])], "copy steps", "work (copy steps)")
     return ok_all
 
 

@@ -16,14 +16,14 @@ def _row(preset: str, actions: int, search_s: float, validated: float, seed: int
             "search_s": str(search_s), "validated": str(validated)}
 
 
-def test_time_linear_in_length_passes_and_reads_the_ratios(capsys) -> None:
+def test_time_in_proportion_to_length_passes_and_reads_the_ratios(capsys) -> None:
     # 20 s per action + 10 s: tower4 / tower3 = 130 / 90, tower5 / tower3 = 170 / 90
     rows = [_row("tower3", 4, 90, 0.95), _row("tower4", 6, 130, 0.92), _row("tower5", 8, 170, 0.91)]
     assert blp.report(rows)
     out = capsys.readouterr().out
-    assert "20.0 s per action + 10.0 s" in out
+    assert "search time against plan length: 20 s per action + 10 s" in out
     assert "x tower3 1.44 [ok <= 1.6]" in out and "x tower3 1.89 [ok <= 2.2]" in out
-    assert "grows linearly (each within 25 % of the line): yes" in out
+    assert "in proportion to plan length (the most per action within 25 % of the least): yes" in out
 
 
 def test_a_slow_tower_and_a_weak_plan_are_marked(capsys) -> None:
@@ -34,11 +34,11 @@ def test_a_slow_tower_and_a_weak_plan_are_marked(capsys) -> None:
     assert not blp.report(weak)
 
 
-def test_growth_far_from_a_line_is_not_called_linear(capsys) -> None:
+def test_growth_out_of_proportion_is_called_so(capsys) -> None:
     rows = [_row("seed_paper", 5, 60, 1.0), _row("tower3", 4, 90, 0.95), _row("tower4", 6, 130, 0.95),
             _row("tower5", 8, 800, 0.95)]
     blp.report(rows)
-    assert "grows linearly (each within 25 % of the line): no" in capsys.readouterr().out
+    assert "in proportion to plan length (the most per action within 25 % of the least): no" in capsys.readouterr().out
 
 
 def test_the_chain_is_compared_with_tower3_searched_the_plain_way(capsys) -> None:
