@@ -2,11 +2,11 @@
 
 For each seed, runs every preset of ``--presets`` one after another in child processes (``python
 -m realize experiment=E seed=S ...``, each with its validation stage), so that the presets of one
-seed are measured back to back and drift of a noisy machine hits them alike. A preset is
-``NAME=OVERRIDES`` (comma-separated); the default set is the seed task, ``robot=panda
-experiment=tower3``, ``tower4``, ``tower5`` and ``rearrange3``, each searched as its preset
-says (``plain``: the towers whole, the seed task by its default stitched search) and, with ``--chain``, also as a chain of segments cut after each place (``chain``:
-``levers=stitched stitch.cut=after_each_place stitch.credit=3``). Per run it appends a CSV row to
+seed are measured back to back and drift of a noisy machine hits them alike. The presets
+(``PRESETS``) are the seed task, ``robot=panda experiment=tower3``, ``tower4``, ``tower5`` and
+``rearrange3``, each searched as its preset says (``plain``: the towers whole, the seed task by
+its default stitched search) and, with ``--chain``, also as a chain of segments cut after each
+place (``chain``: ``levers=stitched stitch.cut=after_each_place stitch.credit=3``). Per run it appends a CSV row to
 ``--out`` as soon as the run ends: ``scripts/bench_levers.py``'s columns, plus ``actions`` (the
 returned plan's length), ``segment_s`` (a stitched run's seconds per segment, ``name:s`` and
 ``;``-separated),
