@@ -132,6 +132,16 @@ def plain(overrides: list[str]) -> dict:
     return compose_config(*overrides, cpu=False, job_name="test")
 
 
+def comparable(v: Any) -> Any:
+    """A config value as a comparison should see it: numbers as floats (YAML's 1 equals a
+    dataclass's 1.0), tuples as lists, recursively."""
+    if isinstance(v, (list, tuple)):
+        return [comparable(a) for a in v]
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return float(v)
+    return v
+
+
 def expect_config_error(overrides: list[str], needles: list[str], run_dir: Path) -> tuple[str, dict]:
     """Run the tiny config with ``overrides``: it must fail with a one-line ConfigError holding
     every needle; returns the message and the result.json written for it."""

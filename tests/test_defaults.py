@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from helpers import comparable
 import pytest
 
 from realize.app.compose import compose_config
@@ -49,14 +50,6 @@ def _leaves(x: Any, path: str = "") -> Iterator[tuple[str, Any]]:
         yield path, x
 
 
-def _plain(v: Any) -> Any:
-    if isinstance(v, (list, tuple)):
-        return [_plain(a) for a in v]
-    if isinstance(v, (int, float)) and not isinstance(v, bool):
-        return float(v)
-    return v
-
-
 def _dataclass_leaves(cls: type) -> dict[str, Any]:
     return dict(_leaves(json.loads(json.dumps(dataclasses.asdict(cls()), default=str))))
 
@@ -67,7 +60,7 @@ def test_the_yaml_and_the_dataclass_agree_on_every_default(group: str) -> None:
     ours = _dataclass_leaves(GROUPS[group])
     both = sorted(set(yaml_leaves) & set(ours))
     assert both, f"{group}: no leaf in common"
-    drift = {k: (yaml_leaves[k], ours[k]) for k in both if _plain(yaml_leaves[k]) != _plain(ours[k])}
+    drift = {k: (yaml_leaves[k], ours[k]) for k in both if comparable(yaml_leaves[k]) != comparable(ours[k])}
     assert not drift, f"{group}: configs/ says (left) and {GROUPS[group].__name__} says (right): {drift}"
 
 

@@ -35,6 +35,7 @@ from typing import Any
 import yaml
 from omegaconf import OmegaConf
 
+from helpers import comparable
 from realize.app.hydra_edge import compose_or_error
 from realize.execution.perception import Noise
 from realize.execution.settings import ExecuteSettings
@@ -51,14 +52,6 @@ def _leaves(x: Any, path: str = "") -> Iterator[tuple[str, Any]]:
             yield from _leaves(v, f"{path}.{k}" if path else str(k))
     else:
         yield path, x
-
-
-def _plain(v: Any) -> Any:
-    if isinstance(v, (list, tuple)):
-        return [_plain(a) for a in v]
-    if isinstance(v, (int, float)) and not isinstance(v, bool):
-        return float(v)
-    return v
 
 
 def _at(d: Any, path: str) -> Any:
@@ -124,7 +117,7 @@ def _repeats_in_configs(config_dir: Path = CONFIG_DIR) -> list[str]:
             full = f"{package}.{key}" if package else key
             for base in bases:
                 b = _at(base, full)
-                if b is not _ABSENT and _plain(b) == _plain(v):
+                if b is not _ABSENT and comparable(b) == comparable(v):
                     out.append(f"{path.relative_to(config_dir)}: {full} = {v!r}")
     return out
 
@@ -175,6 +168,6 @@ def test_a_registered_group_has_no_yaml() -> None:
         assert not (CONFIG_DIR / group / f"{option}.yaml").exists(), group
         defaults = {k: v for k, v in dataclasses.asdict(cls()).items() if k != "seed"}  # (ce.seed: the run's seed)
         assert sorted(composed[group]) == sorted(defaults), group
-        differ = {k for k, v in composed[group].items() if _plain(v) != _plain(defaults[k])}
+        differ = {k for k, v in composed[group].items() if comparable(v) != comparable(defaults[k])}
         assert differ == ({"prune", "patience"} if group == "ce" else set()), (group, differ)
     assert not (CONFIG_DIR / "task" / "perturbation").exists()
