@@ -87,10 +87,13 @@ def test_repairs_level_only_the_places_of_a_plan_that_stacks() -> None:
     """A repair searches and executes with ``place_level`` where the run's plan stacks a block on
     another (``robot=panda experiment=tower3``), not where it places on a table (the seed task),
     nor where the run's own controllers level already."""
-    from realize.app.repair import STACK_LEVEL_RAD, level_places
+    from realize.app.repair import level_places
+    from realize.execution.settings import ExecuteSettings
 
+    turn = ExecuteSettings().stack_level_rad
     tower = build_run_spec(compose_config("robot=panda", "experiment=tower3"))
-    assert level_places(tower) == [f"++controller.place_level={STACK_LEVEL_RAD}"]
-    assert level_places(build_run_spec(compose_config())) == []
+    assert turn is not None and level_places(tower, turn) == [f"++controller.place_level={turn}"]
+    assert level_places(tower, None) == []  # execute.stack_level_rad: null turns it off
+    assert level_places(build_run_spec(compose_config()), turn) == []
     leveled = build_run_spec(compose_config("robot=panda", "experiment=tower3", "controller.place_level=0.5"))
-    assert level_places(leveled) == []
+    assert level_places(leveled, turn) == []

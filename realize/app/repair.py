@@ -25,16 +25,13 @@ from realize.config import ConfigError
 from realize.execution.layout_updates import geometry_changes
 from realize.execution.world import Observation
 
-__all__ = ["Segment", "go_on", "repair", "why_no_plan", "level_places", "STACK_LEVEL_RAD", "EXECUTION_BACKEND"]
+__all__ = ["Segment", "go_on", "repair", "why_no_plan", "level_places", "EXECUTION_BACKEND"]
 
 # an executed world is one copy restored and disturbed through the CPU backend's setters (the GPU
 # backend's restore has never run), whatever backend the run searched on
 EXECUTION_BACKEND = "cpu"
 
 log = logging.getLogger("realize")
-
-# rad: how far a repair's place may turn the hand so a held box lands level on a block (level_places)
-STACK_LEVEL_RAD = 0.8
 
 
 class Segment:
@@ -92,7 +89,7 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     t0 = time.perf_counter()
     state = obs.state
     changes = geometry_changes(obs, ex.spec.geometry_cfg, ex.moved_m())
-    changes = [*changes, *level_places(ex.spec)]
+    changes = [*changes, *level_places(ex.spec, ex.settings.stack_level_rad)]
     kind = "re-parameterize"
     if a >= seg.task.n_actions or _restack(reasons):  # all done but no goal, or the tower it builds on fell
         kind = "re-sequence"
@@ -143,15 +140,18 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     return rec, Segment(rspec.task, res.z, rspec.start, rspec.geometry, offset, rspec.rollout)
 
 
-def level_places(spec: Any) -> list[str]:
+def level_places(spec: Any, max_turn: float | None) -> list[str]:
     """The controller change a repair of a plan that stacks searches and executes with: a held box
-    set down level (``controller.place_level`` = ``STACK_LEVEL_RAD``), where the run's plan places
-    an object on a region framed by another movable object and its own controllers do not level
-    already. Released as held, a box grasped 20-30 degrees off its axis and placed down a tilted
-    approach meets the block below on one edge and tips it or itself off (``tests/test_level_place.py``)."""
+    set down level (``controller.place_level`` = ``max_turn``, rad; ``execute.stack_level_rad``),
+    where the run's plan places an object on a region framed by another movable object and its own
+    controllers do not level already (None: no change). Released as held, a box grasped 20-30
+    degrees off its axis and placed down a tilted approach meets the block below on one edge and
+    tips it or itself off (``tests/test_level_place.py``)."""
+    if max_turn is None:
+        return []
     task, names = spec.task, set(spec.geometry.object_names)
     stacks = any(a.template == "place" and any(task.frame_of(p) in names for p in a.params) for a in task.plan)
-    return [f"++controller.place_level={STACK_LEVEL_RAD}"] if stacks and spec.rollout.place_level is None else []
+    return [f"++controller.place_level={max_turn}"] if stacks and spec.rollout.place_level is None else []
 
 
 def why_no_plan(rec: ReplanRecord, state: Any) -> str:

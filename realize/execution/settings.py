@@ -93,6 +93,9 @@ class ExecuteSettings(Settings):
     pickup_m: list[float] = setting(default_factory=lambda: [0.45, 0.75], check=_pickup)  # base annulus around an object on the floor
     think: Any = setting("measured", check=_think)  # the world while the planner thinks (module docstring)
     budget: ReplanBudget = field(default_factory=ReplanBudget)  # each replan's search
+    # rad: a repair of a plan that stacks sets a held box down level, turning the hand by at most
+    # this (controller.place_level; realize.app.repair.level_places); null: as the run's controller
+    stack_level_rad: float | None = setting(0.8, ge=0)
     disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
 
 
