@@ -16,7 +16,7 @@ from torch import Tensor
 
 from realize.tasks.hemisphere import Hemisphere
 from realize.realization.actions.base import Outcome
-from realize.realization.actions.level import hand_frame, level_turn
+from realize.realization.actions.level import hand_frame, level_turn, rotate
 from realize.realization.actions.manipulate import GRIP, RETREAT, Manipulate
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
@@ -88,8 +88,7 @@ class Place(Manipulate):
         want = self._face_axis(frame, a, held)
         angle = torch.atan2((torch.cross(held, want, dim=1) * a).sum(1), (held * want).sum(1))
         hand = ctx.closing[rows]  # where the hand's closing axis is now (the box rigid in it)
-        c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
-        turned = hand * c + torch.cross(a, hand, dim=1) * s + a * (a * hand).sum(1, keepdim=True) * (1 - c)
+        turned = rotate(a, angle, hand)
         turned = turned - (turned * a).sum(1, keepdim=True) * a  # the fabric's closing goal lies across the approach
         return turned / turned.norm(dim=1, keepdim=True).clamp(min=1e-6)
 
