@@ -55,6 +55,7 @@ class RolloutConfig(Settings):
     grasp_square_turn: float | None = setting(None, ge=0, le=1.5707963267948966)  # rad, grasp of a box: the sampled approach turns by at most this toward the plane of the face the fingers close on (the closing axis then stays that face's normal); null: as sampled
     place_align_yaw: bool = False  # place: turn the held box about the approach so it lands square on its support (the region's frame), modulo 90 degrees
     place_level: float | None = setting(None, ge=0, le=1.5707963267948966)  # rad, place of a box: the hand turns by at most this so the held box lands level (its face nearest horizontal flat) instead of on an edge; null: as held
+    place_lift: bool = False  # place: the hand first rises straight up to the pre-place's height, then crosses to it, so the held object does not sweep through what stands on the way (a tower the fabric does not see)
     place_drop: float = setting(0.004, ge=0)  # m, the held object is released this high above its place point
     place_pre_height: float = setting(0.12, gt=0)  # m, pre-place above a release point (place with a 3-D box region)
     retreat_share: float = setting(0.6, gt=0)  # retreat done once the TCP is this share of the way back out

@@ -5,7 +5,10 @@ gripper, aims the TCP so that the held object's centre lands on the place point,
 success from the fingers letting go and the object coming to rest.
 With ``controller.place_align_yaw`` it turns a held box about the approach so that it lands
 square on its support (the region's frame), modulo 90 degrees; with ``controller.place_level``
-it turns the hand so the held box lands level (``realize.realization.actions.level``).
+it turns the hand so the held box lands level (``realize.realization.actions.level``); with
+``controller.place_lift`` the hand first rises straight up to the pre-place's height and only
+then crosses to it: the fabric does not see movable objects, and a held block carried on the
+straight way from a low grasp up to a pre-place above a tower sweeps through the tower's top.
 What it doesn't: check where the object came to rest (the plan's goal does, ``goals``).
 """
 
@@ -17,7 +20,7 @@ from torch import Tensor
 from realize.tasks.hemisphere import Hemisphere
 from realize.realization.actions.base import Outcome
 from realize.realization.actions.level import hand_frame, level_turn, rotate
-from realize.realization.actions.manipulate import GRIP, RETREAT, Manipulate
+from realize.realization.actions.manipulate import APPROACH, GRIP, RETREAT, Manipulate
 from realize.realization.context import StepContext
 from realize.realization.failures import Failure
 from realize.tasks.regions import Box, Region
@@ -43,6 +46,11 @@ class Place(Manipulate):
                  "of release points (approached top-down)")
     closes_gripper = False
 
+    def __init__(self, n_envs: int, device: torch.device):
+        super().__init__(n_envs, device)
+        self.via = torch.zeros(n_envs, 3, device=device)  # controller.place_lift: above where the hand began
+        self.lifting = torch.zeros(n_envs, dtype=torch.bool, device=device)  # still rising to ``via``
+
     @classmethod
     def accepts(cls, region: Region) -> bool:
         return isinstance(region, Hemisphere) or (isinstance(region, Box) and region.dim == 3)
@@ -55,6 +63,12 @@ class Place(Manipulate):
         if ctx.cfg.place_level is not None and ctx.scene.geometry.objects[obj].shape == "box" \
                 and isinstance(region, Hemisphere):
             self._level(ctx, rows, params, region, obj, shift)
+        if ctx.cfg.place_lift:
+            tcp = ctx.tcp[rows].to(self.via.dtype)
+            self.via[rows] = torch.cat([tcp[:, :2], self.pre[rows, 2:]], dim=1)
+            self.lifting[rows] = self.pre[rows, 2] - tcp[:, 2] > ctx.cfg.pregrasp_tolerance
+        else:
+            self.lifting[rows] = False
         held = ctx.holds(rows, obj)
         return torch.where(held, code, Failure.NOT_HOLDING)
 
@@ -99,7 +113,19 @@ class Place(Manipulate):
         lift = torch.tensor([0.0, 0.0, ctx.cfg.place_drop], device=centre.device)
         return centre + lift - approach * s
 
+    def _goal(self, rows: Tensor, ctx: StepContext | None = None) -> Tensor:
+        """``Manipulate._goal``, but while a plan is still ``lifting`` (``controller.place_lift``)
+        its APPROACH goal is ``via``, straight above where its hand began, at the pre-place's
+        height. Without ``ctx`` (the phase checks' error) the goal stays the pre-place."""
+        goal = super()._goal(rows, ctx)
+        if ctx is None or not ctx.cfg.place_lift:
+            return goal
+        up = self.lifting[rows] & (self.phase[rows] == APPROACH)
+        return torch.where(up[:, None], self.via[rows], goal)
+
     def act(self, ctx: StepContext, rows: Tensor) -> None:
+        if ctx.cfg.place_lift:  # risen to within the pre-pose tolerance of the via point: cross over
+            self.lifting[rows] &= ctx.tcp[rows, 2] < self.via[rows, 2] - ctx.cfg.pregrasp_tolerance
         super().act(ctx, rows)
         # keep squeezing until the release phase
         ctx.grip_cmd[rows] = self.phase[rows] < GRIP
