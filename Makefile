@@ -11,11 +11,11 @@ run: setup
 	$(PY) -m realize experiment=seed_paper $(ARGS)
 
 # test files run in parallel, one file per process (its module fixtures built once), one process
-# per core up to 4. TEST_JOBS=0 runs them in this process. make test leaves out the tests marked
-# slow (whole runs, sweeps, several processes; one smoke test of each kind stays in), make
+# per core up to 4, the longest files first (tests/file_seconds.py). TEST_JOBS=0 runs them in
+# this process. make test leaves out the tests marked slow (whole runs, sweeps, several processes; one smoke test of each kind stays in), make
 # test-slow runs only those, make test-all both; CI runs make test and make test-slow.
 TEST_JOBS ?= auto
-PARALLEL = $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --maxprocesses 4 --dist loadfile)
+PARALLEL = $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --maxprocesses 4 --dist loadfile --no-loadscope-reorder)
 
 test: setup
 	$(PY) -m pytest -m "not slow" -q --durations=20 $(PARALLEL) $(ARGS)

@@ -6,6 +6,16 @@ from typing import Iterator
 
 import pytest
 
+from file_seconds import file_weight, load_table
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Longest test files first (``file_seconds.py``), each file's tests kept together in their
+    order: the worker processes of ``make test`` then end close together."""
+    table = load_table()
+    items.sort(key=lambda it: (-file_weight(it.nodeid, table), it.nodeid.split("::", 1)[0]))
+
 
 @pytest.fixture(scope="module")
 def torch_single_thread() -> Iterator[None]:

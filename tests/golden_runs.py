@@ -41,6 +41,10 @@ GOLDEN_RUNS: dict[str, list[str]] = {
 # runs with their preset's own levers, not EXACT
 PRESET_LEVERS: dict[str, list[str]] = {"seed_paper_default": []}
 KEYS = ("feasible", "best_cost", "success_per_iter", "best_cost_per_iter", "best_z")
+EXPECTED: dict[str, Any] = json.loads(FIXTURE.read_text()) if FIXTURE.exists() else {}
+# make test runs the default search (restores and two worker processes in it), in a file of its own
+# (test_golden_default.py) so that another worker runs beside it; make test-all every golden run
+SMOKE = "seed_paper_default"
 
 
 def run_golden(name: str, run_dir: Path, levers: list[str] | None = None) -> dict[str, Any]:
@@ -56,6 +60,17 @@ def run_golden(name: str, run_dir: Path, levers: list[str] | None = None) -> dic
         out["winner"] = doc.get("winner")
         out["candidates"] = [{"plan": c.get("plan"), "best_cost": c.get("best_cost")} for c in doc["candidates"]]
     return out
+
+
+def check_golden(name: str, tmp_path: Path) -> None:
+    """Run the golden run ``name`` and compare its numbers with the fixture's, bit for bit."""
+    want = EXPECTED[name]
+    assert want["overrides"] == GOLDEN_RUNS[name], "the run's overrides changed: re-record the fixture on purpose"
+    got = run_golden(name, tmp_path / name)
+    recorded = {k: v for k, v in want.items() if k != "overrides"}
+    assert sorted(got) == sorted(recorded), f"{name}: the run's keys changed (a key the fixture holds is gone?)"
+    for key, value in got.items():
+        assert value == recorded[key], f"{name}: {key} changed: {value!r} != {recorded[key]!r}"
 
 
 if __name__ == "__main__":  # pragma: no cover - re-records the fixture

@@ -79,7 +79,7 @@ def quickstart_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return where / "outputs" / "api_example"
 
 
-@pytest.mark.slow  # a whole stitched run: make test keeps one (tests/test_golden.py, seed_paper_default) and
+@pytest.mark.slow  # a whole stitched run: make test keeps one (tests/test_golden_default.py) and
 # the Python API's (tests/test_stitched_run.py)
 def test_python_quickstart_runs(quickstart_run: Path) -> None:
     """README.md's Python quickstart writes its run; docs/python_api.md shows the same code."""

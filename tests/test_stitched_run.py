@@ -26,7 +26,7 @@ SEGMENTS = ["prefix", "prefix", "suffix", "prefix", "suffix", "full"]
 
 
 # stitched_run, a whole run (20 s on a busy 2-core host), and the tests that read it are in make
-# test-slow; make test keeps a stitched run of the realize command, bit for bit (tests/test_golden.py,
+# test-slow; make test keeps a stitched run of the realize command, bit for bit (tests/test_golden_default.py,
 # seed_paper_default), and this file's config checks
 @pytest.fixture(scope="module")
 def stitched_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
