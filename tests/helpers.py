@@ -376,3 +376,102 @@ def turned_worlds(names: tuple[str, ...], turned: str, yaws: list[float]) -> Any
     yaw = np.zeros((n, m))
     yaw[:, names.index(turned)] = yaws
     return Worlds(names, np.zeros((n, 2)), np.zeros((n, m, 2)), yaw, np.ones((n, m)), np.ones((n, m)))
+
+
+# ------------------------------------------------------------------ runs, states and worlds
+STATE_GRASPED = REPO / "tests" / "fixtures" / "state_grasped.json"  # the cube in the hand above table 1, action 2 next
+# the best parameters of a seed-task run, the whole plan (move_to(Table1), grasp(cube, Cube_g) first)
+FULL_Z = [-0.9953907433402727, 0.9260304134062874, -0.03445283281557375, 1.189657915463341, 0.8881229501088985,
+          -0.9659641240604275, -1.0622591208176722, -0.050928051774466784, -1.1459906667680084, 0.8778431067079995,
+          1.9177437232633234, -0.07168660186229141]
+# table 2 moved 30 cm in -y 1 s into move_to(Table2) (while the cube is carried): the planned place
+# then puts the cube on the table's edge, so the plan carried out as planned misses the goal
+TABLE_MOVED = {"trigger": {"action": 2, "delay_s": 1.0}, "move_table": {"table": "table2", "dx": 0.0, "dy": -0.3}}
+
+
+def on_table2(cube: "torch.Tensor") -> bool:
+    """The cube's centre over table 2's top (0.6 x 0.6 m at (0, -1.2), 0.72 m high), resting on it."""
+    x, y, z = cube[:3].tolist()
+    return abs(x) <= 0.3 and abs(y + 1.2) <= 0.3 and abs(z - (0.72 + 0.0225)) <= 0.01
+
+
+def write_known_run(run_dir: Path, overrides: tuple[str, ...] = ()) -> Path:
+    """A run directory of the seed task whose plan and final distribution are the known feasible
+    plan ``GOOD`` (narrow std): what a warm start or an executor starts from."""
+    from realize.app.run_config import build_run_spec
+    from realize.run_dir.jsonio import atomic_write_json
+    from realize.run_dir.names import RESULT_FILE
+
+    config = compose_config(*overrides)
+    spec = build_run_spec(config)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(run_dir / RESULT_FILE, {
+        "status": "done", "feasible": True, "best_cost": 1.5, "best_z": list(GOOD),
+        "final_mean": list(GOOD), "final_std": [0.005] * len(GOOD), "plan": spec.task.describe(),
+        "columns": list(spec.task.layout.column_names), "n_envs_scene": 1, "backend": "cpu", "config": config,
+    })
+    return run_dir
+
+
+def one_world(*disturbances: dict, **keys: object) -> Any:
+    """Execute settings for one world; the world runs on for a fixed 40 control steps (2 s) while
+    the planner thinks, so that a study repeats bit for bit."""
+    from realize.execution.settings import ExecuteSettings
+
+    return ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 3, "think": 40,
+                                         "disturbances": list(disturbances), **keys})
+
+
+def execute_budget() -> Any:
+    """The replan budget of the execution tests: 8 copies, 2 elites, 2 iterations, in this process."""
+    from realize.app.planner import ReplanBudget
+
+    return ReplanBudget(n_envs=8, n_elite=2, iterations=2, shard_rows=None, workers=1)
+
+
+def closed_loop_world(run: Path, settings: Any, out: Path, trajectory: Path | None = None) -> Any:
+    """World 0 of ``settings`` carried out closed loop from ``run`` by a warmed-up planner (its
+    ``WorldLog``)."""
+    from realize.app.execute import execute_world
+    from realize.app.planner import Planner
+
+    budget = execute_budget()
+    planner = Planner.from_run(run)
+    try:
+        planner.warm_up(budget)
+        return execute_world(run, settings, 0, closed_loop=True, planner=planner, out=out, budget=budget,
+                             trajectory=trajectory)
+    finally:
+        planner.close()
+
+
+# ------------------------------------------------------------------ the fabric's random batches
+FABRIC_ROWS = 96
+
+
+def row_subsets(seed: int, count: int = 12) -> list["torch.Tensor"]:
+    """Random subsets of ``FABRIC_ROWS`` rows in shuffled order, the edge sizes (1, 2, 7, 8, 9, all
+    but one) first."""
+    import torch
+
+    g = torch.Generator().manual_seed(seed)
+    sizes = [1, 2, 7, 8, 9, FABRIC_ROWS - 1] + torch.randint(3, FABRIC_ROWS, (count - 6,), generator=g).tolist()
+    return [torch.randperm(FABRIC_ROWS, generator=g)[:k] for k in sizes]
+
+
+def fabric_states(robot: Any, dtype: "torch.dtype", seed: int) -> tuple["torch.Tensor", "torch.Tensor", "torch.Tensor"]:
+    """``FABRIC_ROWS`` whole-body states of ``robot`` in front of table 1 (some arms near it, some
+    far), random speeds, goals."""
+    import torch
+
+    g = torch.Generator().manual_seed(seed)
+    n, dof = FABRIC_ROWS, robot.n_dof
+    q = torch.tensor(robot.rest_q(), dtype=torch.float64).expand(n, -1).clone()
+    q = q + 0.3 * torch.randn(n, dof, generator=g, dtype=torch.float64)
+    q[:, 0] = 0.7 + 0.5 * torch.rand(n, generator=g, dtype=torch.float64)
+    q[:, 1] = 1.2 + 0.4 * (2 * torch.rand(n, generator=g, dtype=torch.float64) - 1)
+    q[:, 2] = math.pi + 0.3 * torch.randn(n, generator=g, dtype=torch.float64)
+    qd = 0.4 * torch.randn(n, dof, generator=g, dtype=torch.float64)
+    pos = torch.tensor([0.0, 1.2, 0.82], dtype=torch.float64) + 0.2 * torch.randn(n, 3, generator=g,
+                                                                                  dtype=torch.float64)
+    return q.to(dtype), qd.to(dtype), pos.to(dtype)

@@ -10,7 +10,6 @@ rollout's dtype) and float64, with torch on one thread as in the rollout and on 
 
 from __future__ import annotations
 
-import math
 import os
 
 import pytest
@@ -19,32 +18,9 @@ import torch
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
 from realize.world.geometry import GeometryCfg, build_geometry
 from realize.robot.spec import load_robot_spec
+from helpers import FABRIC_ROWS, fabric_states, row_subsets
 
 ROBOT = load_robot_spec("fetch_omni")
-DOF = ROBOT.n_dof
-
-N = 96
-
-
-def _subsets(seed: int, count: int = 12) -> list[torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    sizes = [1, 2, 7, 8, 9, N - 1] + torch.randint(3, N, (count - 6,), generator=g).tolist()
-    return [torch.randperm(N, generator=g)[:k] for k in sizes]
-
-
-def _states(dtype: torch.dtype, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Whole-body states in front of table 1 (some arms near it, some far), random speeds, goals."""
-    g = torch.Generator().manual_seed(seed)
-    q = torch.tensor(ROBOT.rest_q(), dtype=torch.float64).expand(N, -1).clone()
-    q = q + 0.3 * torch.randn(N, DOF, generator=g, dtype=torch.float64)
-    q[:, 0] = 0.7 + 0.5 * torch.rand(N, generator=g, dtype=torch.float64)
-    q[:, 1] = 1.2 + 0.4 * (2 * torch.rand(N, generator=g, dtype=torch.float64) - 1)
-    q[:, 2] = math.pi + 0.3 * torch.randn(N, generator=g, dtype=torch.float64)
-    qd = 0.4 * torch.randn(N, DOF, generator=g, dtype=torch.float64)
-    pos = torch.tensor([0.0, 1.2, 0.82], dtype=torch.float64) + 0.2 * torch.randn(N, 3, generator=g,
-                                                                                  dtype=torch.float64)
-    return q.to(dtype), qd.to(dtype), pos.to(dtype)
-
 
 @pytest.fixture(params=[1, "many"], ids=["1-thread", "many-threads"])
 def threads(request):
@@ -60,18 +36,18 @@ def threads(request):
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_fabric_step_of_a_plan_ignores_its_batch_mates(dtype: torch.dtype, threads) -> None:
     fab = WholeBodyFabric(build_geometry(GeometryCfg()), dt=0.05, dtype=dtype)
-    q, qd, pos = _states(dtype, seed=1)
-    approach = torch.tensor([0.0, 0.0, -1.0], dtype=dtype).expand(N, 3)
-    closing = torch.tensor([0.0, 1.0, 0.0], dtype=dtype).expand(N, 3)
+    q, qd, pos = fabric_states(ROBOT, dtype, seed=1)
+    approach = torch.tensor([0.0, 0.0, -1.0], dtype=dtype).expand(FABRIC_ROWS, 3)
+    closing = torch.tensor([0.0, 1.0, 0.0], dtype=dtype).expand(FABRIC_ROWS, 3)
     goal = fab.goal_points(pos, approach, closing)
     q_meas = q.clone()
     q_meas[::5, 4] += 0.2  # some rows re-synchronise from the measurement
-    weight = torch.linspace(1.0, 4.0, N, dtype=dtype)
+    weight = torch.linspace(1.0, 4.0, FABRIC_ROWS, dtype=dtype)
     state = fab.start(q, qd)
     for w in (None, weight):
         full, valid = fab.step(state, q_meas, goal, weight=w)
         assert bool(valid.all())
-        for rows in _subsets(seed=2):
+        for rows in row_subsets(seed=2):
             sub = FabricState(state.q[rows], state.qd[rows])
             part, v = fab.step(sub, q_meas[rows], goal[rows], weight=None if w is None else w[rows])
             assert torch.equal(part.q, full.q[rows]) and torch.equal(part.qd, full.qd[rows]), len(rows)
@@ -81,10 +57,10 @@ def test_fabric_step_of_a_plan_ignores_its_batch_mates(dtype: torch.dtype, threa
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_tcp_and_axes_of_a_plan_ignore_its_batch_mates(dtype: torch.dtype, threads) -> None:
     fab = WholeBodyFabric(build_geometry(GeometryCfg()), dt=0.05, dtype=dtype)
-    q, qd, _ = _states(dtype, seed=3)
+    q, qd, _ = fabric_states(ROBOT, dtype, seed=3)
     full = fab.kin.tcp_and_axes(q)
     jets = fab.map.jets(q, qd)
-    for rows in _subsets(seed=4):
+    for rows in row_subsets(seed=4):
         for a, b in zip(fab.kin.tcp_and_axes(q[rows]), full):
             assert torch.equal(a, b[rows]), len(rows)
         for part, whole in zip(fab.map.jets(q[rows], qd[rows]), jets):

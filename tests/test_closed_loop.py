@@ -14,8 +14,7 @@ import pytest
 from realize.execution.perception import load_noise
 from realize.execution.settings import ExecuteSettings
 from realize.execution.trajectory import read_trajectory
-from test_execute import TABLE_MOVED, _world, settings
-from test_planner import write_known_run
+from helpers import TABLE_MOVED, closed_loop_world, one_world, write_known_run
 
 
 @pytest.fixture(scope="module")
@@ -31,21 +30,26 @@ TABLE_NUDGED = {"trigger": {"action": 2, "delay_s": 1.0}, "move_table": {"table"
 def test_a_check_lets_the_plan_go_on_where_it_still_reaches_the_goal(run: Path, tmp_path: Path) -> None:
     """A table nudged past the monitor's tolerance: the remaining plan, simulated from the
     state with the table where it stands now, still reaches the goal in the check's copies, so
-    the plan goes on unchanged, no replan, and reaches the goal in the world. Without the check
-    the same world replans (the deviation alone asks for it): a replan the check saves."""
-    wl = _world(run, settings(TABLE_NUDGED), tmp_path / "checked")
+    the plan goes on unchanged, no replan, and reaches the goal in the world."""
+    wl = closed_loop_world(run, one_world(TABLE_NUDGED), tmp_path / "checked")
     assert wl.success, wl.failure
     assert wl.replans == [] and len(wl.checks) == 1
     chk = wl.checks[0]
     assert chk["go_on"] and chk["successes"] >= 0.75 * chk["copies"] and chk["action"] == 2
     assert chk["hold_steps"] == 40 and wl.hold_steps == 40  # the world ran on while it checked
     assert [a.text for a in wl.actions].count("move_to(Table2)") == 2  # interrupted, then the same action again
-    unchecked = _world(run, settings(TABLE_NUDGED, precheck={"copies": 0}), tmp_path / "unchecked")
+
+
+@pytest.mark.slow  # a replan (a search) in the world: make test keeps the checked world above
+def test_without_the_check_the_nudged_table_asks_for_a_replan(run: Path, tmp_path: Path) -> None:
+    """The same world without the check replans (the deviation alone asks for it): the replan
+    that the check above saves."""
+    unchecked = closed_loop_world(run, one_world(TABLE_NUDGED, precheck={"copies": 0}), tmp_path / "unchecked")
     assert len(unchecked.replans) >= 1 and unchecked.checks == []
 
 
 def _realistic(*disturbances: dict) -> ExecuteSettings:
-    return ExecuteSettings.from_mapping({**dataclasses.asdict(settings(*disturbances)),
+    return ExecuteSettings.from_mapping({**dataclasses.asdict(one_world(*disturbances)),
                                          "noise": dataclasses.asdict(load_noise("realistic"))})
 
 
@@ -53,7 +57,7 @@ def test_realistic_noise_alone_asks_for_no_repair(run: Path, tmp_path: Path) -> 
     """No disturbance, the realistic observation model (3 mm, 2.5 deg, 1 cm drift, 100 ms late, 5 %
     lost): the monitor, deciding from the filtered belief, finds no deviation, and the world
     reaches the goal."""
-    a = _world(run, _realistic(), tmp_path)
+    a = closed_loop_world(run, _realistic(), tmp_path)
     assert a.success, a.failure
     assert a.deviations == [] and a.replans == [] and a.checks == []
     assert len(a.observed) > 10  # what it decided from: the belief, every check
@@ -64,8 +68,8 @@ def test_a_noisy_world_with_a_hold_repeats_bit_for_bit(run: Path, tmp_path: Path
     """A moved table under the realistic noise, twice: a check, a hold of 40 steps, the same bits
     (the sensor's draws are seeded, the latency and the hold are in control steps)."""
     moved = _realistic(TABLE_MOVED)
-    b = _world(run, moved, tmp_path / "b", trajectory=tmp_path / "b.npz")
-    c = _world(run, moved, tmp_path / "c", trajectory=tmp_path / "c.npz")
+    b = closed_loop_world(run, moved, tmp_path / "b", trajectory=tmp_path / "b.npz")
+    c = closed_loop_world(run, moved, tmp_path / "c", trajectory=tmp_path / "c.npz")
     assert b.success and len(b.checks) >= 1 and b.hold_steps >= 40
     tb, tc = read_trajectory(tmp_path / "b.npz"), read_trajectory(tmp_path / "c.npz")
     assert len(tb) == len(tc) > 0 and np.array_equal(tb.joint_targets, tc.joint_targets)
@@ -84,7 +88,7 @@ def test_a_cube_on_the_floor_is_picked_up_again_and_reaches_the_goal(run: Path, 
     """The re-sequence reads the cube on the floor as a site of its own, with a base region
     around it, and the PDDL planner's new plan drives there, grasps it off the floor (the
     fingers allowed down to it: controller.fabric.floor_exclude) and carries it to table 2."""
-    wl = _world(run, settings(DROPPED), tmp_path)
+    wl = closed_loop_world(run, one_world(DROPPED), tmp_path)
     assert "onto floor" in wl.disturbances[0]["what"]
     first = wl.replans[0]
     assert first.kind == "re-sequence" and first.plan.startswith("move_to(Near_cube), grasp(cube"), first.plan

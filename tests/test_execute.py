@@ -18,27 +18,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import REPO, doc_block
-from realize.app.execute import WorldLog, execute, execute_world
-from realize.app.planner import Planner, ReplanBudget
+from helpers import REPO, TABLE_MOVED, closed_loop_world, doc_block, execute_budget, one_world, write_known_run
+from realize.app.execute import execute
 from realize.config import ConfigError
-from realize.execution.settings import ExecuteSettings
 from realize.execution.trajectory import read_trajectory
-from test_planner import write_known_run
 
-BUDGET = ReplanBudget(n_envs=8, n_elite=2, iterations=2, shard_rows=None, workers=1)
-# table 2 moved 30 cm in -y 1 s into move_to(Table2) (while the cube is carried): the planned place
-# then puts the cube on the table's edge, so the plan carried out as planned misses the goal
-TABLE_MOVED = {"trigger": {"action": 2, "delay_s": 1.0}, "move_table": {"table": "table2", "dx": 0.0, "dy": -0.3}}
+BUDGET = execute_budget()
 # the cube knocked out of the hand onto table 1 just after the grasp (the knocked_out preset's timing)
 KNOCKED = {"trigger": {"action": 2, "delay_s": 0.1}, "knock_out": {"object": "cube"}}
-
-
-def settings(*disturbances: dict, **keys: object) -> ExecuteSettings:
-    """One world; the world runs on for a fixed 40 control steps (2 s) while the planner thinks,
-    so that a study repeats bit for bit."""
-    return ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 3, "think": 40,
-                                         "disturbances": list(disturbances), **keys})
 
 
 @pytest.fixture(scope="module")
@@ -49,23 +36,13 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def table_study(run: Path):
     """Open and closed loop in one world where table 2 moves mid-transport."""
-    summary = execute(run, settings(TABLE_MOVED, precheck={"copies": 0}), name="table", worlds=1, budget=BUDGET,
+    summary = execute(run, one_world(TABLE_MOVED, precheck={"copies": 0}), name="table", worlds=1, budget=BUDGET,
                       rerun=False, progress=False)
     return summary, run / "execution" / "table"
 
 
 def _log(where: Path, mode: str) -> dict:
     return json.loads((where / f"world-0-{mode}.json").read_text())
-
-
-def _world(run: Path, s: ExecuteSettings, out: Path, trajectory: Path | None = None) -> WorldLog:
-    planner = Planner.from_run(run)
-    try:
-        planner.warm_up(BUDGET)
-        return execute_world(run, s, 0, closed_loop=True, planner=planner, out=out, budget=BUDGET,
-                             trajectory=trajectory)
-    finally:
-        planner.close()
 
 
 # ------------------------------------------------------------------------------ a moved table
@@ -128,7 +105,7 @@ def test_the_docs_trajectory_example_runs(table_study) -> None:
 def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp_path: Path) -> None:
     """A second execution of the closed-loop world (a new planner) repeats the study's, bit for bit."""
     _, where = table_study
-    wl = _world(run, settings(TABLE_MOVED, precheck={"copies": 0}), tmp_path, trajectory=tmp_path / "again.npz")
+    wl = closed_loop_world(run, one_world(TABLE_MOVED, precheck={"copies": 0}), tmp_path, trajectory=tmp_path / "again.npz")
     first = _log(where, "closed")
     assert (wl.steps, wl.success, wl.final_plan) == (first["steps"], first["success"], first["final_plan"])
     assert [(a.index, a.text, a.begin_step, a.end_step, a.outcome) for a in wl.actions] == \
@@ -146,7 +123,7 @@ def test_same_seed_and_disturbances_execute_the_same(table_study, run: Path, tmp
 
 # ------------------------------------------------------------------------------ a knocked-out cube
 def test_knocked_out_cube_is_resequenced_with_a_second_grasp(run: Path, tmp_path: Path) -> None:
-    wl = _world(run, settings(KNOCKED), tmp_path)
+    wl = closed_loop_world(run, one_world(KNOCKED), tmp_path)
     assert [r.kind for r in wl.replans][:1] == ["re-sequence"], [(r.kind, r.reason) for r in wl.replans]
     assert wl.final_plan.startswith("grasp(") and "grasp(" in wl.replans[0].plan
     grasps = [a for a in wl.actions if a.text.startswith("grasp(") and a.outcome == "done"]
@@ -169,7 +146,7 @@ def test_bad_disturbances_are_refused_before_anything_is_simulated(run: Path, no
 
     monkeypatch.setattr(planner_mod.Planner, "from_run", classmethod(no_planner))
     with pytest.raises(ConfigError) as ei:
-        execute(run, settings(entry), name="bad", budget=BUDGET, rerun=False, progress=False)
+        execute(run, one_world(entry), name="bad", budget=BUDGET, rerun=False, progress=False)
     msg = str(ei.value)
     assert "\n" not in msg, msg
     for n in needles:

@@ -230,7 +230,7 @@ def executed(tmp_path_factory: pytest.TempPathFactory):
     """One open-loop world of the seed task's known plan, executed and exported (ros2, lerobot)."""
     from realize.app.execute import execute
     from realize.execution.settings import ExecuteSettings
-    from test_planner import write_known_run
+    from helpers import write_known_run
 
     run = write_known_run(tmp_path_factory.mktemp("export") / "run")
     s = ExecuteSettings.from_mapping({"worlds": 1, "seed": 0, "max_replans": 0, "disturbances": []})

@@ -17,10 +17,12 @@ import torch
 from realize.config import ConfigError
 from realize.controllers import fabric_package
 from realize.controllers.whole_body import FabricState, WholeBodyConfig, WholeBodyFabric
+from realize.robot.spec import load_robot_spec
 from realize.world.geometry import GeometryCfg, RampCfg, WallCfg, build_geometry
-from test_batch_invariance import N, _states, _subsets
+from helpers import FABRIC_ROWS, fabric_states, row_subsets
 
 F32 = torch.float32
+ROBOT = load_robot_spec("fetch_omni")  # the fabric's default robot
 
 
 def _fabric(compiled: bool, geometry: GeometryCfg | None = None, **cfg) -> WholeBodyFabric:
@@ -34,8 +36,8 @@ def pair() -> tuple[WholeBodyFabric, WholeBodyFabric]:
 
 
 def _inputs(fab: WholeBodyFabric, seed: int):
-    q, qd, pos = _states(F32, seed=seed)
-    goal = fab.goal_points(pos, torch.tensor([0.0, 0.0, -1.0]).expand(N, 3), torch.tensor([0.0, 1.0, 0.0]).expand(N, 3))
+    q, qd, pos = fabric_states(ROBOT, F32, seed=seed)
+    goal = fab.goal_points(pos, torch.tensor([0.0, 0.0, -1.0]).expand(FABRIC_ROWS, 3), torch.tensor([0.0, 1.0, 0.0]).expand(FABRIC_ROWS, 3))
     q_meas = q.clone()
     q_meas[::5, 4] += 0.2  # some rows re-synchronise from the measurement
     return fab.start(q, qd), q_meas, goal
@@ -46,7 +48,7 @@ def test_built_step_matches_the_eager_step(pair) -> None:
     assert built._package is not None and eager._package is None
     state, q_meas, goal = _inputs(eager, seed=1)
     with torch.inference_mode():
-        for n in (1, 7, N):
+        for n in (1, 7, FABRIC_ROWS):
             sub = FabricState(state.q[:n], state.qd[:n])
             (a, va), (b, vb) = eager.step(sub, q_meas[:n], goal[:n]), built.step(sub, q_meas[:n], goal[:n])
             assert torch.equal(va, vb) and bool(va.all())
@@ -60,7 +62,7 @@ def test_a_row_of_the_built_step_ignores_its_batch_mates(pair) -> None:
     state, q_meas, goal = _inputs(built, seed=3)
     with torch.inference_mode():
         full, valid = built.step(state, q_meas, goal)
-        for rows in _subsets(seed=4):
+        for rows in row_subsets(seed=4):
             part, v = built.step(FabricState(state.q[rows], state.qd[rows]), q_meas[rows], goal[rows])
             assert torch.equal(part.q, full.q[rows]) and torch.equal(part.qd, full.qd[rows]), len(rows)
             assert torch.equal(v, valid[rows])
@@ -88,7 +90,7 @@ def test_one_package_serves_every_scene_and_follows_the_settings(pair) -> None:
 def test_a_per_plan_weight_runs_the_eager_step(pair) -> None:
     eager, built = pair
     state, q_meas, goal = _inputs(eager, seed=6)
-    w = torch.linspace(1.0, 4.0, N)
+    w = torch.linspace(1.0, 4.0, FABRIC_ROWS)
     a, va = eager.step(state, q_meas, goal, weight=w)
     b, vb = built.step(state, q_meas, goal, weight=w)
     assert torch.equal(a.q, b.q) and torch.equal(va, vb)

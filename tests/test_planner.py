@@ -16,31 +16,15 @@ from pathlib import Path
 
 import pytest
 
-from helpers import GOOD, TINY, compose_config as helpers_compose
+from helpers import GOOD, STATE_GRASPED, TINY, write_known_run
 from realize.app.compose import compose_config
 from realize.app.planner import Planner, PlanResult, ReplanBudget
 from realize.app.run_config import build_run_spec
 from realize.config import ConfigError
-from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
 from realize.world.state import load_state
 
-STATE = Path(__file__).parent / "fixtures" / "state_grasped.json"  # the cube in the hand, action 2 next
 BUDGET = ReplanBudget(n_envs=4, n_elite=2, iterations=1, shard_rows=None, workers=1)  # the planner's 4 copies
-
-
-def write_known_run(run_dir: Path, overrides: tuple[str, ...] = ()) -> Path:
-    """A run directory of the seed task whose plan and final distribution are the known feasible
-    plan ``GOOD`` (narrow std): what a warm start or an executor starts from."""
-    config = helpers_compose(*overrides)
-    spec = build_run_spec(config)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(run_dir / RESULT_FILE, {
-        "status": "done", "feasible": True, "best_cost": 1.5, "best_z": list(GOOD),
-        "final_mean": list(GOOD), "final_std": [0.005] * len(GOOD), "plan": spec.task.describe(),
-        "columns": list(spec.task.layout.column_names), "n_envs_scene": 1, "backend": "cpu", "config": config,
-    })
-    return run_dir
 
 
 # ------------------------------------------------------------------------------ compose_config
@@ -117,7 +101,7 @@ def test_plan_result_is_typed(planned) -> None:
 # ------------------------------------------------------------------------------ replan
 def test_replan_writes_its_block_and_keeps_or_rebuilds_scenes(planned, tmp_path: Path) -> None:
     planner, first, _, _ = planned
-    state = load_state(STATE)
+    state = load_state(STATE_GRASPED)
     same = planner.replan(state, 2, source=first, run_dir=tmp_path / "same", budget=BUDGET)
     assert same.scene == "kept" and same.from_action == 2
     assert same.plan == "move_to(Table2), place(cube, Cube_p), move_to(Exit)"
@@ -151,7 +135,7 @@ def test_replan_refusals_before_anything_runs(planned, tmp_path: Path, monkeypat
 
     monkeypatch.setattr(planner, "_pool", no_workers)
     with pytest.raises(ConfigError) as ei:
-        planner.replan(load_state(STATE), from_action, changes, source=first, run_dir=tmp_path / "r", budget=BUDGET)
+        planner.replan(load_state(STATE_GRASPED), from_action, changes, source=first, run_dir=tmp_path / "r", budget=BUDGET)
     msg = str(ei.value)
     assert "\n" not in msg, msg
     for n in needles:

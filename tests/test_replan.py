@@ -17,15 +17,10 @@ from realize.app.realizers import open_realization
 from realize.app.run_config import build_run_spec
 from realize.world.state import SceneState, load_state
 from realize.tasks.suffix import task_suffix
-from helpers import compose_config
+from helpers import FULL_Z, STATE_GRASPED, compose_config, on_table2
 
-FIXTURE = Path(__file__).parent / "fixtures" / "state_grasped.json"
 # that run's best parameters of move_to(Table2), place(cube, Cube_p), move_to(Exit)
-REST_Z = [-0.9659641240604275, -1.0622591208176722, -0.050928051774466784, -1.1459906667680084, 0.8778431067079995,
-          1.9177437232633234, -0.07168660186229141]
-# ... and of the whole plan (move_to(Table1), grasp(cube, Cube_g) first)
-FULL_Z = [-0.9953907433402727, 0.9260304134062874, -0.03445283281557375, 1.189657915463341, 0.8881229501088985,
-          *REST_Z]
+REST_Z = FULL_Z[5:]
 
 
 def _spec(k: int | None, state: SceneState | None):
@@ -36,14 +31,8 @@ def _spec(k: int | None, state: SceneState | None):
     return spec
 
 
-def _on_table2(cube: torch.Tensor) -> bool:
-    """The cube's centre over table 2's top (0.6 x 0.6 m at (0, -1.2), 0.72 m high), resting on it."""
-    x, y, z = cube[:3].tolist()
-    return abs(x) <= 0.3 and abs(y + 1.2) <= 0.3 and abs(z - (0.72 + 0.0225)) <= 0.01
-
-
 def test_restored_grip_holds_and_open_gripper_drops(torch_single_thread: None) -> None:
-    held = load_state(FIXTURE)
+    held = load_state(STATE_GRASPED)
     scene, _ = open_realization(_spec(2, held), n_envs=2)
     with scene:
         scene.reset(state=held)
@@ -61,13 +50,13 @@ def test_restored_grip_holds_and_open_gripper_drops(torch_single_thread: None) -
         assert (z0 - scene.object_pose("cube")[:, 2]).min() > 0.03
 
 
-def test_remaining_actions_put_the_held_cube_on_table2(torch_single_thread: None) -> None:
-    held = load_state(FIXTURE)
+def test_remaining_actions_put_the_held_cubeon_table2(torch_single_thread: None) -> None:
+    held = load_state(STATE_GRASPED)
     scene, (realizer,) = open_realization(_spec(2, held), n_envs=1)
     with scene:
         res = realizer.rollout(torch.tensor([REST_Z], dtype=torch.float64))
         assert res.action_success.all() and bool(res.feasible[0]), res.failure
-        assert _on_table2(scene.object_pose("cube")[0])
+        assert on_table2(scene.object_pose("cube")[0])
         assert 150 < float(res.cost[0]) < 400  # three actions, not five (the whole plan: 445)
 
 
@@ -75,7 +64,7 @@ def test_remaining_actions_put_the_held_cube_on_table2(torch_single_thread: None
 def test_restored_rollouts_are_history_free(torch_single_thread: None) -> None:
     """A rollout from a restored state gives the same cost whatever the scene simulated before
     (every reset starts a new PhysX system: nothing PhysX kept from before survives it)."""
-    held = load_state(FIXTURE)
+    held = load_state(STATE_GRASPED)
     scene, (realizer,) = open_realization(_spec(2, held), n_envs=2)
     Z = torch.tensor([REST_Z, REST_Z], dtype=torch.float64)
     with scene:
@@ -112,7 +101,7 @@ def test_captured_state_continues_the_rollout(torch_single_thread: None) -> None
     realizer.action_hook = lambda a, rows: again.append((a + 2, scene.step_count))
     with scene:
         rest = realizer.rollout(torch.tensor([REST_Z], dtype=torch.float64))
-        assert bool(rest.feasible[0]) and _on_table2(scene.object_pose("cube")[0])
+        assert bool(rest.feasible[0]) and on_table2(scene.object_pose("cube")[0])
     assert abs(dict(again)[3] - (at[3] - at[2])) <= 2  # move_to(Table2) from the restored base pose
     remainder = float(full.cost[0]) - at[2]
     assert abs(float(rest.cost[0]) - remainder) <= 0.05 * remainder
@@ -138,7 +127,7 @@ def test_replan_run_writes_where_it_started(tmp_path: Path, torch_single_thread:
                                                 "final_mean": [0.1 * i for i in range(D)], "final_std": [0.01] * D})
     with pytest.raises(ConfigError, match="not a realize run directory"):
         preflight([f"replan_from={tmp_path / 'none'}"])
-    args = [f"replan_from={earlier}", "replan.action=2", f"replan.state={FIXTURE}",
+    args = [f"replan_from={earlier}", "replan.action=2", f"replan.state={STATE_GRASPED}",
             "scene.tables.1.center=[0.3,-1.2]", "ce.n_envs=2", "ce.n_elite=1", "ce.iterations=1",
             "workers.n=1", "controller.max_time_s=4", "logging.rerun=false", "logging.progress=false"]
     out = run(compose_config(*args), tmp_path / "replan", cli_overrides=args)
@@ -146,7 +135,7 @@ def test_replan_run_writes_where_it_started(tmp_path: Path, torch_single_thread:
     assert out.iterations_done == 1 and doc["plan"] == "move_to(Table2), place(cube, Cube_p), move_to(Exit)"
     assert doc["columns"] == ["Table2.x", "Table2.y", "Cube_p.x", "Cube_p.y", "Cube_p.z", "Exit.x", "Exit.y"]
     rp = doc["replan"]
-    assert (rp["from"], rp["action"], rp["state_file"]) == (str(earlier), 2, str(FIXTURE))
+    assert (rp["from"], rp["action"], rp["state_file"]) == (str(earlier), 2, str(STATE_GRASPED))
     assert rp["state"]["held"] == "cube" and set(rp["state"]["objects"]) == {"cube"}
     # warm-started from the earlier run's marginal over the remaining columns, moved with table 2
     assert rp["warm_start"]["run_dir"] == str(earlier) and doc["warm_start"] == rp["warm_start"]

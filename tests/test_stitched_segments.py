@@ -1,7 +1,7 @@
 """Stitched segments in the simulator (CPU): a prefix's captured end state, restored per copy,
 lets the suffix go on where the prefix stopped, and the two costs add up to the whole plan's.
 
-``FULL_Z`` is a seed-paper run's best plan (``tests/test_replan.py``): move_to(Table1),
+``FULL_Z`` is a seed-paper run's best plan (``tests/helpers.py``): move_to(Table1),
 grasp(cube, Cube_g) | move_to(Table2), place(cube, Cube_p), move_to(Exit).
 """
 
@@ -15,8 +15,7 @@ from realize.app.run_config import build_run_spec
 from realize.tasks.split import default_split, split_task
 from realize.config import ConfigError
 from realize.world.state import SceneState
-from helpers import compose_config
-from test_replan import FIXTURE, FULL_Z, _on_table2
+from helpers import FULL_Z, STATE_GRASPED, compose_config, on_table2
 from realize.world.state import load_state
 
 
@@ -34,7 +33,7 @@ def test_split_task_cuts_the_seed_plan_after_the_grasp() -> None:
 
 
 def test_per_copy_restore_puts_each_copy_in_its_own_state(torch_single_thread: None) -> None:
-    held = load_state(FIXTURE)
+    held = load_state(STATE_GRASPED)
     start = SceneState(base=(-2.0, 0.0, 0.0), source="start")
     scene, _ = open_realization(build_run_spec(compose_config()), n_envs=3)
     with scene:
@@ -57,7 +56,7 @@ def test_prefix_end_state_continues_into_the_suffix(torch_single_thread: None) -
         (end,) = first.end_states
         assert bool(first.feasible[0]) and end is not None and end.held == "cube" and end.gripper_closed
         rest = suf.rollout(Z[:, scols], starts=[end])
-        assert bool(rest.feasible[0]) and _on_table2(scene.object_pose("cube")[0]), rest.failure
+        assert bool(rest.feasible[0]) and on_table2(scene.object_pose("cube")[0]), rest.failure
         assert rest.end_states is None  # only asked for
     # the cut costs a few control steps (the restored copy starts at rest, its grip made anew):
     # measured 456 stitched against 445 whole, which is why a stitched plan is confirmed whole
