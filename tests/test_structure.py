@@ -91,6 +91,18 @@ def test_scripts_use_the_public_api_never_the_tests() -> None:
     assert not bad, bad
 
 
+def test_test_files_share_helpers_through_one_module() -> None:
+    """A test file imports what it shares with other test files from ``helpers.py`` (or the golden
+    runs' ``golden_runs.py``), never from another test file: a test file can then change alone."""
+    bad = []
+    for path in sorted((REPO / "tests").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [node.module or ""] if isinstance(node, ast.ImportFrom) else (
+                [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            bad += [f"{path.name}: imports {n}" for n in names if n.split(".")[-1].startswith("test_")]
+    assert not bad, bad
+
+
 def test_no_import_cycle() -> None:
     mods = _modules()
     g = nx.DiGraph()
