@@ -23,7 +23,8 @@ wants the same initial state for every sample): each object's xy offset by up to
 another object stays above its top), and the robot's start xy by up to ``robot_xy_noise`` m.
 ``reset(options=dict(offsets=...))`` gives each copy its own offsets instead of random ones
 (``robot_xy`` (N, 2); ``object_xy`` {name: (N, 2)}, ``object_yaw`` {name: (N,)}, copies in
-``BatchedScene`` order): the perturbed worlds of ``realize.tasks.worlds``.
+``BatchedScene`` order): the perturbed worlds of ``realize.tasks.worlds``; an optional
+``robot_yaw`` (N,) turns a fixed base (a restored state's, ``realize.scene.state_rows``).
 
 **Success conditions** (``evaluate``): the ``goal`` kwarg, a task config's goal
 (``realize.tasks.goal_spec``) whose ``base_in`` names one of the ``goal_regions`` (a task's
@@ -326,7 +327,8 @@ class RealizePickPlaceEnv(BaseEnv):
                         xy = xy + (torch.rand(b, 2) * 2 - 1) * self.object_xy_noise
                         yaw = yaw + (torch.rand(b) * 2 - 1) * self.object_yaw_noise
                     poses[o.name] = (xy, yaw)
-                robot_base.place(agent, self.robot_spec, qpos, names, start, g.robot_start, off)
+                turn = offsets["robot_yaw"][copies] if offsets is not None and "robot_yaw" in offsets else None
+                robot_base.place(agent, self.robot_spec, qpos, names, start, g.robot_start, off, turn)
                 agent.reset(qpos)
                 agent.robot.set_qvel(torch.zeros_like(qpos))
                 if held:  # held joints (a head) go to their held values, wherever the rest pose starts them

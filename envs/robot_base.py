@@ -38,14 +38,16 @@ def load_poses(spec: RobotSpec, start: Sequence[float], offsets: Sequence[Sequen
 
 
 def place(agent, spec: RobotSpec, qpos: torch.Tensor, names: list[str], start_xy: torch.Tensor,
-          robot_start: Sequence[float], off: torch.Tensor) -> None:
+          robot_start: Sequence[float], off: torch.Tensor, turn: torch.Tensor | None = None) -> None:
     """Put ``agent``'s copies (one tile, ``b`` rows) at their starts ``start_xy`` (b, 2): a fixed
-    base's root there, or a mobile base's planar joints in ``qpos`` (b, J; written in place) with
-    the root at the task's start. ``off``: the tile's offset (2,)."""
+    base's root there, turned by the start's yaw plus ``turn`` (b,) rad where given, or a mobile
+    base's planar joints in ``qpos`` (b, J; written in place) with the root at the task's start.
+    ``off``: the tile's offset (2,)."""
     b = start_xy.shape[0]
     if spec.base.fixed:
         root = torch.cat([start_xy + off, torch.full((b, 1), spec.base.height)], dim=1)
-        quat = torch.tensor([_yaw_quat(robot_start[2])]).repeat(b, 1)
+        quat = torch.tensor([_yaw_quat(robot_start[2])]).repeat(b, 1) if turn is None else \
+            torch.tensor([_yaw_quat(robot_start[2] + float(t)) for t in turn])
     else:
         ix, iy, iyaw = (names.index(j) for j in spec.base.joints)
         rel = start_xy - torch.tensor(robot_start[:2])

@@ -35,7 +35,7 @@ from realize.scene.backends import open_backend
 from realize.scene.object_properties import ObjectProperties
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 from realize.scene.settings import EnvOptions, SimSettings
-from realize.scene.state_rows import state_row
+from realize.scene.state_rows import reset_offsets, state_row
 from realize.world.state import ObjectPose, SceneState
 
 __all__ = ["BatchedScene", "SceneSpec", "StepHook"]
@@ -129,24 +129,22 @@ class BatchedScene(ObjectProperties):
     @torch.inference_mode()
     def reset(self, seed: int = 0, randomize: bool = False,
               state: SceneState | Sequence[SceneState] | None = None) -> None:
-        """Put every copy back in the task's initial state (same state for all unless randomize,
-        or ``env.randomize_resets``), or, with ``state``, every copy in that state (robot joints,
-        object poses, gripper command; at rest); a sequence of states puts copy i in ``state[i]``
-        (copies past its end in its first). Resets are history-free on a deterministic
-        backend: a rollout in a used scene equals one in a fresh scene bit for bit.
-
-        A state that holds an object is simulated for ``RESTORE_SETTLE_STEPS`` control periods
-        with every target holding (not counted in ``step_count``): the closed fingers then press
-        on it, and the contact forces that ``holds`` reads exist before the first action asks."""
+        """Put every copy back in the task's initial state (same state for all unless randomize, or
+        ``env.randomize_resets``), or, with ``state``, every copy in that state (robot joints, object
+        poses, gripper command; at rest; a fixed base bolted where it has it); a sequence of states
+        puts copy i in ``state[i]`` (copies past its end in its first). Resets are history-free on a
+        deterministic backend: a rollout in a used scene equals one in a fresh scene bit for bit.
+        A state that holds an object is simulated for ``RESTORE_SETTLE_STEPS`` control periods with
+        every target holding (not counted in ``step_count``): the closed fingers then press on it,
+        and the contact forces that ``holds`` reads exist before the first action asks."""
         self._frozen.zero_()
-        options: dict[str, Any] = dict(randomize=randomize or self.options.randomize_resets)
-        if self._reset_offsets is not None:
-            options["offsets"] = self._reset_offsets
+        states = [] if state is None else [state] if isinstance(state, SceneState) else list(state)
+        options: dict[str, Any] = dict(randomize=randomize or self.options.randomize_resets,
+                                       offsets=reset_offsets(self, states, self._reset_offsets))
         self.env.reset(seed=seed, options=options)
         self._impl.after_reset()
         if self._fixed_base:  # where this reset bolted every copy's base
             self._base_fixed_pose = self.u.base_poses().to(self.device, torch.float32)
-        states = [] if state is None else [state] if isinstance(state, SceneState) else list(state)
         if states:
             self._restore(states)
         self.state_changed()

@@ -4,7 +4,11 @@ What it does: ``state_row(scene, state)`` turns a ``realize.world.state.SceneSta
 backend's joint row (the base joints relative to the task's robot start, every other joint by
 name; joints the state leaves out at the robot's rest pose) and the objects' poses ((m, 7),
 position and wxyz quaternion; objects left out at their rest pose), checking joint and object
-names against the scene (one ``ConfigError`` naming the state's source).
+names against the scene (one ``ConfigError`` naming the state's source). A fixed base has no
+joints: ``reset_offsets(scene, states, offsets)`` gives the reset's per-copy offsets that bolt
+each copy's base where its state has it (x, y and yaw), so a state captured where the base
+stood elsewhere (an executed world's base, off the task's start by its ``robot_xy`` draw, seen
+with the localizer's error) is restored with the hand, and what it holds, where the state has them.
 What it doesn't: write the simulator (``BatchedScene.reset``) or read a state from it
 (``BatchedScene.capture_state``).
 """
@@ -12,6 +16,7 @@ What it doesn't: write the simulator (``BatchedScene.reset``) or read a state fr
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import torch
@@ -19,7 +24,7 @@ import torch
 from realize.config import ConfigError
 from realize.world.state import SceneState
 
-__all__ = ["state_row"]
+__all__ = ["state_row", "reset_offsets"]
 
 
 def state_row(scene: Any, state: SceneState) -> tuple[torch.Tensor, torch.Tensor]:
@@ -46,3 +51,24 @@ def state_row(scene: Any, state: SceneState) -> tuple[torch.Tensor, torch.Tensor
         else:
             poses.append([*pose.position, *pose.quaternion])
     return row, torch.tensor(poses, dtype=torch.float32)
+
+
+def reset_offsets(scene: Any, states: Sequence[SceneState], offsets: Mapping[str, Any] | None
+                  ) -> Mapping[str, Any] | None:
+    """The offsets a reset of ``scene`` into ``states`` takes (``envs.pick_place``: ``robot_xy``
+    (N, 2), ``robot_yaw`` (N,), the objects' ``object_xy`` and ``object_yaw`` by name):
+    ``offsets`` (the scene's perturbed worlds; None: none) as they are, but for a fixed base
+    restored into states, with the base's put where copy i's state has it (copies past the
+    states' end at the first's; the objects' entries zeros where ``offsets`` is None: a restore
+    sets their poses anyway)."""
+    if not states or not scene.robot.base.fixed:
+        return offsets
+    n = scene.n_envs
+    base = torch.tensor([s.base for s in states] + [states[0].base] * (n - len(states)), dtype=torch.float32)
+    start = torch.tensor(scene.geometry.robot_start, dtype=torch.float32)
+    names = scene.object_names
+    out: dict[str, Any] = dict(offsets) if offsets is not None else {
+        "object_xy": {o: torch.zeros(n, 2) for o in names}, "object_yaw": {o: torch.zeros(n) for o in names}}
+    out["robot_xy"] = base[:, :2] - start[:2]
+    out["robot_yaw"] = base[:, 2] - start[2]
+    return out
