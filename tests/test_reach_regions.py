@@ -96,3 +96,29 @@ def test_an_azimuth_band_samples_projects_and_contains_alike() -> None:
     assert torch.allclose(h.project(z), z, atol=1e-12)
     far = torch.tensor([[0.1, 0.0, 0.02]], dtype=torch.float64)  # azimuth 0: outside the band
     assert not bool(h.contains(far)[0]) and bool(h.contains(h.project(far))[0])
+
+
+def test_stopping_reached_poses_early_answers_as_every_step_would(so100) -> None:
+    """``reachable`` stops the poses some start reaches every ``CHECK_EVERY`` steps: every pose the
+    whole 60 steps of every start reach is reached, and the rest are the poses a start had
+    reached at a check (a configuration within the limits at the pose: a witness), a few at most.
+    Most of these poses (all around the cube) are out of the 5-joint arm's reach."""
+    from realize.robot import reach
+
+    spec, kin = so100
+    from dataclasses import replace
+
+    hemi = replace(spec.task.layout.regions["Cube_g"], azimuth=None, azimuth_half_width=math.pi, facing=None)
+    gen = torch.Generator().manual_seed(1)
+    pre = hemi.sample_uniform(64, gen, torch.float64)[:, :3]
+    approach = hemi.approach(pre)
+    base = tuple(float(v) for v in spec.geometry.robot_start)
+    q = reach._solve(kin, base, pre, approach, None, 16, 60, 0.05, 0)
+    pose = kin.ee_pose(q)
+    near = (pose[:, :3, 3] - pre.repeat_interleave(16, 0)).norm(dim=1) <= 0.01
+    along = ((pose[:, :3, :3] @ kin.approach_local) * approach.repeat_interleave(16, 0)).sum(1) >= math.cos(0.1)
+    every_step = (near & along).reshape(64, 16).any(dim=1)
+    early = reach._reached(kin, base, pre, approach, 0.01, 0.1, 16, 60, 0.05, 0)
+    assert 0 < int(every_step.sum()) < 64, "the poses should be a mix of reached and not"
+    assert bool((early | ~every_step).all())  # nothing the whole solve reaches is lost
+    assert int((early & ~every_step).sum()) <= 3
