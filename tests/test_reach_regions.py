@@ -122,3 +122,22 @@ def test_stopping_reached_poses_early_answers_as_every_step_would(so100) -> None
     assert 0 < int(every_step.sum()) < 64, "the poses should be a mix of reached and not"
     assert bool((early | ~every_step).all())  # nothing the whole solve reaches is lost
     assert int((early & ~every_step).sum()) <= 3
+
+
+def test_a_regions_share_is_solved_once_per_process(so100, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run builds its spec several times (search, validation, replay, replans): the same region
+    asks the kinematics once, and a region that differs (here: its radius) asks again."""
+    from dataclasses import replace
+
+    from realize.realization import reach_check
+    from realize.tasks.param_layout import ParamLayout
+
+    spec, _ = so100
+    first = region_reach(spec.task, spec.geometry, spec.robot, spec.rollout)
+    calls = []
+    monkeypatch.setattr(reach_check, "reachable", lambda *a, **k: calls.append(1) or reachable(*a, **k))
+    assert region_reach(spec.task, spec.geometry, spec.robot, spec.rollout) == first and calls == []
+    regions = dict(spec.task.layout.regions)
+    regions["Cube_p"] = replace(regions["Cube_p"], radius=regions["Cube_p"].radius * 0.9)
+    region_reach(replace(spec.task, layout=ParamLayout(regions)), spec.geometry, spec.robot, spec.rollout)
+    assert calls == [1]  # Cube_p only

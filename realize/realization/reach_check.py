@@ -36,12 +36,16 @@ __all__ = ["region_reach", "check_reach", "check_reach_all"]
 log = logging.getLogger("realize")
 
 
+# (robot, base, region, action, goal terms, n) -> share: a run builds its spec more than once (the
+# search, validation, replay, each replan) and the answer is a pure function of these
+_SHARES: dict[tuple[object, ...], float] = {}
+
+
 def region_reach(task: TaskSpec, geometry: SceneGeometry, robot: RobotSpec, rollout: RolloutConfig,
                  n: int = 48, kin: RobotKinematics | None = None) -> dict[str, float]:
-    """Region name -> the share of ``n`` samples the fixed-base arm reaches (module docstring)."""
-    kin = kin or RobotKinematics(robot, dtype=torch.float64)
+    """Region name -> the share of ``n`` samples the fixed-base arm reaches (module docstring);
+    each region's answer is kept for this process (``_SHARES``)."""
     base = tuple(float(v) for v in geometry.robot_start)
-    q0 = torch.tensor([[*base, *(robot.rest_value(j) for j in robot.upper.joints)]], dtype=kin.dtype)
     out: dict[str, float] = {}
     for action in task.plan:
         if action.template not in ("grasp", "place") or not action.params:
@@ -50,20 +54,34 @@ def region_reach(task: TaskSpec, geometry: SceneGeometry, robot: RobotSpec, roll
         region = task.layout.regions[name]
         if not isinstance(region, Hemisphere) or name in out:
             continue
-        gen = torch.Generator().manual_seed(0)
-        pre = region.sample_uniform(n, gen, torch.float64)[:, :3]
-        centre = torch.tensor(region.center, dtype=torch.float64).expand(n, 3)
-        if region.facing == "robot":  # turned toward the arm's base axis, as the grasp and place turn it
-            pre = region.turn_toward(pre, centre, base_axis_xy(kin, q0.expand(n, -1)).to(pre.dtype))
-        approach = region.approach(pre)
-        if action.template == "grasp" and action.obj is not None:
-            support = centre[:, 2] - geometry.object(action.obj).half_height
-            goal = tcp_target(centre, approach, support, robot.gripper, rollout.grasp_clearance, rollout.grasp_offset)
-        else:
-            goal = centre
-        ok = reachable(kin, base, torch.cat([pre, goal]), torch.cat([approach, approach]))
-        out[name] = float((ok[:n] & ok[n:]).double().mean())
+        grasped = action.template == "grasp" and action.obj is not None
+        key = (repr(robot), base, repr(region), action.template,
+               geometry.object(action.obj).half_height if grasped else None,
+               rollout.grasp_clearance, rollout.grasp_offset, n)
+        if key not in _SHARES:
+            kin = kin or RobotKinematics(robot, dtype=torch.float64)
+            _SHARES[key] = _share(region, action.template, action.obj, geometry, robot, rollout, n, kin, base)
+        out[name] = _SHARES[key]
     return out
+
+
+def _share(region: Hemisphere, template: str, obj: str | None, geometry: SceneGeometry, robot: RobotSpec,
+           rollout: RolloutConfig, n: int, kin: RobotKinematics, base: tuple[float, ...]) -> float:
+    """The share of ``n`` samples of one grasp or place region whose pre-pose and goal the arm reaches."""
+    q0 = torch.tensor([[*base, *(robot.rest_value(j) for j in robot.upper.joints)]], dtype=kin.dtype)
+    gen = torch.Generator().manual_seed(0)
+    pre = region.sample_uniform(n, gen, torch.float64)[:, :3]
+    centre = torch.tensor(region.center, dtype=torch.float64).expand(n, 3)
+    if region.facing == "robot":  # turned toward the arm's base axis, as the grasp and place turn it
+        pre = region.turn_toward(pre, centre, base_axis_xy(kin, q0.expand(n, -1)).to(pre.dtype))
+    approach = region.approach(pre)
+    if template == "grasp" and obj is not None:
+        support = centre[:, 2] - geometry.object(obj).half_height
+        goal = tcp_target(centre, approach, support, robot.gripper, rollout.grasp_clearance, rollout.grasp_offset)
+    else:
+        goal = centre
+    ok = reachable(kin, base, torch.cat([pre, goal]), torch.cat([approach, approach]))
+    return float((ok[:n] & ok[n:]).double().mean())
 
 
 def check_reach(task: TaskSpec, geometry: SceneGeometry, robot: RobotSpec, rollout: RolloutConfig,
