@@ -93,12 +93,14 @@ def test_plan_from_pddl_matches_the_yaml_plan(no_sim: None) -> None:
     assert spec.task.describe() == build_run_spec(plain([])).task.describe()
 
 
-def test_controller_yaml_mirrors_rollout_defaults() -> None:
+def test_the_composed_controller_is_rollout_config_itself() -> None:
+    """The controller group is RolloutConfig's defaults (realize.app.hydra_edge.register_schema),
+    nested pid, astar and fabric included: no YAML copy to keep in step."""
+    from realize.app.compose import compose_config
     from realize.realization.config import RolloutConfig
 
-    want = json.loads(json.dumps(asdict(RolloutConfig())))  # tuples -> lists
-    got = yaml.safe_load((CONFIG_DIR / "controller" / "default.yaml").read_text())
-    assert got == want, "configs/controller/default.yaml is stale: run scripts/sync_controller_config.py"
+    assert compose_config([])["controller"] == json.loads(json.dumps(asdict(RolloutConfig())))  # tuples -> lists
+    assert not (CONFIG_DIR / "controller").exists()
 
 
 def test_the_composed_sim_keys_are_sim_settings_fields() -> None:

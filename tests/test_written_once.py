@@ -5,10 +5,10 @@ The rule this file checks:
 
 * A settings dataclass (``realize.config.Settings``) is where a default is written. Where the
   class is registered as its group's option (``realize.app.hydra_edge.register_schema``: ``sim``,
-  ``workers``, ``logging``, ``validation``, ``ce``, a task's ``perturbation``) no YAML file says its values
+  ``workers``, ``logging``, ``validation``, ``controller``, ``ce``, a task's ``perturbation``) no YAML file says its values
   (``test_a_registered_group_has_no_yaml``).
 * The other files Hydra composes a run from by default (``configs/config.yaml`` and the option
-  its defaults list picks in each group: ``controller/default.yaml``, ``scene/plain.yaml``, ...)
+  its defaults list picks in each group: ``scene/plain.yaml``, ``robot/fetch_omni.yaml``, ...)
   exist to document every key of their group: they are what ``realize --help`` and
   ``realize --cfg job`` show, and what a command line overrides without ``+``. They may say the
   dataclass's value again, and tests/test_defaults.py fails when they say another (until their

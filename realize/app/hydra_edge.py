@@ -188,7 +188,8 @@ def register_schema() -> None:
     """Settings dataclasses as Hydra config groups (idempotent), so that their defaults are written
     in the class only: ``sim/default`` is ``realize.scene.settings.SimSettings``' defaults,
     ``workers/default`` ``realize.app.workers.settings.WorkersSettings``', ``logging/default`` and
-    ``validation/default`` those of ``realize.app.run_settings``, ``ce/seed_paper``
+    ``validation/default`` those of ``realize.app.run_settings``, ``controller/default``
+    ``realize.realization.config.RolloutConfig``'s (with its ``pid``, ``astar`` and ``fabric``), ``ce/seed_paper``
     ``realize.search.ce.config.CEConfig``'s but its ``seed`` (the run's top-level key; these groups'
     directories hold no YAML for them: a preset or the command line changes a key over them), and
     ``task/perturbation/default`` ``realize.tasks.perturbation.Perturbation``'s (a task file takes
@@ -200,13 +201,15 @@ def register_schema() -> None:
 
     from realize.app.run_settings import LoggingSettings, ValidationSettings
     from realize.app.workers.settings import WorkersSettings
+    from realize.realization.config import RolloutConfig
     from realize.scene.settings import SimSettings
     from realize.search.ce.config import CEConfig
     from realize.tasks.perturbation import Perturbation
 
     store = ConfigStore.instance()
     for group, settings in (("sim", SimSettings()), ("workers", WorkersSettings()), ("logging", LoggingSettings()),
-                            ("validation", ValidationSettings()), ("task/perturbation", Perturbation())):
+                            ("validation", ValidationSettings()), ("task/perturbation", Perturbation()),
+                            ("controller", RolloutConfig())):
         store.store(group=group, name="default", node=_plain_data(settings))
     ce = _plain_data(CEConfig())
     del ce["seed"]  # (the run's top-level seed)

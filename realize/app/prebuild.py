@@ -2,7 +2,7 @@
 will load: ``python -m realize.app.prebuild [ROBOT ...]`` (default: the default robot).
 
 What it does: for each robot named, the fabric a run builds with the default controller and
-simulation settings (``configs/controller/``, ``configs/sim/``: the same package key), loaded or
+simulation settings (the ``controller`` and ``sim`` groups: the same package key), loaded or
 built into ``realize.paths.cache_dir("fabric")`` (``realize.controllers.fabric_package``).
 ``scripts/setup.sh`` runs it, so that the first ``make run`` and the tests do not build it; a
 package already there costs about two seconds (its key is computed, nothing is loaded). A failed build is reported, not raised: a run

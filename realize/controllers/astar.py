@@ -57,6 +57,7 @@ import torch
 from torch import Tensor
 
 from realize.controllers.astar_field import field_search
+from realize.controllers.settings import PLANNERS
 from realize.controllers.astar_search import run_search
 from realize.controllers.grid_cache import grid_cached
 from realize.controllers.grid_cells import as_cells, components, nearest_free
@@ -64,7 +65,6 @@ from realize.controllers.occupancy import GridSpec, cell_in_grid, world_to_cell
 
 __all__ = ["PLANNERS", "AStarStatus", "AStarResult", "astar", "astar_world"]
 
-PLANNERS = ("astar", "field")  # search engines of ``astar(planner=...)``
 
 
 class AStarStatus(IntEnum):

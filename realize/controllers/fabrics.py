@@ -64,13 +64,12 @@ reference gives NaN there).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable, ClassVar
+from typing import Callable
 
 import torch
 from torch import Tensor
 
-from realize.config import ConfigError, Settings, setting
+from realize.controllers.settings import FabricConfig
 from realize.controllers.fabric_jets import (
     FabricKinematics,
     distance_jets,
@@ -80,53 +79,6 @@ from realize.controllers.fabric_jets import (
 )
 
 __all__ = ["FabricConfig", "fabric_acceleration", "integrate"]
-
-
-@dataclass
-class FabricConfig(Settings):
-    """Fabric constants; the defaults are the reference package's defaults."""
-
-    config_key: ClassVar[str] = "controller.fabric"
-
-    # base energy 0.5 * base_inertia * |qd|^2 (reference: "0.5 * 0.2 * ca.dot(xdot, xdot)")
-    base_inertia: float = setting(0.2, gt=0)
-    # obstacle collision geometry  h = -collision_lam / x^collision_exp * s(xd) * xd^2
-    collision_lam: float = setting(0.5, ge=0)
-    collision_exp: float = setting(5.0, ge=0)
-    # obstacle collision Finsler energy  l = collision_metric_lam / x^collision_metric_exp * xd^2
-    collision_metric_lam: float = setting(0.1, gt=0)
-    collision_metric_exp: float = setting(1.0, ge=0)
-    # joint-limit geometry  h = -limit_lam / x^limit_exp * xd^2
-    limit_lam: float = setting(0.1, ge=0)
-    limit_exp: float = setting(1.0, ge=0)
-    # joint-limit energy  l = limit_metric_lam / x^limit_metric_exp * s(xd) * xd^2
-    limit_metric_lam: float = setting(0.1, gt=0)
-    limit_metric_exp: float = setting(1.0, ge=0)
-    # attractor potential  psi = gamma * k_psi * (|x| + log(1 + exp(-2 a_psi |x|)) / a_psi)
-    gamma: float = setting(1.0, gt=0)  # attractor weight ("weight_goal_0"); overridable per plan
-    k_psi: float = setting(5.0, gt=0)
-    a_psi: float = setting(10.0, gt=0)
-    # attractor metric  ((m_max - m_min) exp(-(a_m |x|)^2) + m_min) * I
-    m_min: float = setting(0.3, gt=0)
-    m_max: float = setting(2.0, gt=0)
-    a_m: float = setting(0.75, ge=0)
-    # damper  beta = 0.5 (tanh(-alpha_b (|x| - radius_shift)) + 1) beta_close + beta_distant
-    #                + max(0, alpha_geometry - alpha_execution)
-    alpha_b: float = setting(0.5, ge=0)
-    radius_shift: float = 0.02
-    beta_close: float = setting(6.5, ge=0)
-    beta_distant: float = setting(0.01, ge=0)
-    # interpolation  eta = 0.5 (tanh(-alpha_eta * |qd|^2 * (1 - ex_factor) - 0.5) + 1)
-    alpha_eta: float = setting(0.9, ge=0)
-    ex_factor: float = 0.5
-    # regularisation of inverses and alpha denominators; actions with norm < eps or
-    # > 1 / eps are zeroed (set zero_extreme_actions=False to keep them)
-    eps: float = setting(1e-6, gt=0)
-    zero_extreme_actions: bool = True
-
-    def check(self, where: str) -> None:
-        if self.m_max < self.m_min:
-            raise ConfigError(f"{where}.m_max = {self.m_max!r} is invalid: must be >= m_min ({self.m_min})")
 
 
 def _one_sided(xd: Tensor) -> Tensor:

@@ -36,54 +36,19 @@ robot's own joint drives to track.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
 
 import torch
 from torch import Tensor
 
-from realize.config import Settings, setting
+from realize.controllers.settings import HEADING_MODES, PIDConfig
 
 __all__ = ["PIDConfig", "PIDState", "PIDOutput", "pid_init", "pid_step", "wrap_angle", "HEADING_MODES"]
 
-HEADING_MODES = ("hold", "face_goal", "target")
 
 
 def wrap_angle(a: Tensor) -> Tensor:
     """Wrap angles to (-pi, pi] (differentiable: atan2 of sin, cos)."""
     return torch.atan2(torch.sin(a), torch.cos(a))
-
-
-@dataclass
-class PIDConfig(Settings):
-    """Gains and limits (SI units: m, s, rad).
-
-    kp, ki, kd: position gains (kp > 0; ki, kd >= 0).
-    kp_yaw, ki_yaw, kd_yaw: yaw gains (kp_yaw > 0; others >= 0).
-    max_lin_speed: m/s (> 0). max_yaw_rate: rad/s (> 0).
-    max_lin_accel, max_yaw_accel: optional limits (> 0) on the command change per second.
-    switch_radius: advance to the next waypoint once within this distance (> 0).
-    goal_tolerance: final position tolerance (> 0). yaw_tolerance: final yaw tolerance (> 0).
-    integral_limit: bound on the norm of the position error integral (>= 0, m s).
-    heading: "hold" | "face_goal" | "target" (see module docstring).
-    """
-
-    config_key: ClassVar[str] = "controller.pid"
-
-    kp: float = setting(1.5, gt=0)
-    ki: float = setting(0.0, ge=0)
-    kd: float = setting(0.05, ge=0)
-    kp_yaw: float = setting(2.0, gt=0)
-    ki_yaw: float = setting(0.0, ge=0)
-    kd_yaw: float = setting(0.0, ge=0)
-    max_lin_speed: float = setting(0.6, gt=0)
-    max_yaw_rate: float = setting(1.0, gt=0)
-    max_lin_accel: float | None = setting(None, gt=0)
-    max_yaw_accel: float | None = setting(None, gt=0)
-    switch_radius: float = setting(0.15, gt=0)
-    goal_tolerance: float = setting(0.03, gt=0)
-    yaw_tolerance: float = setting(0.05, gt=0)
-    integral_limit: float = setting(0.5, ge=0)
-    heading: str = setting("hold", choices=HEADING_MODES)
 
 
 @dataclass

@@ -24,14 +24,13 @@ simulator (the rollout writes the targets to ``realize.scene.BatchedScene``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
 
 import torch
 from torch import Tensor
 
-from realize.config import Settings, setting
+from realize.controllers.settings import WholeBodyConfig
 from realize.robot.layout import BASE, BASE_XY, YAW
-from realize.controllers.fabrics import FabricConfig, fabric_acceleration
+from realize.controllers.fabrics import fabric_acceleration
 from realize.controllers.fabric_package import load_package
 from realize.controllers.obstacles import BoxDistance, boxes_tensor
 from realize.world.geometry import SceneGeometry
@@ -41,35 +40,6 @@ from realize.robot.kinematics import RobotKinematics
 from realize.robot.spec import DEFAULT_ROBOT, RobotSpec, load_robot_spec
 
 LIMIT_MARGIN = 0.005  # rad (m for a lift): the fabric's state stays this far inside the limits
-
-
-@dataclass
-class WholeBodyConfig(Settings):
-    """Whole-body fabric settings (Hydra ``controller.fabric``). Every field is a config key."""
-
-    config_key: ClassVar[str] = "controller.fabric"
-
-    gamma: float = setting(3.0, gt=0)  # attractor weight
-    beta_close: float = setting(6.5, ge=0)  # damping near the goal (reference default)
-    beta_distant: float = setting(0.01, ge=0)  # damping far from the goal
-    k_psi: float = setting(5.0, gt=0)  # attractor potential gain
-    axis_length: float = setting(0.25, gt=0)  # m, orientation points behind / beside the TCP
-    collision_lam: float = setting(0.5, ge=0)
-    collision_margin: float = setting(0.02, ge=0)  # m added to every sphere radius
-    collision_exclude: tuple[str, ...] | None = None  # spheres without box leaves (None: the robot's fabric_exclude)
-    floor: bool = True
-    # the spheres without box leaves lose their floor leaf too (a pick off the floor: the fingers must
-    # reach an object lying on it); off by default, a re-sequence that picks from the floor turns it on
-    floor_exclude: bool = False
-    max_base_speed: float = setting(0.6, gt=0)  # m/s
-    max_yaw_rate: float = setting(1.0, gt=0)  # rad/s
-    max_joint_speed: float = setting(1.2, gt=0)  # rad/s, or m/s for a lift
-    resync_tolerance: float = setting(0.08, gt=0)  # reference/measured drift that triggers a re-sync
-    compiled: bool = False  # CPU: run the step built ahead of time into native code (realize/controllers/fabric_package.py)
-
-    def fabric(self) -> FabricConfig:
-        return FabricConfig(gamma=self.gamma, beta_close=self.beta_close, beta_distant=self.beta_distant,
-                            k_psi=self.k_psi, collision_lam=self.collision_lam)
 
 
 class _PoseMap:

@@ -13,9 +13,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from realize.config import Settings, setting
-from realize.controllers.astar import PLANNERS
-from realize.controllers.pid import PIDConfig
-from realize.controllers.whole_body import WholeBodyConfig
+from realize.controllers.settings import PLANNERS, PIDConfig, WholeBodyConfig
 
 if TYPE_CHECKING:
     from realize.tasks.spec import TaskSpec
