@@ -189,7 +189,9 @@ def register_schema() -> None:
     in the class only: ``sim/default`` is ``realize.scene.settings.SimSettings``' defaults,
     ``workers/default`` ``realize.app.workers.settings.WorkersSettings``', ``logging/default`` and
     ``validation/default`` those of ``realize.app.run_settings``, ``controller/default``
-    ``realize.realization.config.RolloutConfig``'s (with its ``pid``, ``astar`` and ``fabric``), ``ce/seed_paper``
+    ``realize.realization.config.RolloutConfig``'s (with its ``pid``, ``astar`` and ``fabric``),
+    ``stitch/default`` ``realize.app.stitch_settings.StitchSettings``', ``replan/default``
+    ``realize.app.run_settings.ReplanSettings``', ``ce/seed_paper``
     ``realize.search.ce.config.CEConfig``'s but its ``seed`` (the run's top-level key; these groups'
     directories hold no YAML for them: a preset or the command line changes a key over them), and
     ``task/perturbation/default`` ``realize.tasks.perturbation.Perturbation``'s (a task file takes
@@ -199,7 +201,8 @@ def register_schema() -> None:
     nothing heavy (a refused command line stays quick)."""
     from hydra.core.config_store import ConfigStore
 
-    from realize.app.run_settings import LoggingSettings, ValidationSettings
+    from realize.app.run_settings import LoggingSettings, ReplanSettings, ValidationSettings
+    from realize.app.stitch_settings import StitchSettings
     from realize.app.workers.settings import WorkersSettings
     from realize.realization.config import RolloutConfig
     from realize.scene.settings import SimSettings
@@ -209,7 +212,8 @@ def register_schema() -> None:
     store = ConfigStore.instance()
     for group, settings in (("sim", SimSettings()), ("workers", WorkersSettings()), ("logging", LoggingSettings()),
                             ("validation", ValidationSettings()), ("task/perturbation", Perturbation()),
-                            ("controller", RolloutConfig())):
+                            ("controller", RolloutConfig()), ("stitch", StitchSettings()),
+                            ("replan", ReplanSettings())):
         store.store(group=group, name="default", node=_plain_data(settings))
     ce = _plain_data(CEConfig())
     del ce["seed"]  # (the run's top-level seed)

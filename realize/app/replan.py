@@ -31,7 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from realize.config import ConfigError, Settings, as_mapping, setting
+from realize.app.run_settings import ReplanSettings
+from realize.config import ConfigError, as_mapping
 from realize.world.state import SceneState, load_state
 from realize.tasks.spec import TaskSpec
 from realize.tasks.suffix import check_suffix_start, task_suffix
@@ -42,17 +43,6 @@ __all__ = ["ReplanSettings", "ReplanSpec", "replan_config", "replan_overrides_co
 # overrides a replan refuses: they would change the plan, not the world or the search
 REFUSED_OVERRIDES = ("task", "task_file", "task.plan", "task.goal", "task.planner", "task.name", "experiment",
                      "resume")
-
-
-@dataclass
-class ReplanSettings(Settings):
-    """The ``replan`` keys (with the top-level ``replan_from``)."""
-
-    config_key = "replan"
-
-    action: int | None = setting(None, ge=0, help="the first action to realize again (0-based)")
-    state: str | None = None  # the scene state file the remaining actions start from
-    warm: bool = True  # start from the earlier run's distribution of the remaining actions (else uniform)
 
 
 @dataclass(frozen=True)

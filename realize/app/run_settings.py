@@ -1,11 +1,13 @@
-"""The ``logging`` and ``validation`` config groups: what a run writes, and how it validates.
+"""The ``logging``, ``validation`` and ``replan`` config groups: what a run writes, how it validates,
+and where a replan starts.
 
 What it does: ``LoggingSettings`` (the Hydra ``logging`` group: the rerun recording, its file,
 the sample trajectories, the progress bar) and ``ValidationSettings`` (the ``validation`` group:
 after the search the run's K cheapest distinct feasible plans meet the task's perturbation
 model, R replicas each, and the plan returned is the cheapest whose 95 % Wilson lower bound
 reaches ``min_success``, else the most robust; ``replicas: 0``, or ``validation=off``, turns it
-off). Both classes' defaults are their groups' one option, ``default``
+off), and ``ReplanSettings`` (the ``replan`` group: the action and state a replan of
+``replan_from`` starts from). The classes' defaults are their groups' one option, ``default``
 (``realize.app.hydra_edge.register_schema``), so they are written here only. This module imports
 nothing heavy: the config edge reads it before anything is simulated.
 What it doesn't: validate (``realize.app.candidate_validation``) or write anything
@@ -19,7 +21,7 @@ from pathlib import Path
 
 from realize.config import Settings, setting
 
-__all__ = ["LoggingSettings", "ValidationSettings"]
+__all__ = ["LoggingSettings", "ValidationSettings", "ReplanSettings"]
 
 
 def _check_rrd(name: str) -> str | None:
@@ -56,3 +58,14 @@ class ValidationSettings(Settings):
     min_success: float = setting(0.9, ge=0, le=1)  # return the cheapest whose 95 % lower bound reaches this
     # the last iterations the candidates come from (the run's best joins them where it came earlier)
     iterations: int = setting(3, ge=1)
+
+
+@dataclass
+class ReplanSettings(Settings):
+    """The ``replan`` keys (with the top-level ``replan_from``)."""
+
+    config_key = "replan"
+
+    action: int | None = setting(None, ge=0, help="the first action to realize again (0-based)")
+    state: str | None = None  # the scene state file the remaining actions start from
+    warm: bool = True  # start from the earlier run's distribution of the remaining actions (else uniform)
