@@ -81,3 +81,35 @@ def test_given_the_approach_the_centre_moves_onto_its_line_at_the_same_depth() -
     out = square_in_hand(state, HAND_POSE, CUBE, approach).objects["cube"].position
     assert np.allclose(out, np.array(HAND_POSE[:3]) + 0.03 * a, atol=1e-9)
     assert square_in_hand(state, HAND_POSE, CUBE).objects["cube"].position == tuple(centre)  # without: kept
+
+
+def test_a_grip_that_slips_squared_is_tried_shallower_until_one_holds() -> None:
+    """firm_grip: squared and centred at its own depth (3 cm), then DEPTH_STEP_M shallower each
+    time, until the restore holds (here: the centre within 1.8 cm of the hand, measured along the
+    approach independently of firm_grip); never shallower than the hand's origin."""
+    from realize.execution.in_hand import DEPTH_STEP_M, firm_grip
+
+    approach = (0.0, 0.0, 1.0)
+    a, side = HAND.apply(approach), HAND.apply((0.0, 1.0, 0.0))
+    centre = np.array(HAND_POSE[:3]) + 0.03 * a + 0.02 * side
+    state = SceneState(base=(0.0, 0.0, 0.0), objects={"cube": ObjectPose(tuple(centre), HAND_POSE[3:])}, held="cube",
+                       gripper_closed=True)
+
+    def depth_of(s: SceneState) -> float:
+        return float(np.dot(np.array(s.objects["cube"].position) - np.array(HAND_POSE[:3]), a))
+
+    tried: list[float] = []
+
+    def holds(s: SceneState) -> bool:
+        tried.append(depth_of(s))
+        return depth_of(s) <= 0.018 + 1e-9
+
+    out = firm_grip(state, HAND_POSE, CUBE, approach, holds)
+    assert np.allclose(tried, [0.03 - k * DEPTH_STEP_M for k in range(len(tried))], atol=1e-9)
+    assert depth_of(out) <= 0.018 + 1e-9 and depth_of(out) > 0.018 - DEPTH_STEP_M
+    centred = np.array(out.objects["cube"].position) - np.array(HAND_POSE[:3])
+    assert np.allclose(centred, depth_of(out) * a, atol=1e-9)  # on the approach line
+    never = firm_grip(state, HAND_POSE, CUBE, approach, lambda s: False)
+    assert abs(depth_of(never)) < 1e-9  # none holds: at the hand's origin, no nearer
+    assert firm_grip(state, HAND_POSE, CUBE, approach, lambda s: True).objects["cube"].position == \
+        square_in_hand(state, HAND_POSE, CUBE, approach).objects["cube"].position  # the first holds: its own depth

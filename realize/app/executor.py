@@ -28,7 +28,7 @@ from realize.app.execution_records import ActionRecord, WorldLog
 from realize.app.repair import EXECUTION_BACKEND, Segment, go_on, repair, why_no_plan
 from realize.execution.disturbances import Scheduled
 from realize.execution.monitor import Deviation, check, expectation
-from realize.execution.in_hand import square_in_hand
+from realize.execution.in_hand import firm_grip
 from realize.execution.layout_updates import apply_geometry_updates, geometry_updates
 from realize.execution.precheck import Precheck
 from realize.execution.robot_view import RobotView
@@ -317,14 +317,16 @@ class Executor:
         """The state the planner starts from, with a grip its restore keeps: where the object in
         the hand, restored as observed, falls out of the fingers at rest or on a short drive (a
         grip askew or off the pads' middle, ``Precheck.grip_holds``), it is squared with the hand
-        and centred between the pads (``realize.execution.in_hand``); a grip that holds is left
-        as observed."""
+        and centred between the pads, as deep as a restore of it still holds
+        (``realize.execution.in_hand.firm_grip``); a grip that holds is left as observed."""
         s = obs.state
         if s.held is None or obs.hand is None or self.precheck is None:
             return obs
-        if self.precheck.grip_holds(s, self.layout(obs)):
+        layout = self.layout(obs)
+        if self.precheck.grip_holds(s, layout):
             return obs
-        squared = square_in_hand(s, obs.hand, self.spec.geometry.object(s.held), self.spec.robot.tcp.approach_axis)
+        squared = firm_grip(s, obs.hand, self.spec.geometry.object(s.held), self.spec.robot.tcp.approach_axis,
+                            lambda st: self.precheck.grip_holds(st, layout))
         log.info("world %d: the grip of %s as observed slips in a restore: the planner assumes it square", self.k,
                  s.held)
         return dataclasses.replace(obs, state=squared)
