@@ -4,8 +4,10 @@ What it does: ``square_in_hand(state, hand, obj)`` returns ``state`` with its he
 about its own centre, to the nearest orientation that sits square with the hand: a box's axes
 along the hand's axes (the nearest of the 24 such turns, ``SQUARE``), a cylinder's axis along
 the nearest hand axis (its turn about that axis kept). Given the hand's ``approach`` axis, the
-centre also moves onto the approach line through the TCP link (its depth along it kept):
-centred between the pads, as a grasp aims it.
+centre also moves onto the approach line through the TCP link (its depth along it kept, or
+``depth``): centred between the pads, as a grasp aims it. ``firm_grip(state, hand, obj, approach,
+holds)`` squares and centres it at the first depth whose restore ``holds``, from its own
+toward the hand (the link's origin) in ``DEPTH_STEP_M`` steps.
 
 Why: a state captured from a world holds the object as it slipped into the grip, a few degrees
 tilted between the finger pads. Restored at rest into the planner's scenes, such a grip can let
@@ -17,8 +19,9 @@ both, and in the worlds that held before). A cube held 2.7 cm to one side of the
 drive, squared too; centred as well, it holds (tests/test_execution_world.py). A robot does not see the in-hand tilt either: its
 planner assumes the grasp it commanded. The world itself is never changed: only what is planned
 from.
-What it doesn't: read a simulator (the hand's pose comes with the observation), change the
-object's depth in the hand, or touch an object not in hand.
+What it doesn't: read a simulator (the hand's pose comes with the observation; ``firm_grip``'s
+``holds`` does), move an object farther out along the approach than it is, or touch an object
+not in hand.
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ def _square_turns() -> list[np.ndarray]:
 
 
 SQUARE = _square_turns()
-DEPTH_STEP_M = 0.004  # a squared grip that slips is tried this much shallower in the fingers, again and again
+DEPTH_STEP_M = 0.004  # a squared grip that slips is tried this much nearer the hand, again and again
 
 
 def square_in_hand(state: SceneState, hand: Sequence[float], obj: SceneObject,
@@ -92,10 +95,10 @@ def square_in_hand(state: SceneState, hand: Sequence[float], obj: SceneObject,
 
 def firm_grip(state: SceneState, hand: Sequence[float], obj: SceneObject, approach: Sequence[float],
               holds: Callable[[SceneState], bool]) -> SceneState:
-    """``state`` with its held object squared and centred (``square_in_hand``) at the deepest
-    depth along the approach, from its own toward the link's origin in ``DEPTH_STEP_M`` steps,
-    whose restore ``holds`` (e.g. ``Precheck.grip_holds``); at the last (its own depth, if that is
-    at the link's origin or nearer) where none does. An object that slid down the fingers
+    """``state`` with its held object squared and centred (``square_in_hand``) at the first
+    depth along the approach whose restore ``holds`` (e.g. ``Precheck.grip_holds``), from its own
+    toward the link's origin in ``DEPTH_STEP_M`` steps; at the origin (or its own depth, if that
+    is nearer) where none does. An object that slid down the fingers
     (grasp_slip world 15, seed 0, ``55d5866``: cube C centred 2.3 cm deep, where a grasp leaves it
     1.5 cm) falls out of a restore even squared: every row of the replans failed at step 3."""
     squared = square_in_hand(state, hand, obj, approach)
