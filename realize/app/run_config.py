@@ -214,13 +214,25 @@ def _read_rollout(d: Any) -> Any:
 
 def _replan_start_held(keys: Any, d: Mapping[str, Any]) -> str | None:
     """What the hand holds where the task's plan starts: a replan of a whole new plan (replan.action
-    0, a re-sequence) from a state holding an object may begin with its place; else nothing."""
-    r = d.get("replan")
-    if keys.replan_from is None or not isinstance(r, Mapping) or r.get("action") != 0 or not r.get("state"):
-        return None
+    0, a re-sequence) from a state holding an object may begin with its place; a replan of later
+    actions of an earlier run's plan starts that plan where the earlier run started it (followed
+    back through the runs it replanned: a re-sequenced restack that begins by setting the held
+    block down, replanned from its second action); else nothing."""
+    from realize.app.replan import saved_config
     from realize.world.state import load_state
 
-    return load_state(r["state"], "replan.state").held
+    r, source = d.get("replan"), keys.replan_from
+    for _ in range(64):  # a chain of replans, each of the one before
+        if source is None or not isinstance(r, Mapping):
+            return None
+        if r.get("action") == 0:
+            return load_state(r["state"], "replan.state").held if r.get("state") else None
+        try:
+            earlier = saved_config(source)
+        except ConfigError:
+            return None
+        r, source = earlier.get("replan"), earlier.get("replan_from")
+    return None
 
 
 def build_run_spec(d: Mapping[str, Any]) -> RunSpec:
