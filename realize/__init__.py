@@ -12,14 +12,14 @@ pin_cpu_math()  # before any torch op: the same torch/MKL kernel paths on every 
 __version__ = "0.1.0"
 
 # The Python API, imported on first use so that `import realize` stays fast (no simulator, no Hydra):
-#   from realize import Planner           (realize.app.planner)
+#   from realize import Planner           (realize.run.planner)
 _LAZY = {
-    "Planner": "realize.app.planner",
-    "PlanResult": "realize.app.planner",
-    "ReplanBudget": "realize.app.planner",
-    "compose_config": "realize.app.compose",
+    "Planner": "realize.run.planner",
+    "PlanResult": "realize.run.planner",
+    "ReplanBudget": "realize.run.planner",
+    "compose_config": "realize.spec.compose",
     "SceneState": "realize.world.state",
-    "execute": "realize.app.execute",
+    "execute": "realize.repair.study",
 }
 
 __all__ = ["__version__", *_LAZY]

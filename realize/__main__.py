@@ -1,6 +1,6 @@
-"""``python -m realize [overrides]``: the same as the ``realize`` console script (``realize.app.cli``)."""
+"""``python -m realize [overrides]``: the same as the ``realize`` console script (``realize.cli.main``)."""
 
-from realize.app.cli import main
+from realize.cli.main import main
 
 if __name__ == "__main__":
     main()

@@ -13,7 +13,7 @@ What it does:
     ``Settings``, ``dict[str, X]`` of named entries), then the field metadata, then the class's own cross-field ``check(where)``.
     Constructing a ``Settings`` directly validates the same way (``__post_init__``), with
     ``where`` = the class's ``config_key``.
-What it doesn't: know Hydra (``realize.app.cli`` turns Hydra's objects into plain data first), or
+What it doesn't: know Hydra (``realize.cli.main`` turns Hydra's objects into plain data first), or
 know any particular config group: those live beside the code they configure.
 """
 

@@ -34,7 +34,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
 
-from realize.app.realizers import open_realization  # noqa: E402
+from realize.workers.realizers import open_realization  # noqa: E402
 from realize.scene import BatchedScene  # noqa: E402
 from uniform_success import load_spec  # noqa: E402
 

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default=None, help="JSON file of every timing")
     a = p.parse_args(argv)
 
-    from realize.app.planner import Planner
+    from realize.run.planner import Planner
     from realize.world.state import load_state
 
     repairs = [r for s in a.study for r in _repairs(Path(s))[: a.per_study]][: a.max]

@@ -55,9 +55,9 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from realize.app.compose import compose_config  # noqa: E402  (the public composer, checked as the command line is)
-from realize.app.realizers import open_realization  # noqa: E402
-from realize.app.run_config import build_run_spec  # noqa: E402
+from realize.spec.compose import compose_config  # noqa: E402  (the public composer, checked as the command line is)
+from realize.workers.realizers import open_realization  # noqa: E402
+from realize.spec.run_spec import build_run_spec  # noqa: E402
 
 BATCH_FILE = REPO / "scripts" / "bench_data" / "late_batch.json"
 PHASES = ("physics", "fabric", "astar", "pid", "state_reads", "target_writes", "contact_forces", "reset")

@@ -5,7 +5,7 @@ Runs ``python -m realize experiment=seed_paper workers.n=W`` once per worker cou
 the other, each in a child process (wall time as a user sees it), and prints per run: wall
 time, setup time, realizations per second over the CE iterations, and the ratio to the first
 worker count. It checks that every run produced the same numbers (best_cost, success and cost
-per iteration, best_z): the workers must not change them (``realize.app.workers.blocks``).
+per iteration, best_z): the workers must not change them (``realize.scene.shards``).
 The last lines estimate the journal budget (3000 -> 300 samples x 20 iterations) from the
 measured throughput per worker: nodes of ``--node-cores`` cores, one worker per core, every
 worker as fast as one measured here, ``sim.shard_rows`` small enough that every worker holds a

@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
                         "(default: realize.execution.time_param.DEFAULT_ACCELERATION_LIMIT)")
     a = p.parse_args(argv)
 
-    from realize.app.execute import execute
+    from realize.repair.study import execute
     from realize.config import ConfigError
     from realize.execution.export import DEFAULT_ACCELERATION_LIMIT, ExportOptions, export_formats
     from realize.execution.perception import load_noise

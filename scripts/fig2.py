@@ -2,7 +2,7 @@
 
 Usage: python scripts/fig2.py RUN_DIR [--iterations 0 4 9] [--out PNG] [--max-plans N]
 
-Reads RUN_DIR/trajectories_iter{k}.npz (written by the app when trajectories are recorded),
+Reads RUN_DIR/trajectories_iter{k}.npz (written by a run when trajectories are recorded),
 history.npz and scene.json (or the config in result.json); writes the PNG and the CSV of the
 plotted points next to it (default RUN_DIR/figures/fig2.{png,csv}). See realize/figures/fig2.py.
 """

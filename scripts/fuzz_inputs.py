@@ -11,7 +11,7 @@ anything), robot spec edits (``robot.*`` overrides), scene state files (a saved 
 to ``replan_from``) and disturbance lists (``execute`` presets' ``disturbances``). Each case goes
 through the edge the command line uses (``preflight``, the composition, ``build_run_spec``; the
 disturbance reader for disturbance lists) and, where it is valid, the first ``--simulate`` valid
-cases are also run (``realize.app.run.run``) at tiny N (2 plans, 1 iteration, a 2 s horizon). It
+cases are also run (``realize.run.one_run.run``) at tiny N (2 plans, 1 iteration, a 2 s horizon). It
 prints the count of cases, of refusals (a ``ConfigError`` of one line: exit code 2 on the command
 line), of valid ones (and of those simulated), and of anything else: a traceback, a message over
 several lines, a hang (``--limit`` seconds). Exit code 1 if there is anything else. ``--out``
@@ -42,9 +42,9 @@ from hypothesis import strategies as st
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from realize.app.cli import preflight  # noqa: E402
-from realize.app.compose import CONFIG_GROUPS, compose_config, group_options  # noqa: E402
-from realize.app.run_config import build_run_spec  # noqa: E402
+from realize.cli.main import preflight  # noqa: E402
+from realize.spec.compose import CONFIG_GROUPS, compose_config, group_options  # noqa: E402
+from realize.spec.run_spec import build_run_spec  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 from realize.paths import CONFIG_DIR  # noqa: E402
 
@@ -246,7 +246,7 @@ class Fuzzer:
     def run_dir(self) -> Path:
         """A finished tiny run for replan_from (made once)."""
         if self._run_dir is None:
-            from realize.app.run import run
+            from realize.run.one_run import run
 
             self._run_dir = self.work / "source_run"
             run(compose_config(TINY), self._run_dir)
@@ -264,7 +264,7 @@ class Fuzzer:
         preflight(list(args))
         build_run_spec(compose_config(args))
         if self.simulate_left > 0:
-            from realize.app.run import run
+            from realize.run.one_run import run
 
             self.simulate_left -= 1
             run(compose_config(args + TINY), where / "run")

@@ -5,11 +5,12 @@ What it does: walks ``realize/`` (the files git tracks, where git is there; else
 and prints, per package, one bullet per module: its path under ``realize/`` and its docstring's
 first paragraph on one line. Paste the output under "Modules" in docs/architecture.md when a
 module is added, renamed or says something new; tests/test_architecture_map.py fails while a
-module of ``realize/app/`` or ``realize/execution/`` is missing from the page.
+module of a run-layer package (``spec``, ``workers``, ``validation``, ``run``, ``repair``,
+``cli``) or of ``realize/execution/`` is missing from the page.
 What it doesn't: write the page (the map's prose around the list is written by hand), or read
 anything but docstrings (nothing is imported).
 
-    python scripts/module_map.py [PACKAGE ...]     # e.g. app execution; default: every package
+    python scripts/module_map.py [PACKAGE ...]     # e.g. run execution; default: every package
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ def first_paragraph(path: Path) -> str:
 
 
 def module_map(packages: list[str] | None = None) -> str:
-    """Markdown: a heading per package (``app``, ``app/workers``, ...), a bullet per module."""
+    """Markdown: a heading per package (``cli``, ``run``, ...), a bullet per module."""
     by_pkg: dict[str, list[Path]] = {}
     for f in tracked_modules():
         rel = f.relative_to(PKG)

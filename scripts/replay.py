@@ -32,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.app.replay import ReplayError, replay  # noqa: E402
+from realize.validation.replay import ReplayError, replay  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
 

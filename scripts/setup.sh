@@ -33,7 +33,7 @@ physx_gpu() {
 fabric_step() {
   command -v "${CXX:-g++}" >/dev/null 2>&1 \
     || { say "warning: no C++ compiler (${CXX:-g++}): runs with controller.fabric.compiled=true will stop; install g++"; return 0; }
-  "$VENV/bin/python" -m realize.app.prebuild \
+  "$VENV/bin/python" -m realize.cli.prebuild \
     || say "warning: the compiled fabric step did not build (above); runs with controller.fabric.compiled=true will stop"
 }
 

@@ -2,10 +2,10 @@
 
 What it does: composes the app's config (``configs/config.yaml`` with its default groups, the task
 read from ``--task-file``, default ``configs/task/pick_place.yaml``) through the same edge the
-``realize`` command uses (``realize.app.run_config.build_run_spec``), draws ``--n`` parameter vectors
+``realize`` command uses (``realize.spec.run_spec.build_run_spec``), draws ``--n`` parameter vectors
 uniformly over the task's regions exactly as the cross-entropy search draws iteration 0 (one CPU
 ``torch.Generator`` seeded with ``--seed``, the CE dtype), realizes them all at once in one
-batched scene (``realize.app.realizers.open_realization``, as a run does) and prints where they fail: failure reasons, per-action success shares (of all
+batched scene (``realize.workers.realizers.open_realization``, as a run does) and prints where they fail: failure reasons, per-action success shares (of all
 plans and of the plans that reached the action), and, for grasps, success against the angle
 between the base position and the grasp approach around the cube.
 It ends with two lines::
@@ -19,7 +19,7 @@ Usage::
 
     python scripts/uniform_success.py --n 200 --seed 0 [--save out.npz] [key=value ...]
 
-Trailing ``key=value`` arguments are Hydra overrides of the app config (e.g. ``sim=...``,
+Trailing ``key=value`` arguments are Hydra overrides of the run config (e.g. ``sim=...``,
 ``controller.manip_timeout_s=20``). The paper reports about 10 % successes at iteration 0.
 """
 
@@ -43,9 +43,9 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 
 from realize.config import ConfigError  # noqa: E402
 from realize.paths import CONFIG_DIR  # noqa: E402
-from realize.app.assembly import plain_config  # noqa: E402
-from realize.app.realizers import open_realization  # noqa: E402
-from realize.app.run_config import RunSpec, build_run_spec  # noqa: E402
+from realize.run.assembly import plain_config  # noqa: E402
+from realize.workers.realizers import open_realization  # noqa: E402
+from realize.spec.run_spec import RunSpec, build_run_spec  # noqa: E402
 
 
 def load_spec(task_file: str, seed: int, device: str, overrides: Sequence[str] = ()) -> RunSpec:
@@ -123,7 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--task-file", default="configs/task/pick_place.yaml", help="task YAML (params, plan, goal)")
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="simulator backend")
     ap.add_argument("--save", default=None, help="write samples and per-plan results to this .npz")
-    ap.add_argument("overrides", nargs="*", help="Hydra overrides of the app config (key=value)")
+    ap.add_argument("overrides", nargs="*", help="Hydra overrides of the run config (key=value)")
     args = ap.parse_args(argv)
     if args.n < 1:
         ap.error("--n must be >= 1")

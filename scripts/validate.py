@@ -30,9 +30,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without install
 
-from realize.app.replay import ReplayError  # noqa: E402
-from realize.app.candidate_validation import validate_candidates  # noqa: E402
-from realize.app.validation import validate  # noqa: E402
+from realize.validation.replay import ReplayError  # noqa: E402
+from realize.validation.candidates import validate_candidates  # noqa: E402
+from realize.validation.returned_plan import validate  # noqa: E402
 from realize.config import ConfigError  # noqa: E402
 
 RUNS_OWN = "the run's"  # --candidates without K: the run's validation.candidates
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--candidates", type=int, nargs="?", const=RUNS_OWN, default=None, metavar="K",
                     help="validate the K cheapest distinct feasible plans of the last iterations (no K: the run's "
                          "validation.candidates), not only the best, name the one to return and rewrite the run's "
-                         "validation block (realize/app/candidate_validation.py)")
+                         "validation block (realize/validation/candidates.py)")
     ap.add_argument("--min-success", type=float, default=None,
                     help="with --candidates: return the cheapest plan whose 95%% lower bound reaches this "
                          "(default: the run's validation.min_success)")

@@ -27,7 +27,7 @@ import pytest
 if TYPE_CHECKING:
     import torch
 
-    from realize.app.run_config import RunSpec
+    from realize.spec.run_spec import RunSpec
     from realize.scene import BatchedScene
 
 REPO = Path(__file__).resolve().parent.parent
@@ -51,7 +51,7 @@ def compose_config(*overrides: str, cpu: bool = True, plain: bool = True, hydra_
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from realize.app.hydra_edge import register_resolvers
+    from realize.spec.hydra_edge import register_resolvers
     from realize.paths import CONFIG_DIR
 
     register_resolvers()  # ${realize_scaled:...} in the presets
@@ -146,7 +146,7 @@ def expect_config_error(overrides: list[str], needles: list[str], run_dir: Path)
     """Run the tiny config with ``overrides``: it must fail with a one-line ConfigError holding
     every needle; returns the message and the result.json written for it."""
     from realize.config import ConfigError
-    from realize.app.run import run
+    from realize.run.one_run import run
     from realize.run_dir.names import RESULT_FILE
 
     with pytest.raises(ConfigError) as ei:
@@ -398,7 +398,7 @@ def on_table2(cube: "torch.Tensor") -> bool:
 def write_known_run(run_dir: Path, overrides: tuple[str, ...] = ()) -> Path:
     """A run directory of the seed task whose plan and final distribution are the known feasible
     plan ``GOOD`` (narrow std): what a warm start or an executor starts from."""
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
     from realize.run_dir.jsonio import atomic_write_json
     from realize.run_dir.names import RESULT_FILE
 
@@ -424,7 +424,7 @@ def one_world(*disturbances: dict, **keys: object) -> Any:
 
 def execute_budget() -> Any:
     """The replan budget of the execution tests: 8 copies, 2 elites, 2 iterations, in this process."""
-    from realize.app.planner import ReplanBudget
+    from realize.run.planner import ReplanBudget
 
     return ReplanBudget(n_envs=8, n_elite=2, iterations=2, shard_rows=None, workers=1)
 
@@ -432,8 +432,8 @@ def execute_budget() -> Any:
 def closed_loop_world(run: Path, settings: Any, out: Path, trajectory: Path | None = None) -> Any:
     """World 0 of ``settings`` carried out closed loop from ``run`` by a warmed-up planner (its
     ``WorldLog``)."""
-    from realize.app.execute import execute_world
-    from realize.app.planner import Planner
+    from realize.repair.study import execute_world
+    from realize.run.planner import Planner
 
     budget = execute_budget()
     planner = Planner.from_run(run)

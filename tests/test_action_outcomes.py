@@ -1,4 +1,4 @@
-"""Per-action and per-segment validation counts (``realize.app.action_outcomes``) add up.
+"""Per-action and per-segment validation counts (``realize.validation.action_outcomes``) add up.
 
 On hand-made replica outcomes of a 4-action plan cut into segments [0, 1] and [2, 3] (+ goal):
 each action's ``completed`` never exceeds the one before it, the goal's is the replicas that
@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 import torch
 
-from realize.app.action_outcomes import GOAL, plan_outcomes, weak_lines
+from realize.validation.action_outcomes import GOAL, plan_outcomes, weak_lines
 
 PLAN = ["grasp(a, Ga)", "place(a, Pa)", "grasp(b, Gb)", "place(b, Pb)"]
 

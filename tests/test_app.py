@@ -20,17 +20,17 @@ import yaml
 
 import realize.scene
 from helpers import TINY, cfg_of, compose_config, expect_config_error, plain, realize_cli, tiny
-from realize.app.cli import preflight
+from realize.cli.main import preflight
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
-from realize.app.run import run
-from realize.app.run_config import build_run_spec
+from realize.run.one_run import run
+from realize.spec.run_spec import build_run_spec
 from realize.run_dir.checkpoint import CheckpointError, load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.history import History, load_history
 from realize.run_dir.names import CHECKPOINT_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE
 from realize.run_dir.result_doc import ResultDoc
-from realize.app.sweep_summary import COLUMNS, write_summary
+from realize.cli.sweep_summary import COLUMNS, write_summary
 
 
 # --------------------------------------------------------------------------------------------
@@ -94,9 +94,9 @@ def test_plan_from_pddl_matches_the_yaml_plan(no_sim: None) -> None:
 
 
 def test_the_composed_controller_is_rollout_config_itself() -> None:
-    """The controller group is RolloutConfig's defaults (realize.app.hydra_edge.register_schema),
+    """The controller group is RolloutConfig's defaults (realize.spec.hydra_edge.register_schema),
     nested pid, astar and fabric included: no YAML copy to keep in step."""
-    from realize.app.compose import compose_config
+    from realize.spec.compose import compose_config
     from realize.realization.config import RolloutConfig
 
     assert compose_config([])["controller"] == json.loads(json.dumps(asdict(RolloutConfig())))  # tuples -> lists
@@ -104,10 +104,10 @@ def test_the_composed_controller_is_rollout_config_itself() -> None:
 
 
 def test_the_composed_sim_keys_are_sim_settings_fields() -> None:
-    """The sim group is SimSettings itself (realize.app.hydra_edge.register_schema)."""
+    """The sim group is SimSettings itself (realize.spec.hydra_edge.register_schema)."""
     from dataclasses import fields
 
-    from realize.app.compose import compose_config
+    from realize.spec.compose import compose_config
 
     assert set(compose_config([])["sim"]) == {f.name for f in fields(realize.scene.SimSettings)}
 
@@ -125,7 +125,7 @@ def test_the_composed_sim_keys_are_sim_settings_fields() -> None:
 def test_launchers_resolve(launcher: str, target: str) -> None:
     cfg = cfg_of([f"hydra/launcher={launcher}"], hydra_cfg=True)
     assert cfg.hydra.launcher._target_.endswith(target)
-    assert any(cb._target_ == "realize.app.sweep_summary.SweepSummary" for cb in cfg.hydra.callbacks.values())
+    assert any(cb._target_ == "realize.cli.sweep_summary.SweepSummary" for cb in cfg.hydra.callbacks.values())
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,5 +1,5 @@
 """The batch lever ``ce.batch_scale``: a preset's batch times the levers' scale, resolved where the
-config is composed (``${realize_scaled:N,SCALE}``, ``realize.app.hydra_edge``).
+config is composed (``${realize_scaled:N,SCALE}``, ``realize.spec.hydra_edge``).
 
 What a user relies on: ``levers=exact`` gives the paper's batch, ``levers=fast`` (what
 ``experiment=seed_paper`` uses) half of it in as many shards (both cores busy), a number on the
@@ -15,9 +15,9 @@ import math
 import pytest
 
 from helpers import compose_config, realize_cli
-from realize.app.hydra_edge import scaled_count
-from realize.app.run_config import build_run_spec
-from realize.app.workers.blocks import shard_rows
+from realize.spec.hydra_edge import scaled_count
+from realize.spec.run_spec import build_run_spec
+from realize.scene.shards import shard_rows
 from realize.config import ConfigError
 
 

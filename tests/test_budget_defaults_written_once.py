@@ -104,7 +104,7 @@ def _execute_script() -> Any:
 def test_the_command_line_changes_the_presets_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--n-envs`` (with its elites), ``--iterations`` and ``--validation`` change the preset's
     budget key by key; without them the study runs on the preset's budget."""
-    import realize.app.execute
+    import realize.repair.study
 
     run = tmp_path / "run"
     run.mkdir()
@@ -118,7 +118,7 @@ def test_the_command_line_changes_the_presets_budget(tmp_path: Path, monkeypatch
         seen.append(settings)
         raise ConfigError("stop here")
 
-    monkeypatch.setattr(realize.app.execute, "execute", study)
+    monkeypatch.setattr(realize.repair.study, "execute", study)
     script = _execute_script()
     assert script.main([str(run), "--disturbance", str(preset)]) == 2
     assert script.main([str(run), "--disturbance", str(preset), "--n-envs", "8"]) == 2

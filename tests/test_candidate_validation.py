@@ -1,4 +1,4 @@
-"""Validating a run's K cheapest distinct plans (``realize.app.candidate_validation``).
+"""Validating a run's K cheapest distinct plans (``realize.validation.candidates``).
 
 * the 95 % Wilson interval equals scipy's (``binomtest(...).proportion_ci(method="wilson")``);
 * the candidates are the K cheapest distinct feasible samples of the last iterations, and the
@@ -22,12 +22,12 @@ import yaml
 from scipy.stats import binomtest
 
 from helpers import compose_config, realize_result
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
-from realize.app.candidate_validation import pick_candidates, validate_candidates, wilson_interval
-from realize.app.run_settings import ValidationSettings
-from realize.app.validation import run_validation
+from realize.validation.candidates import pick_candidates, validate_candidates, wilson_interval
+from realize.spec.run_settings import ValidationSettings
+from realize.validation.returned_plan import run_validation
 from realize.run_dir.directory import BestPlan
 from realize.run_dir.history import History
 

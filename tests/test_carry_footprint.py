@@ -87,7 +87,7 @@ def test_the_cube_stays_in_hand_past_the_wall_only_with_the_carry_footprint() ->
     from helpers import compose_config
 
     from realize.realization.rollout import PlanRealizer
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
     from realize.scene import BatchedScene
 
     failures = {}

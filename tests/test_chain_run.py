@@ -16,7 +16,7 @@ import pytest
 
 from golden_runs import FIXTURE, GOLDEN_RUNS, KEYS
 from helpers import compose_config
-from realize.app.run import run
+from realize.run.one_run import run
 
 QUIET = ["logging.progress=false", "logging.rerun=false"]
 

@@ -7,8 +7,8 @@ import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from helpers import realize_cli
-from realize.app.cli import CONFIG_GROUPS
-from realize.app.cli_keys import check_override_keys, closest
+from realize.cli.main import CONFIG_GROUPS
+from realize.spec.keys import check_override_keys, closest
 from realize.config import ConfigError
 
 
@@ -50,7 +50,7 @@ def test_the_command_answers_in_one_line() -> None:
 
 
 def test_cfg_with_a_task_file_says_what_it_shows(capsys: pytest.CaptureFixture[str]) -> None:
-    from realize.app.cli import preflight
+    from realize.cli.main import preflight
 
     assert preflight(["--cfg", "job", "task_file=x.yaml"]) == ["--cfg", "job", "task_file=x.yaml"]
     assert "task_file replaces it" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""The closed loop under a robot's conditions (realize/app/executor.py, realize/app/repair.py):
+"""The closed loop under a robot's conditions (realize/repair/executor.py, realize/repair/on_deviation.py):
 the check before a repair, the observation model, a cube picked up again off the floor. One
 world each, on the hand-written run of tests/test_execute.py (no search makes it), small
 replans, the world held for a fixed 40 control steps while the planner thinks (bit for bit)."""

@@ -1,5 +1,5 @@
 """The config edge composes the defaults tree once per set of group choices and applies value
-overrides to a copy (``realize.app.hydra_edge.compose_or_error``). It must give what Hydra's
+overrides to a copy (``realize.spec.hydra_edge.compose_or_error``). It must give what Hydra's
 whole compose gives, config and flags, or the same one-line error: checked on hand-picked
 override sets (every override form: set, ``+`` add, ``++`` force-add, ``~`` delete, a dict
 value on a group, null, lists, a group choice next to a value in that group) and on override
@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, Phase, given, seed, settings
 from omegaconf import OmegaConf
 
 from helpers import load_script
-from realize.app.hydra_edge import _compose_whole, compose_or_error
+from realize.spec.hydra_edge import _compose_whole, compose_or_error
 from realize.config import ConfigError
 
 HAND = [

@@ -82,7 +82,7 @@ def test_fabric_exclusions_name_spheres_of_the_robot(override: str, key: str | N
     """The spheres left out of the fabric's box leaves are checked against the robot's sphere
     file at the config edge, naming the key they came from."""
     from helpers import compose_config
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
 
     if key is None:
         assert build_run_spec(compose_config(override)).robot.name == "mobile_panda"

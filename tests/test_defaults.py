@@ -17,10 +17,10 @@ from typing import Any
 from helpers import comparable
 import pytest
 
-from realize.app.compose import compose_config
-from realize.app.run_config import LoggingSettings, StitchSettings, ValidationSettings, _TopLevel, build_run_spec
-from realize.app.replan import ReplanSettings
-from realize.app.workers.settings import WorkersSettings
+from realize.spec.compose import compose_config
+from realize.spec.run_spec import LoggingSettings, StitchSettings, ValidationSettings, _TopLevel, build_run_spec
+from realize.spec.replan_from import ReplanSettings
+from realize.spec.workers_settings import WorkersSettings
 from realize.config import ConfigError
 from realize.paths import CONFIG_DIR
 from realize.realization.config import RolloutConfig

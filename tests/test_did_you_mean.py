@@ -14,8 +14,8 @@ from typing import Any
 import pytest
 import yaml
 
-from realize.app.compose import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.compose import compose_config
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.world.state import load_state
 

@@ -4,7 +4,7 @@ says holds. The line before each ```bash, ```python or ```yaml block is a marker
 with a reason. A block whose marker adds "arguments checked" has every command checked here
 without running it:
 
-- ``realize ...``: the command line's own edge (``realize.app.cli.preflight``: group choices,
+- ``realize ...``: the command line's own edge (``realize.cli.main.preflight``: group choices,
   key names, run directories, every job of a sweep) and, for a single run, the composed config
   validated (``check_sweep``, which reads a warm start's files); nothing is simulated;
 - ``python scripts/X.py ...``: the script's own argument parser, in one child process that stops
@@ -31,8 +31,8 @@ from pathlib import Path
 import pytest
 
 from helpers import DOC_PAGES, REPO, DocBlock, doc_block, doc_blocks
-from realize.app.cli import preflight
-from realize.app.sweep_check import check_sweep
+from realize.cli.main import preflight
+from realize.cli.sweep_check import check_sweep
 from realize.config import ConfigError
 from realize.run_dir.names import RESULT_FILE
 

@@ -1,4 +1,4 @@
-"""Carrying a plan out and repairing it (realize/app/execute.py, scripts/execute.py), on CPU.
+"""Carrying a plan out and repairing it (realize/repair/study.py, scripts/execute.py), on CPU.
 
 The run executed is written by hand once per module (as tests/test_replay.py writes its runs):
 the seed task's default config and its known feasible plan ``GOOD`` as the returned plan and
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from helpers import REPO, TABLE_MOVED, closed_loop_world, doc_block, execute_budget, one_world, write_known_run
-from realize.app.execute import execute
+from realize.repair.study import execute
 from realize.config import ConfigError
 from realize.execution.trajectory import read_trajectory
 
@@ -139,7 +139,7 @@ def test_knocked_out_cube_is_resequenced_with_a_second_grasp(run: Path, tmp_path
 ])
 def test_bad_disturbances_are_refused_before_anything_is_simulated(run: Path, no_sim, monkeypatch, entry,
                                                                   needles) -> None:
-    import realize.app.planner as planner_mod
+    import realize.run.planner as planner_mod
 
     def no_planner(*a, **k):
         raise AssertionError("a planner was started for an invalid execution")

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from helpers import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.execution.schedule import Schedule
 from realize.execution.disturbances import (AddBox, KnockOut, MoveObject, MoveTable, PushBase, Scheduled,

@@ -228,7 +228,7 @@ def test_the_lerobot_dataset_reads_back_with_pyarrow(hand_world: Path) -> None:
 @pytest.fixture(scope="module")
 def executed(tmp_path_factory: pytest.TempPathFactory):
     """One open-loop world of the seed task's known plan, executed and exported (ros2, lerobot)."""
-    from realize.app.execute import execute
+    from realize.repair.study import execute
     from realize.execution.settings import ExecuteSettings
     from helpers import write_known_run
 
@@ -245,8 +245,8 @@ def executed(tmp_path_factory: pytest.TempPathFactory):
 def executed_closed(executed):
     """The same run's world closed loop, table 2 moved 12 cm 1 s into move_to(Table2): the monitor
     sees it and the robot holds while it decides (a hold segment, the move_to resumed after it)."""
-    from realize.app.execute import execute
-    from realize.app.planner import ReplanBudget
+    from realize.repair.study import execute
+    from realize.run.planner import ReplanBudget
     from realize.execution.settings import ExecuteSettings
 
     run = executed[0]
@@ -340,9 +340,9 @@ def test_the_bag_replayed_through_the_joint_drives_reaches_every_action_end_with
     world's table move is not replayed: both replays run in the undisturbed world.)"""
     import dataclasses
 
-    from realize.app.execute import SEED_STRIDE
-    from realize.app.executor import EXECUTION_BACKEND
-    from realize.app.replay import build_replay_spec, returned_z, saved_plan
+    from realize.repair.study import SEED_STRIDE
+    from realize.repair.executor import EXECUTION_BACKEND
+    from realize.validation.replay import build_replay_spec, returned_z, saved_plan
     from realize.execution.world import ExecutionWorld
 
     run, s, out, summary, _ = request.getfixturevalue(which)

@@ -110,7 +110,7 @@ def test_a_failed_build_names_the_key_and_the_way_out(monkeypatch, tmp_path) -> 
 
 
 def test_prebuild_finds_the_package_a_run_loads(pair, monkeypatch, capsys) -> None:
-    from realize.app import prebuild as pb
+    from realize.cli import prebuild as pb
 
     _, built = pair  # built with the default settings at the scene's control period, as a run's
     assert pb.prebuild(["fetch_omni"])  # already there: nothing is built or loaded

@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from realize.realization.context import StepContext
-from realize.app.realizers import open_realization
-from realize.app.run_config import build_run_spec
+from realize.workers.realizers import open_realization
+from realize.spec.run_spec import build_run_spec
 from helpers import GOOD, SEED_TASK, blas_batch_invariant, compose_config
 
 N, BAD = 8, 3

@@ -23,7 +23,7 @@ WORLD_SEED_TASK = {  # the seed paper's regions as the task config wrote them be
 
 
 def _task(*overrides: str):
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
 
     return build_run_spec(compose_config(*overrides)).task
 

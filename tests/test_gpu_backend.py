@@ -285,7 +285,7 @@ def test_realize_device_cuda_without_the_library_exits_in_one_line(tmp_path: Pat
     home = tmp_path / "home"
     home.mkdir()
     driver = ("import sys, torch; torch.cuda.is_available = lambda: True\n"
-              "from realize.app.cli import main; main(sys.argv[1:])\n")
+              "from realize.cli.main import main; main(sys.argv[1:])\n")
     p = subprocess.run([sys.executable, "-c", driver, "device=cuda", f"hydra.run.dir={tmp_path / 'run'}"],
                        cwd=REPO, capture_output=True, text=True, timeout=60,
                        env={"HOME": str(home), "PATH": "/usr/bin:/bin", "PYTHONPATH": str(REPO)})
@@ -300,7 +300,7 @@ def test_realize_device_cuda_without_the_library_exits_in_one_line(tmp_path: Pat
 
 def test_auto_picks_the_cpu_where_torch_reports_cuda(monkeypatch: pytest.MonkeyPatch) -> None:
     from realize.search.ce.config import CEConfig
-    from realize.app.run_config import resolve_placement
+    from realize.spec.run_spec import resolve_placement
     from realize.scene.settings import SimSettings
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)

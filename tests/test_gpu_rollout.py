@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from realize.app.realizers import open_realization
-from realize.app.run_config import build_run_spec
+from realize.workers.realizers import open_realization
+from realize.spec.run_spec import build_run_spec
 
 from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, compose_config
 

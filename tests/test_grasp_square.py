@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from helpers import compose_config, turned_worlds
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.realization.actions.manipulate import square_approach
 from realize.realization.rollout import PlanRealizer

@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from helpers import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.robot.grip_geometry import grip_geometry
 from realize.robot.kinematics import RobotKinematics

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from helpers import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.realization.actions.level import hand_frame, level_turn
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene, quat_to_matrix
@@ -87,7 +87,7 @@ def test_repairs_level_only_the_places_of_a_plan_that_stacks() -> None:
     """A repair searches and executes with ``place_level`` where the run's plan stacks a block on
     another (``robot=panda experiment=tower3``), not where it places on a table (the seed task),
     nor where the run's own controllers level already."""
-    from realize.app.repair import level_places
+    from realize.repair.on_deviation import level_places
     from realize.execution.settings import ExecuteSettings
 
     turn = ExecuteSettings().stack_level_rad

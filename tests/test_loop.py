@@ -1,4 +1,4 @@
-"""The one search loop (realize.app.loop) and its sinks' failure rule (realize.sinks.base), on a fake
+"""The one search loop (realize.run.loop) and its sinks' failure rule (realize.sinks.base), on a fake
 scene: either searcher runs through the same loop, sinks see every iteration in order, a failing
 non-critical sink is dropped while the search goes on, a failing critical sink fails the run
 clearly, and an interrupt ends the run as ``interrupted``. No simulator."""
@@ -18,7 +18,7 @@ from realize.search.budget import plan_budget
 from realize.search.candidates import CandidateSpec, SuccessiveHalving
 from realize.search.ce.config import CEConfig
 from realize.search.ce.optimizer import CrossEntropyOptimizer
-from realize.app.loop import search_loop
+from realize.run.loop import search_loop
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
 from realize.search.ce.state import IterationRecord

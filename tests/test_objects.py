@@ -21,7 +21,7 @@ import torch
 
 from envs.goal_check import goal_info
 from helpers import REPO, compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.realization.actions import TEMPLATES
 from realize.tasks.goals import goal_reached, object_at

@@ -1,6 +1,6 @@
 """Optuna sweeps (``hydra/sweeper=optuna``, ``experiment=tune_ce``): 3 trials at tiny N through
 the command line. The study is stored in the sweep directory (SQLite), every trial's value is
-the objective its run wrote (``realize.app.objective``), and summary.csv lists every trial."""
+the objective its run wrote (``realize.run.objective``), and summary.csv lists every trial."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import pytest
 import yaml
 
 from helpers import doc_block, realize_cli
-from realize.app.cli import preflight
-from realize.app.objective import INFEASIBLE_FACTOR, run_objective
+from realize.cli.main import preflight
+from realize.run.objective import INFEASIBLE_FACTOR, run_objective
 from realize.config import ConfigError
 from realize.run_dir.names import RESULT_FILE
 

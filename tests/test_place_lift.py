@@ -19,7 +19,7 @@ import pytest
 import torch
 
 from helpers import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene
 from realize.tasks.suffix import task_suffix

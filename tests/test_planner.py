@@ -1,4 +1,4 @@
-"""The planner you import (realize/app/planner.py, realize/app/compose.py): configs composed from
+"""The planner you import (realize/run/planner.py, realize/spec/compose.py): configs composed from
 Python with one-line errors, ``plan()`` twice through kept workers, ``replan`` from a state (its
 result block, refusals before anything runs, kept vs rebuilt scenes). The README's example runs in
 tests/test_doc_commands.py.
@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 from helpers import GOOD, STATE_GRASPED, TINY, write_known_run
-from realize.app.compose import compose_config
-from realize.app.planner import Planner, PlanResult, ReplanBudget
-from realize.app.run_config import build_run_spec
+from realize.spec.compose import compose_config
+from realize.run.planner import Planner, PlanResult, ReplanBudget
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.run_dir.names import RESULT_FILE
 from realize.world.state import load_state

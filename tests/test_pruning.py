@@ -24,7 +24,7 @@ import torch
 
 from golden_runs import FIXTURE, run_golden
 from helpers import FAR_SIDE, GOOD, SEED_TASK, SIDE, compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.realization.pruning import EliteBound
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer

@@ -24,8 +24,8 @@ from realize.config import ConfigError
 from realize.tasks.goals import object_in_container
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.app.run_config import RunSpec, build_run_spec
-from realize.app.task_plans import build_task
+from realize.spec.run_spec import RunSpec, build_run_spec
+from realize.spec.task_plans import build_task
 from realize.scene import BatchedScene
 
 # columns: PushSide.x, PushSide.y, Stick_p.x, Stick_p.y, Stick_p.z

@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from helpers import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.realization.actions.manipulate import base_axis_xy, tcp_target
 from realize.realization.reach_check import region_reach

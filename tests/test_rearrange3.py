@@ -14,10 +14,10 @@ import pytest
 import torch
 
 from helpers import compose_config, realize_result
-from realize.app.run_config import build_run_spec, read_ce, read_stitch
+from realize.spec.run_spec import build_run_spec, read_ce, read_stitch
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene
-from realize.app.task_plans import PlannerSettings, build_task_candidates
+from realize.spec.task_plans import PlannerSettings, build_task_candidates
 from realize.config import as_mapping
 from realize.tasks.split import chain_tasks
 from realize.world.geometry import GeometryCfg, build_geometry

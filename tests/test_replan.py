@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from realize.app.realizers import open_realization
-from realize.app.run_config import build_run_spec
+from realize.workers.realizers import open_realization
+from realize.spec.run_spec import build_run_spec
 from realize.world.state import SceneState, load_state
 from realize.tasks.suffix import task_suffix
 from helpers import FULL_Z, STATE_GRASPED, compose_config, on_table2
@@ -111,14 +111,14 @@ def test_replan_run_writes_where_it_started(tmp_path: Path, torch_single_thread:
     """``realize replan_from=RUN replan.action=2 replan.state=FILE`` with table 2 moved: one
     iteration of two plans over the remaining parameters (a short horizon), result.json says
     where it started."""
-    from realize.app.cli import preflight
+    from realize.cli.main import preflight
     from realize.config import ConfigError
-    from realize.app.run import run
+    from realize.run.one_run import run
     from realize.run_dir.jsonio import atomic_write_json, read_json
 
     earlier = tmp_path / "earlier"
     earlier.mkdir()
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
 
     whole = build_run_spec(compose_config()).task
     D = whole.layout.dim

@@ -1,4 +1,4 @@
-"""Where a replan's whole plan starts holding something (``realize.app.run_config._replan_start_held``):
+"""Where a replan's whole plan starts holding something (``realize.spec.run_spec._replan_start_held``):
 a replan from action 0 starts from its own state; a replan of later actions starts the plan where
 the run it replans started it, followed back through a chain of replans. grasp_slip world 14 (seed 0,
 ``d97601a``): the restack from cube C in hand begins ``place(cube_c, ...)``; its tower knocked again,
@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
-from realize.app.run_config import _replan_start_held
+from realize.spec.run_spec import _replan_start_held
 from realize.world.state import ObjectPose, SceneState, save_state
 
 

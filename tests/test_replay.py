@@ -15,12 +15,12 @@ import pytest
 import torch
 
 from helpers import GOOD, compose_config, load_script
-from realize.app.replay import ReplayError, build_replay_spec, replay, saved_plan
+from realize.validation.replay import ReplayError, build_replay_spec, replay, saved_plan
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.scene import BatchedScene, EnvOptions, SimSettings
-from realize.app.validation import validate
+from realize.validation.returned_plan import validate
 from realize.realization.rollout import PlanRealizer
 
 FEASIBLE_Z = GOOD  # a plan of the seed task that reaches the goal with the default configs
@@ -151,7 +151,7 @@ def test_validation_writes_result_json(run_dir: Path) -> None:
     assert all(0.8 <= f / doc["config"]["scene"]["objects"]["cube"]["friction"] <= 1.2 for f in v["friction"]["cube"])
     assert doc["best_z"] == FEASIBLE_Z and doc["config"]["seed"] == 0  # the rest is kept
     assert rep.success_share > 0  # seed 3 gave 3 of 4 when written; the key matters here
-    # where the replicas failed adds up (realize.app.action_outcomes): completed never grows along the
+    # where the replicas failed adds up (realize.validation.action_outcomes): completed never grows along the
     # plan, the goal's is the successes, each entry's failures are its started - completed, all sum to the misses
     acts, ok = v["per_action"], round(4 * v["success_share"])
     assert [a["action"] for a in acts] == [str(a) for a in build_replay_spec(saved_plan(run_dir)).task.plan] + ["goal"]
@@ -170,7 +170,7 @@ def test_push_scene_gets_its_camera_and_noise(tmp_path: Path, monkeypatch: pytes
     spec = build_run_spec(compose_config("experiment=move_and_push", cpu=False))
     z = spec.task.layout.sample_uniform(1, torch.Generator().manual_seed(0))[0].tolist()
     d = _write_run(tmp_path / "push", ["experiment=move_and_push", "controller.max_time_s=0.5"], z=z)
-    import realize.app.realizers as realizers
+    import realize.workers.realizers as realizers
 
     opened, noise = realizers.open_realization, []
 
@@ -206,7 +206,7 @@ def test_video_follows_the_action_and_labels_every_frame(tmp_path: Path) -> None
     every frame (the caption's text itself: ``Caption.text``)."""
     import imageio.v2 as imageio
 
-    from realize.app.video import Caption
+    from realize.validation.video import Caption
 
     # an 11 s horizon: the rollout is cut (infeasible) but the video covers the start of the grasp
     d = _write_run(tmp_path / "grasp", ["controller.max_time_s=11"])

@@ -13,7 +13,7 @@ from realize.paths import CONFIG_DIR
 from realize.recording.world3d import STEP_STRIDE
 from realize.recording.read import read_rrd_3d
 from realize.recording.robot import MAX_MESH_BYTES, link_meshes, matrix_to_quat_xyzw
-from realize.app.run import run
+from realize.run.one_run import run
 from realize.run_dir.directory import RunDir
 
 # 3 plans, 2 iterations, 8 s: the base drives to table 1 and the arm starts to reach

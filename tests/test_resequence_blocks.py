@@ -1,4 +1,4 @@
-"""Re-sequencing in the blocks domain (realize/app/resequence.py): the symbolic state read off a
+"""Re-sequencing in the blocks domain (realize/repair/resequence.py): the symbolic state read off a
 hand-made scene state of the three-block tower (robot=panda experiment=tower3), and the new plan
 Fast Downward finds from it. No simulation: geometry and PDDL only."""
 
@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from helpers import REPO, compose_config
-from realize.app.pddl_text import domain_predicates
-from realize.app.resequence import resequence_task, symbolic_facts
-from realize.app.resequence_blocks import blocks_facts, is_blocks_domain
+from realize.repair.pddl_text import domain_predicates
+from realize.repair.resequence import resequence_task, symbolic_facts
+from realize.repair.resequence_blocks import blocks_facts, is_blocks_domain
 from realize.config import ConfigError
 from realize.world.geometry import GeometryCfg, build_geometry
 from realize.world.state import ObjectPose, SceneState
@@ -115,7 +115,7 @@ def test_a_restack_of_a_planner_chosen_plan_is_a_replan_of_it(tower3, tmp_path: 
     against the plan its result.json names, so the search is warm-started from the run."""
     import json
 
-    from realize.app.planner import realized_task
+    from realize.run.planner import realized_task
     from realize.tasks.suffix import tail_index
 
     task, g = tower3
@@ -182,7 +182,7 @@ def test_a_block_the_domain_cannot_say_makes_the_planner_say_unsolvable_in_one_l
 
 def test_the_pick_place_facts_are_unchanged() -> None:
     """The pick-place path (symbolic_facts) still reads item-at off a table top."""
-    from realize.app.task_plans import build_task
+    from realize.spec.task_plans import build_task
 
     cfg = compose_config()
     g = build_geometry(GeometryCfg.from_mapping(cfg["scene"], "scene"))
@@ -197,8 +197,8 @@ def test_the_monitor_sees_the_block_a_remaining_place_stacks_on_knocked_off(towe
     """During grasp(cube_c) the plan still places cube_c on cube_b: cube_b knocked off cube_a onto
     the table (5 cm lower, 10 cm aside, far within object_m) is a support_moved deviation; cube_b
     where the plan left it is none; and the repair is a re-sequence (a new pose cannot rebuild)."""
-    from realize.app.repair import _restack
-    from realize.app.task_plans import build_task
+    from realize.repair.on_deviation import _restack
+    from realize.spec.task_plans import build_task
     from realize.execution.monitor import check, expectation
     from realize.execution.settings import Tolerance
     from realize.execution.world import Observation
@@ -223,7 +223,7 @@ def test_the_monitor_sees_the_block_a_remaining_place_stacks_on_knocked_off(towe
 def test_the_monitor_leaves_a_block_the_plan_itself_carries(tower3) -> None:
     """While grasp(cube_b) lifts cube_b, the later place of cube_c on cube_b watches nothing:
     the plan moves cube_b itself before it stacks on it (cube_a, which nothing moves, is watched)."""
-    from realize.app.task_plans import build_task
+    from realize.spec.task_plans import build_task
     from realize.execution.monitor import expectation
 
     task_cfg, geometry = tower3
@@ -256,7 +256,7 @@ def test_a_new_plan_that_starts_by_placing_the_held_block_builds_from_a_state_th
     """A re-sequence from a state that holds cube B (grasp_slip's worlds 10 and 13: cube C in
     hand, cube B knocked down) begins with a place: its task builds where the plan starts with
     the block in hand, and is refused in one line where it starts empty."""
-    from realize.app.task_plans import build_task_candidates
+    from realize.spec.task_plans import build_task_candidates
 
     task, g = tower3
     new = resequence_task(task, g, _state("cube_b", cube_a=(0.0, 1.2, Z0), cube_b=(0.0, 1.1, 0.9),

@@ -33,8 +33,8 @@ from helpers import (FAR_SIDE, GOOD, SEED_TASK, SIDE, StepCounter, blas_batch_in
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
-from realize.app.run_config import RunSpec, build_run_spec
-from realize.app.task_plans import build_task, load_task_file
+from realize.spec.run_spec import RunSpec, build_run_spec
+from realize.spec.task_plans import build_task, load_task_file
 from realize.scene import BatchedScene
 
 VECTORS = torch.tensor([GOOD, SIDE, FAR_SIDE])  # two feasible plans of the seed task, one infeasible
@@ -291,7 +291,7 @@ def test_unreachable_grasp_pose_30cm_away_stops_at_the_grasp_timeout(
 
 def _bad_task(tmp_path: Path, plain_cfg: dict[str, Any], seed_task: dict[str, Any], name: str,
               edit: Any = None, text: str | None = None) -> tuple[str, Path]:
-    """Write a broken task file, build the run spec the app builds from it, return the error."""
+    """Write a broken task file, build the run spec a run builds from it, return the error."""
     path = tmp_path / f"{name}.yaml"
     if text is None:
         d = copy.deepcopy(seed_task)

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from helpers import REPO, realize_cli, tiny
-from realize.app.execute import EXECUTION_DIR
-from realize.app.run_settings import LoggingSettings
+from realize.repair.study import EXECUTION_DIR
+from realize.spec.run_settings import LoggingSettings
 from realize.recording.validation_log import VALIDATION_RRD
 from realize.run_dir.names import (CHECKPOINT_FILE, ERROR_FILE, HISTORY_FILE, JOB_STATUS_FILE, RESULT_FILE, SCENE_FILE,
                                    WORKER_LOG_DIR, candidate_file, trajectories_name)

@@ -15,8 +15,8 @@ import pytest
 import yaml
 
 from helpers import compose_config, load_script
-from realize.app.run import run
-from realize.app.run_config import build_run_spec
+from realize.run.one_run import run
+from realize.spec.run_spec import build_run_spec
 from realize.run_dir.names import RESULT_FILE
 
 TASK = {
@@ -78,7 +78,7 @@ def test_resume_and_replan_config_use_the_runs_copy(tmp_path: Path) -> None:
     """Interrupted after iteration 0 of 2, the file edited, resumed: the run ends as an
     uninterrupted run of the original file does (its own copy), and a replan's config starts
     from that copy too."""
-    from realize.app.replan import replan_config
+    from realize.spec.replan_from import replan_config
 
     task_file = tmp_path / "t.yaml"
     task_file.write_text(yaml.safe_dump(TASK))
@@ -104,7 +104,7 @@ def test_resume_and_replan_config_use_the_runs_copy(tmp_path: Path) -> None:
 def test_an_old_run_without_a_copy_says_it_read_the_live_file(edited_run: tuple[Path, Path], tmp_path: Path) -> None:
     """A run directory written before runs kept their task names the file only: replay reads
     the file as it is now, and says so."""
-    from realize.app.replay import replay
+    from realize.validation.replay import replay
 
     run_dir, task_file = edited_run
     old = tmp_path / "old"

@@ -193,7 +193,7 @@ def test_every_variant_builds_from_the_config_files() -> None:
 
     extras = {"plain": [], "wall": ["wall"], "ramp": ["ramp"],
               "push": ["box_floor", "box_wall_xn", "box_wall_xp", "box_wall_yn", "box_wall_yp"]}
-    for variant in ("plain", "wall", "ramp", "push"):  # configs/scene/<variant>.yaml, composed as the app does
+    for variant in ("plain", "wall", "ramp", "push"):  # configs/scene/<variant>.yaml, composed as a run does
         g = build_geometry(GeometryCfg.from_mapping(compose_config(f"scene={variant}")["scene"]))
         stick = [b.name for b in g.floor_objects] == ["stick"]
         assert g.variant == variant and stick == (variant == "push")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from realize.config import ConfigError
-from realize.app.replan import replan_config
-from realize.app.run_config import build_run_spec
+from realize.spec.replan_from import replan_config
+from realize.spec.run_spec import build_run_spec
 from realize.run_dir.jsonio import atomic_write_json
 from realize.run_dir.names import RESULT_FILE
 from realize.robot.spec import load_robot_spec

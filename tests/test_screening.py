@@ -15,8 +15,8 @@ import math
 import torch
 
 from helpers import compose_config
-from realize.app.realizers import open_realization
-from realize.app.run_config import build_run_spec
+from realize.workers.realizers import open_realization
+from realize.spec.run_spec import build_run_spec
 from realize.realization.screening import HandDepthScreen
 from realize.search.ce.config import CEConfig
 from realize.search.ce.optimizer import CrossEntropyOptimizer

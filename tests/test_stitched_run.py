@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from helpers import compose_config, plain
-from realize.app.replay import replay
-from realize.app.run import run
-from realize.app.run_config import build_run_spec
+from realize.validation.replay import replay
+from realize.run.one_run import run
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.run_dir.directory import RunDir
 

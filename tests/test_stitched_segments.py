@@ -10,8 +10,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from realize.app.realizers import open_realization
-from realize.app.run_config import build_run_spec
+from realize.workers.realizers import open_realization
+from realize.spec.run_spec import build_run_spec
 from realize.tasks.split import default_split, split_task
 from realize.config import ConfigError
 from realize.world.state import SceneState
@@ -71,9 +71,9 @@ def test_worker_processes_carry_starts_and_end_states(tmp_path) -> None:
     from it, equal a fresh one-copy scene's that realized the same two rollouts, bit for bit.
     (Restores are history-free, ``test_a_restore_is_history_free``, so the histories need not
     match; they do here all the same.)"""
-    from realize.app.workers.blocks import group_shards
-    from realize.app.workers.pool import run_shards
-    from realize.app.workers.process import ProcessPool
+    from realize.scene.shards import group_shards
+    from realize.workers.pool import run_shards
+    from realize.workers.process import ProcessPool
 
     spec = build_run_spec(compose_config("ce.n_envs=2", "ce.n_elite=1", "sim.shard_rows=1"))
     prefix, suffix, pcols, scols = split_task(spec.task, 2)

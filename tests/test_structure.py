@@ -172,8 +172,9 @@ def _package(module: str) -> str:
 
 def test_no_import_cycle_between_packages() -> None:
     """The packages are layers: no import runs back up between them (robot, world, tasks, run_dir,
-    search, controllers, scene, realization, recording, sinks, figures, app; envs above the scene,
-    which asks gym for its tasks by id and never imports envs)."""
+    search, controllers, scene, realization, recording, sinks, figures, execution, spec, workers,
+    validation, run, repair, cli; envs above the scene, which asks gym for its tasks by id and never
+    imports envs)."""
     mods = _modules()
     g = nx.DiGraph()
     for n, p in mods.items():

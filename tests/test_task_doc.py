@@ -12,7 +12,7 @@ from realize.world.geometry import GeometryCfg, build_geometry
 from realize.tasks.goal_spec import GOAL_KEYS
 from realize.tasks.param_layout import REGION_TYPES
 from realize.paths import CONFIG_DIR
-from realize.app.task_plans import build_task, load_task_file
+from realize.spec.task_plans import build_task, load_task_file
 
 DOC = CONFIG_DIR.parent / "docs" / "task_files.md"
 

@@ -16,9 +16,9 @@ import yaml
 import realize.tasks.pddl
 from helpers import cfg_of, expect_config_error, plain, tiny_with
 from realize.paths import CONFIG_DIR
-from realize.app.replay import build_replay_spec, saved_plan
-from realize.app.run import run
-from realize.app.run_config import build_run_spec
+from realize.validation.replay import build_replay_spec, saved_plan
+from realize.run.one_run import run
+from realize.spec.run_spec import build_run_spec
 from realize.run_dir.checkpoint import load_checkpoint
 from realize.run_dir.directory import RunDir
 from realize.run_dir.names import CHECKPOINT_FILE, RESULT_FILE

@@ -10,8 +10,8 @@ from __future__ import annotations
 import pytest
 
 from helpers import compose_config
-from realize.app.run_config import read_ce, read_stitch
-from realize.app.task_plans import PlannerSettings, build_task_candidates
+from realize.spec.run_spec import read_ce, read_stitch
+from realize.spec.task_plans import PlannerSettings, build_task_candidates
 from realize.config import ConfigError, as_mapping
 from realize.tasks.split import chain_tasks
 from realize.world.geometry import GeometryCfg, build_geometry, with_fixed_base_start
@@ -90,7 +90,7 @@ def test_hand_chosen_top_down_plans_build_the_tower(n: int) -> None:
 
     import torch
 
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
     from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
 

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from helpers import GOOD, compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene

@@ -18,7 +18,7 @@ import torch
 import yaml
 
 from helpers import compose_config
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.config import ConfigError
 from realize.realization.rollout import PlanRealizer
 from realize.scene import BatchedScene

@@ -2,7 +2,7 @@
 returned plan (``--nominal`` the search's best_z), ``validation.rrd`` and the validation figure.
 
 The run directories are written by hand: the composed default config, a ``best_z`` and a
-``validation`` block in ``realize.app.candidate_validation``'s layout. Replay's rollout is a
+``validation`` block in ``realize.validation.candidates``'s layout. Replay's rollout is a
 stand-in (``open_realization`` patched) that records the rows it is given.
 """
 
@@ -18,8 +18,8 @@ import pytest
 import torch
 
 from helpers import GOOD, compose_config, load_script
-from realize.app.replay import ReplayError, replay, returned_z, saved_plan
-from realize.app.run_config import build_run_spec
+from realize.validation.replay import ReplayError, replay, returned_z, saved_plan
+from realize.spec.run_spec import build_run_spec
 from realize.figures.fig_validation import fig_validation
 from realize.recording.validation_log import VALIDATION_RRD, log_validation, summary_markdown
 from realize.run_dir.jsonio import atomic_write_json
@@ -89,11 +89,11 @@ class _FakeScene:
 @pytest.fixture()
 def rollouts(monkeypatch: pytest.MonkeyPatch) -> list[torch.Tensor]:
     """The rows each (stand-in) rollout got; no simulator is built."""
-    import realize.app.realizers
+    import realize.workers.realizers
     import realize.scene
 
     seen: list[torch.Tensor] = []
-    monkeypatch.setattr(realize.app.realizers, "open_realization",
+    monkeypatch.setattr(realize.workers.realizers, "open_realization",
                         lambda spec, n_envs=1, **kw: (_FakeScene(), (_FakeRealizer(seen),)))
     monkeypatch.setattr(realize.scene, "BatchedScene", lambda *a, **k: pytest.fail("a simulator was built"))
     return seen

@@ -1,12 +1,12 @@
 """Which deviations the executor waits on, for every object to come to rest, before it reads the
-state to repair from (``realize.app.executor.waits_for_rest``): the reasons as the world logs of
+state to repair from (``realize.repair.executor.waits_for_rest``): the reasons as the world logs of
 the grasp_slip and tower_knocked studies write them."""
 
 from __future__ import annotations
 
 import pytest
 
-from realize.app.executor import waits_for_rest
+from realize.repair.executor import waits_for_rest
 
 
 @pytest.mark.parametrize("reasons, waits", [

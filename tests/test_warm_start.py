@@ -15,7 +15,7 @@ from realize.search.ce.state import WarmDistribution
 from realize.config import ConfigError
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
-from realize.app.run_config import build_run_spec
+from realize.spec.run_spec import build_run_spec
 from realize.search.protocol import EvalResult
 from realize.search.warm_start import load_warm_start, merge_modes
 from helpers import compose_config
@@ -145,7 +145,7 @@ def test_a_warm_start_at_the_optimum_beats_a_cold_start_of_the_same_budget():
 
 
 def test_a_run_refuses_a_missing_warm_start_run_before_simulating(tmp_path, no_sim):
-    from realize.app.run import run
+    from realize.run.one_run import run
 
     cfg = compose_config(f"warm_start={tmp_path / 'nowhere'}", "ce.n_envs=4", "ce.n_elite=2", "ce.iterations=1")
     with pytest.raises(ConfigError, match="warm_start = .*nowhere.*is not a directory"):

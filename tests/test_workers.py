@@ -1,4 +1,4 @@
-"""Rollout workers (realize.app.workers): shards fix the numbers, workers only where they run.
+"""Rollout workers (realize.workers): shards fix the numbers, workers only where they run.
 
 Checks: the shard and group arithmetic; the config edge (a worker count the shards cannot
 carry is refused before anything is built); a run gives the same numbers in one process and in
@@ -23,10 +23,11 @@ import torch
 from helpers import KEYS, RUN16, compose_config, kill_on_rollout, realize_cli, realize_result
 from realize.config import ConfigError
 from realize.realization.result import RolloutResult
-from realize.app.run_config import build_run_spec
-from realize.app.workers.blocks import deal_rows, group_shards, join_results, shard_rows, split_rows, worker_parts
-from realize.app.workers.errors import WorkerFailed
-from realize.app.workers.settings import WorkersSettings, physx_threads, worker_count
+from realize.spec.run_spec import build_run_spec
+from realize.scene.shards import deal_rows, group_shards, shard_rows, split_rows
+from realize.workers.blocks import join_results, worker_parts
+from realize.workers.errors import WorkerFailed
+from realize.spec.workers_settings import WorkersSettings, physx_threads, worker_count
 
 # RUN16: the issue's must-show run (slow); RUN8: a smaller one of the same kind for every CI run
 RUN8 = ["ce.n_envs=8", "ce.n_elite=2", "ce.iterations=2", "seed=3", "sim.shard_rows=4", "controller.max_time_s=12",
@@ -134,7 +135,7 @@ def test_the_issue_run_gives_the_same_numbers_with_two_worker_processes(one_proc
 def test_a_run_resumed_with_other_workers_gives_the_same_numbers(one_process: dict, tmp_path: Path) -> None:
     from omegaconf import OmegaConf
 
-    from realize.app.run import run
+    from realize.run.one_run import run
 
     def stop(i: int) -> None:
         if i == 0:
@@ -163,8 +164,8 @@ def test_top_k_halving_gives_the_same_numbers_with_workers(tmp_path: Path) -> No
 
 # ------------------------------------------------------------------------------ faults
 def _pool(tmp_path: Path):
-    from realize.app.workers.pool import run_shards
-    from realize.app.workers.process import ProcessPool
+    from realize.workers.pool import run_shards
+    from realize.workers.process import ProcessPool
 
     spec = build_run_spec(compose_config("ce.n_envs=8", "ce.n_elite=2", "sim.shard_rows=4", "controller.max_time_s=4"))
     shards = run_shards(spec)
@@ -186,7 +187,7 @@ def _worker_1_in_rollout(pool, log: Path) -> Callable[[list[int]], int | None]:
 
 @pytest.mark.slow  # a whole run or several processes: make test-all (make test keeps a smoke test)
 def test_a_killed_worker_is_replaced_and_its_rows_rerun(tmp_path: Path) -> None:
-    from realize.app.workers.pool import InProcessPool, run_shards
+    from realize.workers.pool import InProcessPool, run_shards
 
     spec, pool, Z = _pool(tmp_path / "logs")
     with pool:

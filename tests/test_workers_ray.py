@@ -1,4 +1,4 @@
-"""Rollout workers as Ray actors (realize.app.workers.ray_pool), on a local Ray instance and on a
+"""Rollout workers as Ray actors (realize.workers.ray_pool), on a local Ray instance and on a
 cluster started with ``ray start --head``.
 
 Checks: without Ray the backend is a config error; actor CPUs fit the nodes; a run with two
@@ -31,11 +31,11 @@ import ray
 import torch
 
 from helpers import KEYS, RUN16, compose_config, kill_on_rollout, realize_cli, realize_result
-from realize.app.run_config import build_run_spec
-from realize.app.workers.errors import WorkerFailed
+from realize.spec.run_spec import build_run_spec
+from realize.workers.errors import WorkerFailed
 
 from realize.config import ConfigError
-from realize.app.workers.ray_pool import actor_cpus, ray_cores
+from realize.workers.ray_pool import actor_cpus, ray_cores
 
 
 REPO = Path(__file__).resolve().parents[1]
@@ -124,7 +124,7 @@ def test_two_ray_actors_give_the_numbers_of_one_process(tmp_path: Path) -> None:
 def pool_and_batch():
     """Two actors (rows 0-3, 4-7) on a local Ray instance started by ``open_pool``, a batch,
     and every process the instance started (read while it runs)."""
-    from realize.app.workers.pool import open_pool
+    from realize.workers.pool import open_pool
 
     spec = build_run_spec(compose_config("ce.n_envs=8", "ce.n_elite=2", "sim.shard_rows=4", "controller.max_time_s=4",
                                          "workers.n=2", "workers.backend=ray"))
@@ -170,7 +170,7 @@ def test_an_exception_in_an_actor_stops_with_its_traceback_and_no_rerun(pool_and
 
 @pytest.mark.slow  # starts Ray; make test keeps the config checks above
 def test_a_killed_actor_is_replaced_and_its_rows_rerun(pool_and_batch) -> None:
-    from realize.app.workers.pool import InProcessPool, run_shards
+    from realize.workers.pool import InProcessPool, run_shards
 
     spec, pool, Z, _ = pool_and_batch
     first = pool.pids()

@@ -23,8 +23,8 @@ import pytest
 import torch
 
 from helpers import GOOD, compose_config, realize_result
-from realize.app.run_config import build_run_spec
-from realize.app.workers.blocks import deal_rows, shard_rows
+from realize.spec.run_spec import build_run_spec
+from realize.scene.shards import deal_rows, shard_rows
 from realize.config import ConfigError
 from realize.scene import BatchedScene
 from realize.search.ce.ranking import rank_samples, sort_key
@@ -148,7 +148,7 @@ def test_a_robust_run_meets_its_worlds_and_repeats(tmp_path: Path) -> None:
 @pytest.mark.slow  # a worker process (23 s on a busy 2-core host): make test keeps the worlds per copy
 # (test_each_copy_starts_in_its_world) and their folding (test_folding_worlds_equals_a_per_sample_loop)
 def test_a_robust_pool_realizes_each_sample_in_every_world() -> None:
-    from realize.app.workers.pool import open_pool
+    from realize.workers.pool import open_pool
 
     spec = build_run_spec(compose_config("ce.n_envs=6", "ce.n_elite=1", "ce.replicas=3", "sim.shard_rows=3",
                                          "workers.n=1"))

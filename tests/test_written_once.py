@@ -4,7 +4,7 @@ that documents it.
 The rule this file checks:
 
 * A settings dataclass (``realize.config.Settings``) is where a default is written. Where the
-  class is registered as its group's option (``realize.app.hydra_edge.register_schema``: ``sim``,
+  class is registered as its group's option (``realize.spec.hydra_edge.register_schema``: ``sim``,
   ``workers``, ``logging``, ``validation``, ``controller``, ``ce``, a task's ``perturbation``) no YAML file says its values
   (``test_a_registered_group_has_no_yaml``).
 * The other files Hydra composes a run from by default (``configs/config.yaml`` and the option
@@ -17,7 +17,7 @@ The rule this file checks:
   (``configs/experiment/``, ``configs/ablation/``), a group option built on another one
   (``defaults: [plain, _self_]``), a global option in place of its group's default one (the
   ``levers`` options, over the run config without them), a node built on a registered dataclass (a task's
-  ``perturbation:`` over ``Perturbation``, ``realize.app.hydra_edge.register_schema``) and the
+  ``perturbation:`` over ``Perturbation``, ``realize.spec.hydra_edge.register_schema``) and the
   presets read without Hydra (``configs/execute/`` over ``ExecuteSettings``, ``configs/noise/``
   over ``Noise``). A value equal to the one it overrides is the default written a second time:
   taking it out changes no composed config. (A group option that replaces its group's default
@@ -36,7 +36,7 @@ import yaml
 from omegaconf import OmegaConf
 
 from helpers import comparable
-from realize.app.hydra_edge import compose_or_error
+from realize.spec.hydra_edge import compose_or_error
 from realize.execution.perception import Noise
 from realize.execution.settings import ExecuteSettings
 from realize.paths import CONFIG_DIR
@@ -152,10 +152,10 @@ def test_a_registered_group_has_no_yaml() -> None:
     """A group whose option is a registered dataclass has no YAML file of that option (Hydra would
     take the file and leave the class's values unread), and the composed group is the class's
     defaults."""
-    from realize.app.compose import compose_config
-    from realize.app.hydra_edge import registered_options
-    from realize.app.run_settings import LoggingSettings, ValidationSettings
-    from realize.app.workers.settings import WorkersSettings
+    from realize.spec.compose import compose_config
+    from realize.spec.hydra_edge import registered_options
+    from realize.spec.run_settings import LoggingSettings, ValidationSettings
+    from realize.spec.workers_settings import WorkersSettings
     from realize.scene.settings import SimSettings
 
     from realize.search.ce.config import CEConfig

@@ -3,7 +3,7 @@ planner names): plain dataclasses with their defaults and bounds, in a module th
 
 What it does: holds ``PIDConfig`` (the base's waypoint PID), ``FabricConfig`` (the fabric's
 constants), ``WholeBodyConfig`` (the whole-body fabric's keys) and the names ``HEADING_MODES`` and
-``PLANNERS``, so that the ``controller`` group's schema (``realize.app.hydra_edge.register_schema``)
+``PLANNERS``, so that the ``controller`` group's schema (``realize.spec.hydra_edge.register_schema``)
 is registered from the classes without loading the controllers. The controllers' modules
 (``pid``, ``fabrics``, ``whole_body``, ``astar``) import them from here.
 What it doesn't: run a controller.

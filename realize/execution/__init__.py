@@ -17,6 +17,6 @@ Modules:
   * ``trajectory``: the ``.npz`` a driver follows (docs/execution_format.md);
     ``time_param``: time-parameterization within the URDF's limits; ``ros2_export``,
     ``lerobot_export`` and ``export``: an MCAP bag and a LeRobot dataset of the executed worlds.
-Nothing here searches or replans (``realize.app.execute``, ``realize.app.executor`` and
-``realize.app.repair`` do, on top of these).
+Nothing here searches or replans (``realize.repair.study``, ``realize.repair.executor`` and
+``realize.repair.on_deviation`` do, on top of these).
 """

@@ -11,7 +11,7 @@ preset (``configs/execute/``) sets ``budget:`` keys where it differs, ``scripts/
 ``--n-envs``, ``--iterations`` and ``--validation`` override them, and ``realize.Planner``'s
 ``replan``/``resequence`` take one (default: this class's). ``overrides()`` says it as
 run-config keys. ``elites_for(n)`` is the elites of a budget given only its copies.
-What it doesn't: search (``realize.app.planner.Planner`` runs the replan on these keys).
+What it doesn't: search (``realize.run.planner.Planner`` runs the replan on these keys).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ before a repair (``precheck``: ``PrecheckSettings``) and what the world does whi
 (``think``: ``measured``, the replan's own wall time in control steps; ``frozen``, the world
 waits; or a number of control steps, fixed, so that a study repeats bit for bit), and
 ``pickup_m``, the radii of the base annulus from which a re-sequence picks an object off the
-floor (``realize.app.resequence``), and ``budget``, the search of each replan
+floor (``realize.repair.resequence``), and ``budget``, the search of each replan
 (``realize.execution.replan_budget.ReplanBudget``). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
 key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file).
 What it doesn't: check disturbances against a scene (that needs the run's geometry and plan), or
@@ -94,7 +94,7 @@ class ExecuteSettings(Settings):
     think: Any = setting("measured", check=_think)  # the world while the planner thinks (module docstring)
     budget: ReplanBudget = field(default_factory=ReplanBudget)  # each replan's search
     # rad: a repair of a plan that stacks sets a held box down level, turning the hand by at most
-    # this (controller.place_level; realize.app.repair.level_places); null: as the run's controller
+    # this (controller.place_level; realize.repair.on_deviation.level_places); null: as the run's controller
     stack_level_rad: float | None = setting(0.8, ge=0)
     disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
 

@@ -45,7 +45,7 @@ from realize.world.state import SceneState
 if TYPE_CHECKING:
     from realize.scene import EnvOptions
 
-RunSpec = Any  # a run's spec (realize.app.run_config.RunSpec; the app layer sits above this one)
+RunSpec = Any  # a run's spec (realize.spec.run_spec.RunSpec; the run layer sits above this one)
 
 __all__ = ["EXECUTION_STREAM", "TablePose", "BoxSeen", "Observation", "ExecutionWorld"]
 
@@ -121,7 +121,7 @@ class ExecutionWorld:
     """One copy of the run's world, drawn with ``seed``, disturbed by ``apply`` (module docstring).
 
     Args:
-        spec: the run's spec (``realize.app.replay.build_replay_spec(saved_plan(run_dir))``).
+        spec: the run's spec (``realize.validation.replay.build_replay_spec(saved_plan(run_dir))``).
         seed: which world of the task's perturbation model (``EXECUTION_STREAM``).
         perturb: False: the nominal world (the task's config, unperturbed).
         disturbances: the world's drawn disturbances (``realize.execution.disturbances.draw``):

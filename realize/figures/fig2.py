@@ -5,7 +5,7 @@ trajectory (orange tones, darker and opaque for successful plans), its parameter
 the iteration's best plan (base cyan solid, end effector cyan dashed), the regions and the
 tables; it writes the PNG and a CSV of every plotted point. Reads ``trajectories_iter{k}.npz``,
 ``history.npz`` (the samples, where the trajectories file has none) and the scene.
-What it doesn't: record trajectories (the app does, with ``logging.record=true``).
+What it doesn't: record trajectories (a run does, with ``logging.record=true``).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ What it does: ``fig_validation(run_dir)`` reads the ``validation`` block of the 
 success share under the task's perturbations) with its 95 % Wilson interval as error bars, the
 returned candidate highlighted, and ``min_success`` as a dashed line; it writes the PNG and a
 CSV with the plotted numbers (default ``RUN_DIR/figures/fig_validation.{png,csv}``).
-What it doesn't: validate (``realize.app.candidate_validation``) or recompute an interval: the
+What it doesn't: validate (``realize.validation.candidates``) or recompute an interval: the
 numbers are the block's. A single-plan validation (no ``candidates``) is refused with one line.
 """
 

@@ -1,6 +1,6 @@
 """The seed runs behind Fig. 4: one ``python -m realize`` subprocess per seed.
 
-What it does: ``launch_runs(seeds, root)`` runs the app once per seed into ``<root>/seed<S>``
+What it does: ``launch_runs(seeds, root)`` runs ``realize`` once per seed into ``<root>/seed<S>``
 (``jobs`` at a time; each run's output goes to ``<root>/seed<S>.log``), keeps runs whose
 ``result.json`` says ``done`` (unless ``force``) and resumes interrupted ones
 (``run_command``); ``run_status`` reads a run directory's status.
@@ -65,7 +65,7 @@ def launch_runs(
     env: Mapping[str, str] | None = None,
     echo: Callable[[str], None] = print,
 ) -> tuple[list[Path], list[tuple[int, int]]]:
-    """Run the app once per seed into ``<root>/seed<S>`` (subprocesses, ``jobs`` at a time; the
+    """Run ``realize`` once per seed into ``<root>/seed<S>`` (subprocesses, ``jobs`` at a time; the
     output of each goes to ``<root>/seed<S>.log``). Runs whose ``result.json`` says ``done`` are
     kept unless ``force``; interrupted ones are resumed. Returns the run directories that
     finished (status ``done``) and ``(seed, exit code)`` of those that did not."""

@@ -78,7 +78,7 @@ class RolloutConfig(Settings):
 
 
 class RealizerSpec(Protocol):
-    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.app.run_config.RunSpec``)."""
+    """What ``PlanRealizer.from_spec`` reads from a run spec (``realize.spec.run_spec.RunSpec``)."""
 
     task: TaskSpec
     rollout: RolloutConfig

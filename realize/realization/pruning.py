@@ -18,7 +18,7 @@ was read, the one time the rollout asks.
 Each shard of a batch keeps its own bound (its ``keep`` best contain the batch's ``keep`` best
 among its rows), so a run's numbers still do not depend on how shards are dealt to workers.
 What it doesn't: stop anything itself, or apply to a robust or kNN-ranked search, where a row's
-score depends on other rows or worlds (``realize.app.run_config.RunSpec.keep_best`` is None there).
+score depends on other rows or worlds (``realize.spec.run_spec.RunSpec.keep_best`` is None there).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ returns each region's reachable share. ``check_reach`` refuses, in one line nami
 region none of whose samples the arm reaches, and returns a warning line for each region of which
 less than ``warn_below`` is reachable (a hemisphere all around an object, for a 5-joint arm
 that tilts only in the vertical plane through its base: use ``facing: robot``); ``check_reach_all``
-does it for a run's candidate plans and logs the warnings (``realize.app.run_config``).
+does it for a run's candidate plans and logs the warnings (``realize.spec.run_spec``).
 What it doesn't: check mobile robots (the base moves during a grasp), collisions, or the
 samples the search draws later (``ce.screen`` rejects those it can).
 """

@@ -8,7 +8,7 @@ its heading), the end effector and every movable object (boxes at their poses), 
 ``event(k, text)`` a line in ``world/events`` (disturbances, deviations, replans: rerun's
 text log, on the same timeline) and a ``world/replans`` scalar that counts the replans.
 ``close()`` writes the footer.
-What it doesn't: decide what happened (``realize.app.execute``), or draw the robot's links (the
+What it doesn't: decide what happened (``realize.repair.study``), or draw the robot's links (the
 search's recording does, ``realize.recording.world3d``).
 """
 

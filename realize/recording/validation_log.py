@@ -1,7 +1,7 @@
 """A run's candidate validation as a small rerun recording, ``validation.rrd`` in the run directory.
 
 What it does: ``log_validation(run_dir, report)`` takes the ``validation`` block of a run's
-``result.json`` (``realize.app.candidate_validation.CandidatesReport.to_dict()``, or the block read
+``result.json`` (``realize.validation.candidates.CandidatesReport.to_dict()``, or the block read
 back from the file: ``candidates`` with ``cost``, ``success_share``, ``ci95``, ``failures``,
 ``cost_mean``; ``returned``, ``reason``, ``replicas``, ``min_success``, ...) and writes, per candidate
 (index ``j`` into ``validation.candidates``):

@@ -65,7 +65,7 @@ class RunInfo:
     backend: str | None = None
     n_envs: int | None = None
     setup_time_s: float | None = None
-    workers: int = 1  # rollout workers (realize.app.workers); never changes the numbers
+    workers: int = 1  # rollout workers (realize.workers); never changes the numbers
     warm_start: dict[str, Any] | None = None  # the earlier run the search started from (realize.search.warm_start)
 
 

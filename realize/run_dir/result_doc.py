@@ -8,8 +8,8 @@ two apart. Float fields hold real floats in memory (``inf``: no feasible cost; `
 value); ``to_json``/``from_json`` convert at the JSON boundary with the one encoding of
 ``realize.run_dir.jsonio``. ``from_json`` is lenient: any key may be missing (partial or older
 documents, stand-in apps in tests); keys it does not know are kept in ``extra`` and written
-back (e.g. ``validation``, added by ``realize.app.candidate_validation``, and ``plan_validation``,
-added by ``realize.app.validation``).
+back (e.g. ``validation``, added by ``realize.validation.candidates``, and ``plan_validation``,
+added by ``realize.validation.returned_plan``).
 
 JSON keys (the ones readers rely on): ``status`` (running | done | interrupted | failed),
 ``interrupted``, ``error``, ``feasible``, ``best_cost`` (null: none feasible),

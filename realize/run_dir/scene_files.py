@@ -197,7 +197,7 @@ def load_trajectories(run_dir: str | Path, iteration: int) -> dict[str, np.ndarr
     path = trajectories_path(run_dir, iteration)
     if not path.is_file():
         have = [trajectories_name(k) for k in trajectory_iterations(run_dir)]
-        raise FileNotFoundError(f"{path} does not exist (have: {have or 'none'}); the app writes it when "
+        raise FileNotFoundError(f"{path} does not exist (have: {have or 'none'}); a run writes it when "
                                 "trajectories are recorded (logging.record=true)")
     with np.load(path, allow_pickle=False) as z:
         return {k: z[k] for k in z.files}

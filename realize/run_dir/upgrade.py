@@ -12,9 +12,9 @@ what replaced it:
     value moves to ``robot.base.footprint_radius`` where that is unset.
 A group added since: ``validation`` (added 2026-12-02): a run saved without it never validated, so
 it reads as ``validation: {replicas: 0}`` (a new config without the group gets the dataclass's
-defaults, ``realize.app.run_config.ValidationSettings``).
+defaults, ``realize.spec.run_spec.ValidationSettings``).
 ``check_retired(cfg)`` refuses a retired key in a new config in one line, saying what replaced it
-(``realize.app.run_config`` calls it before anything is read).
+(``realize.spec.run_spec`` calls it before anything is read).
 What it doesn't: upgrade anything but configs (``scene.json``'s reader,
 ``realize.run_dir.scene_files``, skips fields it does not know by itself).
 """

@@ -56,7 +56,7 @@ def resolve_backend(backend: str, where: str = "sim.backend") -> str:
 
 def shardable(backend: str) -> bool:
     """Whether a resolved backend's copies may be cut into several scenes (shards of
-    ``sim.shard_rows``, ``realize.app.workers``): the CPU's tiled scenes may; the GPU backend holds
+    ``sim.shard_rows``, ``realize.workers``): the CPU's tiled scenes may; the GPU backend holds
     every copy in one scene on its device."""
     return backend == "cpu"
 

@@ -28,7 +28,7 @@ ROBOT_COLLISIONS = ("all", "no_self", "hand")  # envs.robot_agent.ROBOT_COLLISIO
 @dataclass
 class SimSettings(Settings):
     """Physics settings (the Hydra ``sim`` group: this class's defaults are its one option,
-    ``realize.app.hydra_edge.register_schema``). Every field is a config key."""
+    ``realize.spec.hydra_edge.register_schema``). Every field is a config key."""
 
     config_key: ClassVar[str] = "sim"
 
@@ -52,7 +52,7 @@ class SimSettings(Settings):
     cpu_workers: int | None = setting(None, ge=0)  # PhysX CPU threads of each scene (every worker's); None: a worker's share of the cores
     grasp_min_force: float = setting(0.5, gt=0)  # N, per finger, for "holds the object"
     torch_threads_cpu: int | None = setting(1, ge=1)  # torch intra-op threads beside PhysX CPU workers (None: leave as is)
-    # CPU: at most this many copies per PhysX scene (a shard; realize.app.workers.blocks): a run's
+    # CPU: at most this many copies per PhysX scene (a shard; realize.scene.shards): a run's
     # numbers depend on it, never on workers.n
     shard_rows: int = setting(100, ge=1)
     # PhysX scene settings (ManiSkill's SceneConfig; defaults are ManiSkill's)

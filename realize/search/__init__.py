@@ -5,5 +5,5 @@ Modules: ``protocol`` (``Searcher``, ``Batch``, ``EvalResult``: what the loop as
 halving over the k best symbolic plans), ``warm_start`` (a search begun from an earlier run's
 final distribution), ``stitched``, ``chain`` and ``chain_pool`` (a plan searched as segments
 stitched together: one cut, or a chain of them with credit, and the chain's pools of start states).
-What it doesn't: simulate (``realize.realization``) or run the loop (``realize.app.loop``).
+What it doesn't: simulate (``realize.realization``) or run the loop (``realize.run.loop``).
 """

@@ -14,7 +14,7 @@ to success ascending.
 Each candidate has its own ``CrossEntropyOptimizer`` over its own ``ParamLayout`` (only the
 parameters its plan uses), seeded ``ce.seed + SEED_STRIDE * index``: candidate 0 draws the same
 samples as a single-plan run of the same seed (when its plan binds all the task's parameters).
-All candidates are realized one batch at a time in the same scene (``realize.app.loop``), which is
+All candidates are realized one batch at a time in the same scene (``realize.run.loop``), which is
 valid because every rollout starts with a history-free reset.
 
 What it doesn't: simulate (the caller passes an evaluator ``(candidate index, Z) -> EvalResult``

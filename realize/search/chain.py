@@ -32,7 +32,7 @@ So a segment whose successors keep failing from one mode of it refits on its oth
 doomed row is still realized, kept and tried downstream: the verdict is a guess from neighbours.
 ``run(evaluate)`` drives the same ask/tell without a run directory (the analytic tests).
 
-What it doesn't: simulate or capture states (``realize.app.stitched``), choose the cuts
+What it doesn't: simulate or capture states (``realize.run.stitched_run``), choose the cuts
 (``realize.tasks.split``), or let a segment's rows depend on the predecessor's columns: each
 segment's CE is one distribution over its own columns, whatever row its start came from. The
 segments' searches run a constant schedule without elite memory, screen or patience.

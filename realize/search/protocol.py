@@ -10,7 +10,7 @@ What it does:
     ``CEState`` and, for a search over several candidate plans, their ``HalvingDoc``;
   * ``Searcher``: the protocol (``ask`` / ``tell`` / ``done`` / ``state_dict`` /
     ``load_state_dict`` / ``report``) that ``realize.search.ce.optimizer.CrossEntropyOptimizer`` and
-    ``realize.search.candidates.SuccessiveHalving`` implement; ``realize.app.loop`` drives either one
+    ``realize.search.candidates.SuccessiveHalving`` implement; ``realize.run.loop`` drives either one
     without knowing which.
 What it doesn't: sample, rank or simulate (``realize.search.ce``, ``realize.search.candidates``,
 ``realize.realization``), or write files (``realize.sinks``).

@@ -30,7 +30,7 @@ a guess (a restored state starts at rest, its contacts made anew), the confirmed
 (states through their ``to_json``; a ``read_state`` given to the constructor reads them back)
 and the stitched plans kept.
 
-What it doesn't: simulate or capture states (``realize.app.stitched``, ``realize.app.loop``),
+What it doesn't: simulate or capture states (``realize.run.stitched_run``, ``realize.run.loop``),
 pick the split, or rank a prefix by the suffixes it allows (a cheaper grasp that makes the place
 dearer still wins its pool place; the confirmation sees the sum). The segments' searches run a
 constant schedule without elite memory, screen or patience.

@@ -6,6 +6,6 @@ protocol, the ``Iteration`` event and ``SinkSet``, the one place a failing sink 
 ``result.json``), ``rerun`` (``RerunSink``: ``.rrd`` recordings), ``trajectories``
 (``TrajectorySink``: ``scene.json`` and ``trajectories_iter{k}.npz`` for the figures) and
 ``progress`` (``ProgressSink``: the tqdm bar).
-What they don't: search or simulate (``realize.app.loop`` drives them), or define file formats
+What they don't: search or simulate (``realize.run.loop`` drives them), or define file formats
 (``realize.run_dir``).
 """

@@ -12,7 +12,7 @@ What it does:
     logged, dropped, and the search goes on. ``wants_trajectories``: the rollout records
     trajectories only if a sink wants them;
   * ``SinkSet``: calls the sinks in order and applies that rule, in one place.
-What it doesn't: know any file or format (the sink modules), or drive the search (``realize.app.loop``).
+What it doesn't: know any file or format (the sink modules), or drive the search (``realize.run.loop``).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ What it does:
   * ``RunClock``: the run's wall time over all its segments.
 Every write is atomic (``realize.run_dir``).
 What it doesn't: build the result document (``realize.run_dir.build``; the caller passes a
-``make_doc``), or decide the order of sinks (``realize.app.assembly``: checkpoint, then result).
+``make_doc``), or decide the order of sinks (``realize.run.assembly``: checkpoint, then result).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ What it does:
     needs none in hand. ``move_to`` assumes nothing: it plans from where the base is and holds
     the arm and the gripper as they are (the rollout starts the gripper command from the state).
 What it doesn't: simulate (``realize.realization``), load state files (``realize.world.state``)
-or read run directories (``realize.app.replan``).
+or read run directories (``realize.spec.replan_from``).
 """
 
 from __future__ import annotations

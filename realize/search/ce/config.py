@@ -4,7 +4,7 @@ What it does: declares every CE setting with its bounds and choices (``realize.c
 metadata), the cross-field rules (schedule, elites vs samples, modes vs elites, ...) and the
 sample schedule ``n_envs_at(i)``.
 What it doesn't: sample or rank (``realize.search.ce.optimizer``, ``realize.search.ce.ranking``), or know
-the run's top-level ``seed`` key (``realize.app.run_config`` puts it into ``CEConfig.seed``).
+the run's top-level ``seed`` key (``realize.spec.run_spec`` puts it into ``CEConfig.seed``).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ RISKS = ("mean", "cvar")
 @dataclass
 class CEConfig(Settings):
     """Cross-entropy settings. Defaults follow the seed paper (200 samples, 10 elites, 10 its);
-    they are the Hydra ``ce`` group's default option, ``seed_paper`` (``realize.app.hydra_edge``).
+    they are the Hydra ``ce`` group's default option, ``seed_paper`` (``realize.spec.hydra_edge``).
 
     Fallback when fewer than ``n_elite`` samples are feasible (``fallback``):
 
@@ -75,7 +75,7 @@ class CEConfig(Settings):
     feasible elites (``realize.search.ce.elite_memory``; pruning stays exact, as a row that cannot
     be among the batch's ``n_elite`` best cannot be among the pooled ones either);
     ``batch_scale`` is a record of the share of a preset's batch the config was composed with (a
-    preset opts in with ``${realize_scaled:N,${ce.batch_scale}}``, ``realize.app.hydra_edge``).
+    preset opts in with ``${realize_scaled:N,${ce.batch_scale}}``, ``realize.spec.hydra_edge``).
 
     ``dtype``: the search's bookkeeping dtype (sampling, ranking, refits). ``keep_samples``:
     keep each iteration's ``Z`` in its record.
