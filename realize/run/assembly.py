@@ -352,7 +352,7 @@ class _Assembly:
                   f"unperturbed one ({v.candidates * (v.replicas + 1)} copies at most) ...", flush=True)
         try:
             rep = validate_candidates(self.run_dir, v.candidates, v.replicas, min_success=v.min_success,
-                                      iterations=v.iterations, seed=self.spec.seed)
+                                      iterations=v.iterations, seed=self.spec.seed, spec=self.spec)
         except (ReplayError, ConfigError) as e:
             log.warning("validation skipped: %s", e)
             return

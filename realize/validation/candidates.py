@@ -127,12 +127,13 @@ def pick_candidates(history: Any, k: int, iterations: int) -> list[tuple[np.ndar
 def validate_candidates(run_dir: str | Path, candidates: int | None = None, replicas: int | None = None, *,
                         min_success: float | None = None, iterations: int | None = None, seed: int | None = None,
                         perturbation: Perturbation | None = None, backend: str | None = None,
-                        track_objects: bool | None = None, write: bool = True,
+                        track_objects: bool | None = None, write: bool = True, spec: Any = None,
                         **overrides: Any) -> CandidatesReport:
     """Validate the run's ``candidates`` cheapest distinct feasible plans, ``replicas`` each
     (module docstring); perturbations as ``realize.validation.returned_plan.validate``'s. A setting left
     None is the run's (``realize.validation.returned_plan.run_validation``: its ``validation`` group, its
-    seed), so the call redoes the run's own validation."""
+    seed), so the call redoes the run's own validation. ``spec``: the run's ``RunSpec`` in memory (a
+    run validating itself at its end; else rebuilt from ``result.json``)."""
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
     settings, run_seed = run_validation(run)
@@ -155,7 +156,7 @@ def validate_candidates(run_dir: str | Path, candidates: int | None = None, repl
     picked = pick_candidates(history, candidates, iterations)
     if not picked:
         raise ReplayError(f"{run.run_dir}: no feasible sample in its last {iterations} iteration(s) to validate")
-    spec, model = replica_spec(run, backend, perturbation, track_objects, overrides)
+    spec, model = replica_spec(run, backend, perturbation, track_objects, overrides, spec)
     k, u = len(picked), replicas + 1
     # candidate j fills copies j*u .. j*u + R: world 0, the unperturbed one (its nominal cost), then
     # the perturbed worlds 1..R, the same for every candidate

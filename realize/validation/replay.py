@@ -4,7 +4,8 @@ What it does:
   * ``saved_plan`` reads the run's best plan through ``realize.run_dir.directory.RunDir``
     (the resolved ``config``, ``best_z``, ``best_cost``, ``columns``, the top-k leader);
     ``build_replay_spec`` turns that config back into a ``RunSpec`` with
-    ``realize.spec.run_spec.build_run_spec`` (the simulator backend forced, CPU by default);
+    ``realize.spec.run_spec.build_run_spec`` (the run's simulator backend, or one forced);
+    ``replay_spec`` makes a run's spec (rebuilt, or the one in memory) a replay's;
   * ``replay`` re-simulates the best plan in ONE copy (N = 1) with the run's task, geometry,
     physics, controllers and seed, checks that it reaches the goal and compares its cost with
     the saved ``best_cost``; with ``video=...`` it renders every k-th control step to an MP4.
@@ -61,7 +62,7 @@ from realize.world.state import SceneState, save_state
 
 __all__ = [
     "ReplayError", "VideoRecorder", "VideoReport", "ReplayReport", "PlanChoice",
-    "saved_plan", "returned_z", "build_replay_spec", "video_camera", "best_z_rows", "replay",
+    "saved_plan", "returned_z", "build_replay_spec", "replay_spec", "video_camera", "best_z_rows", "replay",
 ]
 
 NOMINAL = "best_z"  # PlanChoice.source of the search's nominal best
@@ -133,8 +134,9 @@ def returned_z(run: BestPlan, nominal: bool = False) -> PlanChoice:
 
 
 def build_replay_spec(run: BestPlan, backend: str | None = None) -> RunSpec:
-    """The run's ``RunSpec``, on the simulator backend the run's config names (``sim.backend`` and
-    ``device``, as the run resolved them), or with ``backend`` (cpu | gpu | auto) forced."""
+    """The run's ``RunSpec``, rebuilt from its saved config, on the simulator backend the run's
+    config names (``sim.backend`` and ``device``, as the run resolved them), or with ``backend``
+    (cpu | gpu | auto) forced; made a replay's by ``replay_spec``."""
     if backend not in (None, "cpu", "gpu", "auto"):
         raise ReplayError(f"backend = {backend!r} is invalid: allowed 'cpu', 'gpu', 'auto' (None: the run's own)")
     cfg = json.loads(json.dumps(run.config))  # deep copy of plain data
@@ -146,22 +148,28 @@ def build_replay_spec(run: BestPlan, backend: str | None = None) -> RunSpec:
         spec = build_run_spec(cfg)
     except ValueError as e:
         raise ReplayError(f"{run.run_dir / RESULT_FILE}: its config: {e}") from None
+    return replay_spec(spec, run)
+
+
+def replay_spec(spec: RunSpec, run: BestPlan) -> RunSpec:
+    """``spec`` (the run's, in memory or rebuilt) made a replay's, as a new spec: a top-k run's
+    leading candidate as the task (``best_z`` belongs to it), and every row realized to its end."""
+    task = spec.task
     lead = run.leader
-    if spec.halving and lead is not None:  # a top-k run: best_z belongs to the leading candidate
+    if spec.halving and lead is not None:
         i = lead.index
         if not isinstance(i, int) or not 0 <= i < len(spec.candidates) or spec.candidates[i].describe() != lead.plan:
             raise ReplayError(
                 f"{run.run_dir / RESULT_FILE}: its leading candidate {lead.plan!r} is not among the plans "
                 f"the planner returns now ({[t.describe() for t in spec.candidates]})"
             )
-        spec.task = spec.candidates[i]
-    spec.ce = dataclasses.replace(spec.ce, prune=False)  # a replay realizes every row to its end
-    if len(run.best_z) != spec.task.layout.dim:
+        task = spec.candidates[i]
+    if len(run.best_z) != task.layout.dim:
         raise ReplayError(
             f"{run.run_dir / RESULT_FILE}: best_z has {len(run.best_z)} values, the task's parameters "
-            f"{spec.task.layout.dim}"
+            f"{task.layout.dim}"
         )
-    return spec
+    return dataclasses.replace(spec, task=task, ce=dataclasses.replace(spec.ce, prune=False))
 
 
 def best_z_rows(run: BestPlan, k: int = 1) -> torch.Tensor:

@@ -19,7 +19,6 @@ perturbations: each copy sits at its own tile offset (float32 rounding differs).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import time
@@ -32,7 +31,7 @@ import numpy as np
 import torch
 
 from realize.validation.action_outcomes import plan_outcomes
-from realize.validation.replay import ReplayError, build_replay_spec, returned_z, saved_plan
+from realize.validation.replay import ReplayError, build_replay_spec, replay_spec, returned_z, saved_plan
 from realize.spec.run_spec import ValidationSettings
 from realize.config import ConfigError
 from realize.tasks.perturbation import Perturbation
@@ -139,12 +138,14 @@ def validation_worlds(model: Perturbation, objects: Any, replicas: int, seed: in
 
 
 def replica_spec(run: Any, backend: str | None, perturbation: Perturbation | None, track_objects: bool | None,
-                 overrides: dict[str, Any]) -> tuple[Any, Perturbation]:
+                 overrides: dict[str, Any], spec: Any = None) -> tuple[Any, Perturbation]:
     """The run's replay spec (``track_objects`` overriding its controller's) and the perturbation
-    model (``perturbation`` or the run task's, with ``overrides`` of its fields)."""
-    spec = build_replay_spec(run, backend)
+    model (``perturbation`` or the run task's, with ``overrides`` of its fields). ``spec``: the
+    run's spec in memory (a run validating itself), taken as it is where no ``backend`` is forced;
+    else the spec is rebuilt from the run's saved config."""
+    spec = build_replay_spec(run, backend) if spec is None or backend is not None else replay_spec(spec, run)
     if track_objects is not None:
-        spec.rollout = dataclasses.replace(spec.rollout, track_objects=bool(track_objects))
+        spec = dataclasses.replace(spec, rollout=dataclasses.replace(spec.rollout, track_objects=bool(track_objects)))
     try:
         model = (perturbation or spec.task.perturbation).with_overrides(**overrides)
     except (TypeError, ConfigError) as e:
@@ -162,10 +163,9 @@ def simulate_worlds(spec: Any, Z: torch.Tensor, worlds: Worlds, log_dir: Path | 
     n = Z.shape[0]
     if len(worlds) != n:
         raise ReplayError(f"{len(worlds)} worlds for {n} plans")
-    vspec = copy.copy(spec)
-    vspec.ce = dataclasses.replace(spec.ce, n_envs=n, n_envs_end=None, schedule="constant", n_elite=1, replicas=1,
-                                   knn_robust=0, n_modes=1)
-    vspec.worlds = worlds
+    ce = dataclasses.replace(spec.ce, n_envs=n, n_envs_end=None, schedule="constant", n_elite=1, replicas=1,
+                             knn_robust=0, n_modes=1)
+    vspec = dataclasses.replace(spec, ce=ce, worlds=worlds)
     pool = open_pool(vspec, [spec.task], log_dir=log_dir)
     try:
         return pool.rollout(None, Z), pool.backend

@@ -15,7 +15,7 @@ What it doesn't: talk to the search or to other workers (``realize.workers.proce
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -39,10 +39,7 @@ def worker_spec(spec: RunSpec, physx_threads: int | None) -> RunSpec:
     set by the user, the one key for them: as it is)."""
     if physx_threads is None or spec.sim.cpu_workers is not None:
         return spec
-    out = copy.copy(spec)
-    out.sim = copy.copy(spec.sim)
-    out.sim.cpu_workers = physx_threads
-    return out
+    return dataclasses.replace(spec, sim=dataclasses.replace(spec.sim, cpu_workers=physx_threads))
 
 
 class ShardWorker:
