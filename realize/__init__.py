@@ -18,6 +18,7 @@ _LAZY = {
     "PlanResult": "realize.run.planner",
     "ReplanBudget": "realize.run.planner",
     "compose_config": "realize.spec.compose",
+    "compose_execution": "realize.spec.execution_config",
     "SceneState": "realize.world.state",
     "execute": "realize.repair.study",
 }

@@ -1,14 +1,19 @@
 """Carry a run's returned plan out in changing worlds, open loop beside closed loop (watch and replan).
 
 Usage: python scripts/execute.py RUN_DIR [--disturbance FAMILY|FILE.yaml] [--worlds W] [--seed S]
-            [--max-replans N] [--noise PRESET] [--think measured|frozen|STEPS] [--check-copies K]
+            [--max-replans N] [--noise PRESET|FILE.yaml] [--think measured|frozen|STEPS] [--check-copies K]
             [--open-only | --closed-only] [--n-envs N] [--iterations T] [--validation R]
             [--video] [--no-rerun] [--out DIR] [--json] [--export ros2,lerobot] [--accel-limit A]
+            [execute.KEY=VALUE ...]
 
-FAMILY is a preset of configs/execute/ (none, cube_moved, table_moved, knocked_out, obstacle) or a
-YAML file of the same keys; --worlds, --seed and --max-replans override it. Each world is its own
-one-copy scene drawn from the task's perturbation model with seed S * 1000 + k, plus the family's
-disturbances; the replans search --n-envs copies for at most --iterations iterations and stop at
+The study's settings are a Hydra config (configs/execution.yaml, realize.compose_execution):
+FAMILY is an option of its execute group (configs/execute/: none, cube_moved, table_moved,
+knocked_out, obstacle, pushed, tower_knocked, block_moved, grasp_slip) or a YAML file of the same
+keys, PRESET an option of its noise group (configs/noise/); the flags set their keys
+(--worlds is execute.worlds, --n-envs execute.budget.n_envs, ...), and trailing overrides set
+any key of realize.execution.settings.ExecuteSettings (execute.tolerance.object_m=0.2), after
+the flags. Each world is its own one-copy scene drawn from the task's perturbation model with seed
+S * 1000 + k, plus the family's disturbances; the replans search --n-envs copies for at most --iterations iterations and stop at
 the first plan that reaches the goal (the preset's budget: realize.execution.replan_budget). Results go to
 RUN_DIR/execution/FAMILY/ (summary.json, world-K-{open,closed}.json/.npz/.rrd; format of the .npz in
 docs/execution_format.md). The last lines print the study's table row.
@@ -19,7 +24,6 @@ docs/execution_format.md). The last lines print the study's table row.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import logging
 import sys
@@ -36,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()), epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run_dir")
+    p.add_argument("overrides", nargs="*", help="keys of the execution config, after the flags (execute.KEY=VALUE)")
     p.add_argument("--disturbance", default="none", help="preset of configs/execute/ or a YAML file (default none)")
     p.add_argument("--worlds", type=int, default=None, help="worlds (default: the preset's)")
     p.add_argument("--seed", type=int, default=None, help="study seed (default: the preset's)")
@@ -70,13 +75,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--accel-limit", type=float, default=None,
                    help="the exported arm trajectories' acceleration limit, rad/s^2 (m/s^2 prismatic), every joint "
                         "(default: realize.execution.time_param.DEFAULT_ACCELERATION_LIMIT)")
-    a = p.parse_args(argv)
+    a = p.parse_intermixed_args(argv)
 
     from realize.repair.study import execute
     from realize.config import ConfigError
     from realize.execution.export import DEFAULT_ACCELERATION_LIMIT, ExportOptions, export_formats
-    from realize.execution.perception import load_noise
-    from realize.execution.settings import load_preset
+    from realize.spec.execution_config import compose_execution
 
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     try:
@@ -85,22 +89,24 @@ def main(argv: list[str] | None = None) -> int:
         formats = export_formats(a.export)  # a bad name is refused before anything runs
         accel = DEFAULT_ACCELERATION_LIMIT if a.accel_limit is None else a.accel_limit
         ExportOptions(acceleration_limit=accel)
-        settings = load_preset(a.disturbance)
-        changed = {key: getattr(a, key) for key in ("worlds", "seed", "max_replans") if getattr(a, key) is not None}
-        if a.noise is not None:
-            changed["noise"] = dataclasses.asdict(load_noise(a.noise))
-        if a.think is not None:
-            changed["think"] = int(a.think) if a.think.lstrip("-").isdigit() else a.think
-        if a.check_copies is not None:
-            changed["precheck"] = {**dataclasses.asdict(settings.precheck), "copies": a.check_copies}
-        kw = {k: v for k, v in (("n_envs", a.n_envs), ("iterations", a.iterations), ("validation", a.validation))
-              if v is not None}
+        files = {}
+        overrides = []
+        for flag, group in ((a.disturbance, "execute"), (a.noise, "noise")):
+            if flag is None:
+                continue
+            if Path(flag).suffix in (".yaml", ".yml"):
+                files[group] = flag
+            else:
+                overrides.append(f"{group}={flag}")
+        for flag, key in ((a.worlds, "worlds"), (a.seed, "seed"), (a.max_replans, "max_replans"), (a.think, "think"),
+                          (a.check_copies, "precheck.copies"), (a.n_envs, "budget.n_envs"),
+                          (a.iterations, "budget.iterations"), (a.validation, "budget.validation")):
+            if flag is not None:
+                overrides.append(f"execute.{key}={flag}")
         if a.n_envs is not None:
-            kw["n_elite"] = ReplanBudget.elites_for(a.n_envs)
-        if kw:
-            changed["budget"] = {**dataclasses.asdict(settings.budget), **kw}
-        if changed:
-            settings = type(settings).from_mapping({**dataclasses.asdict(settings), **changed}, "execute")
+            overrides.append(f"execute.budget.n_elite={ReplanBudget.elites_for(a.n_envs)}")
+        settings = compose_execution([*overrides, *a.overrides], preset_file=files.get("execute"),
+                                     noise_file=files.get("noise"))
         name = Path(a.disturbance).stem
         s = execute(a.run_dir, settings, name=name, open_loop=not a.closed_only, closed_loop=not a.open_only,
                     out=a.out, rerun=not a.no_rerun, video=a.video, export=formats, export_acceleration=accel)

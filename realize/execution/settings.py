@@ -13,7 +13,10 @@ waits; or a number of control steps, fixed, so that a study repeats bit for bit)
 ``pickup_m``, the radii of the base annulus from which a re-sequence picks an object off the
 floor (``realize.repair.resequence``), and ``budget``, the search of each replan
 (``realize.execution.replan_budget.ReplanBudget``). Unknown keys and bad values are one-line ``ConfigError``\\ s naming the
-key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file).
+key. ``load_preset(name)`` reads ``configs/execute/<name>.yaml`` (or a path to a YAML file)
+over these defaults; a study's config is composed by Hydra (``configs/execution.yaml``: the
+``execute`` and ``noise`` groups, ``realize.spec.execution_config.compose_execution``), which
+gives the same settings for a preset.
 What it doesn't: check disturbances against a scene (that needs the run's geometry and plan), or
 execute anything.
 """

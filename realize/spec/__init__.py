@@ -10,6 +10,8 @@ Modules, by what you look for (docs/architecture.md draws the path through them)
 * ``run_spec``: the whole config checked into a ``RunSpec`` (``build_run_spec``).
 * The groups the run layer owns: ``run_settings`` (``logging``, ``validation``, ``replan``),
   ``stitch_settings`` (``stitch``), ``workers_settings`` (``workers``).
+* ``execution_config``: an execution study's config (``realize.compose_execution``): the
+  ``execute`` and ``noise`` groups over ``ExecuteSettings``.
 * ``task_plans``: a run's task and candidate plans; ``replan_from``: the spec of a replan (the rest
   of an earlier run's plan from a state); ``resume_config``: what a resumed run takes from the
   command line.

@@ -113,13 +113,14 @@ def _compose_choices(choices: tuple[str, ...]) -> Any:
     return _compose_whole(list(choices))
 
 
-def _compose_whole(overrides: list[str]) -> Any:
-    """Hydra's compose, every file read (what ``compose_or_error`` caches)."""
+def _compose_whole(overrides: list[str], config_name: str = "config") -> Any:
+    """Hydra's compose of ``configs/<config_name>.yaml``, every file read (what ``compose_or_error``
+    caches for the run config)."""
     from hydra import compose, initialize_config_dir
 
     try:
         with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3", job_name="realize"):
-            return compose(config_name="config", overrides=list(overrides))
+            return compose(config_name=config_name, overrides=list(overrides))
     except Exception as e:
         raise _one_line(e) from None
 
