@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 from realize.config import ConfigError, did_you_mean
 from realize.paths import CONFIG_DIR
-from realize.spec.hydra_edge import _compose_whole, _one_line, parse_overrides, resolution_error, split_overrides
+from realize.spec.hydra_edge import (_compose_whole, _one_line, _plain_data, parse_overrides, resolution_error,
+                                     split_overrides)
 
 if TYPE_CHECKING:
     from realize.execution.settings import ExecuteSettings
@@ -35,21 +36,13 @@ EXECUTION_GROUPS = ("execute", "noise")  # their options: the files of configs/e
 
 def _register() -> None:
     """``execute_defaults``: ExecuteSettings' defaults at package ``execute`` (idempotent)."""
-    import dataclasses
-
     from hydra.core.config_store import ConfigStore
 
     from realize.execution.settings import ExecuteSettings
 
     store = ConfigStore.instance()
     if "execute_defaults.yaml" not in store.list(""):
-        store.store(name="execute_defaults", node=_plain(dataclasses.asdict(ExecuteSettings())), package="execute")
-
-
-def _plain(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    return [_plain(x) for x in v] if isinstance(v, (list, tuple)) else v
+        store.store(name="execute_defaults", node=_plain_data(ExecuteSettings()), package="execute")
 
 
 def _check_choices(parsed: Sequence[Any]) -> None:
