@@ -48,6 +48,24 @@ def test_compose_config_gives_the_plain_config() -> None:
     assert isinstance(d, dict) and "hydra" not in d and d["ce"]["n_envs"] == 3
 
 
+def test_from_config_checks_a_composed_config_at_once() -> None:
+    """A Hydra app's composed config (DictConfig) or compose_config's plain data: checked into a
+    RunSpec when the planner is made; a bad value is one line there, before any worker starts."""
+    from omegaconf import OmegaConf
+
+    cfg = compose_config(["device=cpu", "ce.n_envs=3", "ce.n_elite=2"])
+    planner = Planner.from_config(OmegaConf.create(cfg))
+    assert planner.config == cfg and planner.open_pools == 0
+    planner.close()
+    bad = compose_config(["device=cpu", "ce.n_envs=3", "ce.n_elite=2"])
+    bad["ce"]["n_elite"] = 5  # more elites than copies: build_run_spec's refusal
+    with pytest.raises(ConfigError, match=r"ce.n_elite") as ei:
+        Planner.from_config(bad)
+    assert "\n" not in str(ei.value)
+    with pytest.raises(ConfigError, match="a list of overrides goes to Planner"):
+        Planner.from_config(["ce.n_envs=3"])  # type: ignore[arg-type]
+
+
 # ------------------------------------------------------------------------------ plan twice
 @pytest.fixture(scope="module")
 def known(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -1,7 +1,7 @@
 """The planner you import: built once from a config, then ``plan()``, ``replan(...)``, ``close()``.
 
 What it does: ``Planner`` holds one run config (composed from overrides, as the ``realize``
-command composes its arguments, or given) and the rollout workers it has opened. ``plan()``
+command composes its arguments, or given; ``Planner.from_config`` checks a given one at once) and the rollout workers it has opened. ``plan()``
 runs the search of that config into a run directory (the command line runs through it: one
 path; ``resume`` and ``replan_from`` configs too) and returns a typed ``PlanResult``.
 ``replan(state, from_action, changes)`` realizes the rest of a plan from a
@@ -98,6 +98,21 @@ class Planner:
         self._built: set[str] = set()  # keys whose workers the current call built
         self.last: PlanResult | None = None
         self.closed = False
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any] | DictConfig, **kw: Any) -> Planner:
+        """A planner of a composed config (a Hydra app's ``cfg``, whose groups the settings
+        dataclasses type: ``realize.spec.hydra_edge.register_schema``; or ``compose_config``'s
+        plain data), checked into its ``RunSpec`` at once: a bad value is one ``ConfigError``
+        line here, before any worker starts, not at ``plan()``."""
+        from realize.spec.run_spec import build_run_spec
+
+        if not isinstance(cfg, (DictConfig, Mapping)):
+            raise ConfigError(f"Planner.from_config: give a composed config (a mapping), not {type(cfg).__name__}; "
+                              f"a list of overrides goes to Planner(overrides)")
+        planner = cls(cfg, **kw)
+        build_run_spec(dict(planner.config, resume=None))
+        return planner
 
     @classmethod
     def from_run(cls, run_dir: str | Path, **kw: Any) -> Planner:
