@@ -39,6 +39,7 @@ import csv
 import json
 import math
 import os
+import re
 import shutil
 import statistics
 import sys
@@ -76,6 +77,18 @@ def copy_steps(run_dir: Path) -> int:
                 if k.startswith("steps_"):
                     total += int(h[k].size) * int(h[k].max(initial=0))
     return total
+
+
+def variant_label(name: str, extra: list[str]) -> str:
+    """The ``variant`` column of a row: the search's name, with the ``--extra`` overrides after it
+    (``plain[controller.place_lift=true]``), so that runs of one preset with other options keep
+    their own rows and each is compared with its own tower3."""
+    return f"{name}[{' '.join(extra)}]" if extra else name
+
+
+def run_dir_name(preset: str, variant: str, seed: int) -> str:
+    """A row's kept run directory (the variant's overrides made a file name)."""
+    return re.sub(r"[^\w.=+-]+", "_", f"{preset}-{variant}-s{seed}")
 
 
 def measure(preset: str, overrides: list[str], seed: int, run_dir: Path) -> dict[str, object]:
@@ -181,7 +194,7 @@ def main() -> None:
     if args.summary:
         rows = read(args.summary)
         for r in rows:  # rows written before the column: read it from the kept run directory
-            d = (args.keep or Path()) / f"{r['preset']}-{r['variant']}-s{r['seed']}"
+            d = (args.keep or Path()) / run_dir_name(r["preset"], r["variant"], int(r["seed"]))
             if not r.get("copy_steps") and args.keep and d.is_dir():
                 r["copy_steps"] = str(copy_steps(d))
         sys.exit(0 if report(rows) else 1)
@@ -203,10 +216,11 @@ def main() -> None:
             for preset in presets:
                 for name, ov in variants.items():
                     overrides = [*PRESETS[preset], *ov, *extra]
-                    run_dir = keep / f"{preset}-{name}-s{seed}"
+                    variant = variant_label(name, extra)
+                    run_dir = keep / run_dir_name(preset, variant, seed)
                     shutil.rmtree(run_dir, ignore_errors=True)  # a run dir with a checkpoint would resume
                     row = measure(preset, overrides, seed, run_dir)
-                    row = {"preset": preset, "variant": name, "seed": seed,
+                    row = {"preset": preset, "variant": variant, "seed": seed,
                            "overrides": " ".join(overrides), **row, "commit": commit_of(REPO)}
                     w.writerow(row)
                     f.flush()

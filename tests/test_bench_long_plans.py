@@ -59,3 +59,15 @@ def test_the_work_ratio_is_printed_beside_the_time_ratio(capsys) -> None:
     rows = [{**_row("tower3", 4, 100, 0.95), "copy_steps": "1000"}, {**_row("tower4", 6, 150, 0.95), "copy_steps": "1500"}]
     blp.report(rows)
     assert "x tower3 1.50 (copy steps x tower3 1.50)" in capsys.readouterr().out
+
+
+def test_runs_with_other_options_keep_their_own_rows(capsys) -> None:
+    """``--extra`` names the variant, so a preset searched with an option is a row of its own
+    (not collapsed into the plain one), compared with tower3 as searched today."""
+    lifted = blp.variant_label("plain", ["controller.place_lift=true"])
+    assert lifted == "plain[controller.place_lift=true]" and blp.variant_label("plain", []) == "plain"
+    assert blp.run_dir_name("tower5", lifted, 0) == "tower5-plain_controller.place_lift=true_-s0"
+    rows = [_row("tower3", 4, 100, 0.95), _row("tower5", 8, 300, 0.75), _row("tower5", 8, 200, 0.91, variant=lifted)]
+    blp.report(rows)
+    out = capsys.readouterr().out
+    assert f"== {lifted}" in out and "x tower3 3.00" in out and "x tower3 2.00" in out
