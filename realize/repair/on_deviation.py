@@ -133,7 +133,7 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
              f"{res.cost:.0f}" if res.feasible else "none")
     if not res.feasible:
         return rec, None
-    rspec = build_replay_spec(saved_plan(res.run_dir), EXECUTION_BACKEND)
+    rspec = build_replay_spec(saved_plan(res.run_dir), EXECUTION_BACKEND, judged=True)
     whole = ex.spec.task.describe()
     offset = res.from_action if rspec.config.get("task", {}).get("plan") == ex.run.config["task"].get("plan") \
         and whole.endswith(rspec.task.describe()) else None

@@ -70,7 +70,7 @@ def execute_world(run_dir: str | Path, settings: ExecuteSettings, k: int, *, clo
 
     run = saved_plan(run_dir)
     choice = returned_z(run)
-    spec = build_replay_spec(dataclasses.replace(run, best_z=choice.z), EXECUTION_BACKEND)
+    spec = build_replay_spec(dataclasses.replace(run, best_z=choice.z), EXECUTION_BACKEND, judged=True)
     disturbances = read_disturbances(settings.disturbances, spec.geometry, [str(a) for a in spec.task.plan])
     seed = settings.seed * SEED_STRIDE + k
     scheduled = draw(disturbances, np.random.default_rng([settings.seed, k]))
@@ -101,7 +101,7 @@ def execute(run_dir: str | Path, settings: ExecuteSettings, *, name: str | None 
 
     t0 = time.perf_counter()
     run = saved_plan(run_dir)
-    spec = build_replay_spec(run, EXECUTION_BACKEND)
+    spec = build_replay_spec(run, EXECUTION_BACKEND, judged=True)
     read_disturbances(settings.disturbances, spec.geometry, [str(a) for a in spec.task.plan])  # before simulating
     formats = export_formats(export)
     export_options = ExportOptions.for_robot(spec.robot, export_acceleration) if formats else None

@@ -8,7 +8,11 @@ movable object of the scene (``realize.world.objects``):
   * ``rests_at: {cube: {region: Spot, tol: 0.02}}``: the object's centre rests within ``tol`` of the
     task parameter ``Spot`` (a fixed point, or inside a box region grown by ``tol``), e.g.
     "put the cube back on table 1, 15 cm further" (``Spot`` framed by ``table1``);
-  * ``base_in: Exit``: the base ends inside that 2-D box parameter.
+  * ``base_in: Exit``: the base ends inside that 2-D box parameter;
+  * ``margin: 0.01`` (m, default 0): while a run searches, an object resting on another object must
+    stand this much further inside its support's top than the goal asks (the support's inscribed
+    circle shrunk by it), so that the search's plans keep off the edge of what stands; validation
+    and execution judge the goal itself (``judged()``: the margin 0).
 (``rests_*``, not ``on``: YAML 1.1, which Hydra reads, takes a bare ``on`` for true.)
 ``goal_from_dict`` reads and checks it against the scene and the task's regions: an unknown
 object, table, container or parameter, or a region of the wrong kind, is one ``ConfigError``
@@ -19,7 +23,7 @@ What it doesn't: evaluate anything (``realize.tasks.goals`` does, batched).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from realize.config import ConfigError, check_unknown, did_you_mean
@@ -28,7 +32,7 @@ from realize.world.geometry import SceneGeometry
 
 __all__ = ["AtGoal", "GoalSpec", "GOAL_KEYS", "goal_from_dict", "DEFAULT_AT_TOL"]
 
-GOAL_KEYS = ("rests_on", "rests_in", "rests_at", "base_in")
+GOAL_KEYS = ("rests_on", "rests_in", "rests_at", "base_in", "margin")
 DEFAULT_AT_TOL = 0.02  # m
 
 
@@ -48,6 +52,11 @@ class GoalSpec:
     inside: Mapping[str, str] = field(default_factory=dict)  # object -> container (config key ``rests_in``)
     at: Mapping[str, AtGoal] = field(default_factory=dict)  # object -> point or box parameter
     base_in: str | None = None  # a parameter whose region is a 2-D box
+    margin: float = 0.0  # m: a stacked object's centre this much further inside its support's top, while searching
+
+    def judged(self) -> GoalSpec:
+        """The goal as validation and execution judge it: without the search's ``margin``."""
+        return replace(self, margin=0.0) if self.margin else self
 
     @property
     def objects(self) -> tuple[str, ...]:
@@ -79,6 +88,8 @@ class GoalSpec:
             d["rests_at"] = {k: {"region": a.region, "tol": a.tol} for k, a in self.at.items()}
         if self.base_in is not None:
             d["base_in"] = self.base_in
+        if self.margin:
+            d["margin"] = self.margin
         return d
 
 
@@ -161,4 +172,14 @@ def goal_from_dict(d: Any, scene: SceneGeometry, regions: Mapping[str, Region], 
         r = regions[base_in]
         if not (isinstance(r, Box) and r.dim == 2):
             raise ConfigError(f"{where}.base_in: {base_in!r} must be a 2-D box region")
-    return GoalSpec(on, inside, at, base_in)
+    margin = d.get("margin", 0.0)
+    if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0.0 <= margin < 1.0:
+        raise ConfigError(f"{where}.margin = {margin!r} is invalid: must be a distance >= 0 (m)")
+    for name, support in on.items():
+        if margin and support in objects:
+            s = scene.object(support)
+            r = min(s.half_size[0], s.half_size[1])
+            if margin >= r:
+                raise ConfigError(f"{where}.margin = {margin!r} is invalid: {name!r} rests on {support!r}, whose top "
+                                  f"admits a centre within {r:.4g} m of its middle; the margin must be smaller")
+    return GoalSpec(on, inside, at, base_in, float(margin))

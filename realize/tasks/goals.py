@@ -52,20 +52,21 @@ def object_on_table(p: Tensor, speed: Tensor, geometry: SceneGeometry, obj: str,
 
 
 def object_on_object(p: Tensor, speed: Tensor, below: Tensor, below_speed: Tensor, geometry: SceneGeometry,
-                     obj: str, support: str, rest_speed: float = REST_SPEED) -> Tensor:
+                     obj: str, support: str, rest_speed: float = REST_SPEED, margin: float = 0.0) -> Tensor:
     """(N,) bool: centres ``p`` (N, 3) of object ``obj`` rest on object ``support``'s top, where
     that object stands now (its centres ``below``, (N, 3)): the centre over the support's
-    inscribed circle (whatever either's yaw), at resting height within ``HEIGHT_TOL``, both
-    nearly still (speeds (N,) each)."""
-    ok = object_on_object_distance(p, below, geometry, obj, support) <= 0.0
+    inscribed circle shrunk by ``margin`` (whatever either's yaw), at resting height within
+    ``HEIGHT_TOL``, both nearly still (speeds (N,) each)."""
+    ok = object_on_object_distance(p, below, geometry, obj, support, margin) <= 0.0
     return ok & (speed <= rest_speed) & (below_speed <= rest_speed)
 
 
-def object_on_object_distance(p: Tensor, below: Tensor, geometry: SceneGeometry, obj: str, support: str) -> Tensor:
+def object_on_object_distance(p: Tensor, below: Tensor, geometry: SceneGeometry, obj: str, support: str,
+                              margin: float = 0.0) -> Tensor:
     """(N,) how far (m) centres ``p`` of object ``obj`` are from resting on object ``support``
-    whose centres are ``below``."""
+    whose centres are ``below`` (its top's inscribed circle shrunk by ``margin``)."""
     s = geometry.object(support)
-    r = min(s.half_size[0], s.half_size[1])
+    r = min(s.half_size[0], s.half_size[1]) - margin
     top = below[:, 2] + s.half_height + geometry.object(obj).half_height
     dxy = ((p[:, :2] - below[:, :2]).norm(dim=1) - r).clamp(min=0.0)
     dz = ((p[:, 2] - top).abs() - HEIGHT_TOL).clamp(min=0.0)
@@ -162,8 +163,8 @@ def goal_reached(goal: GoalSpec, geometry: SceneGeometry, regions: Mapping[str, 
         if support in geometry.object_names:  # a stack: on that object, where it stands
             j = geometry.object_index(support)
             ok &= object_on_object(objects[:, k], speeds[:, k], objects[:, j], speeds[:, j], geometry, name, support,
-                                   rest_speed)
-            dist += object_on_object_distance(objects[:, k], objects[:, j], geometry, name, support)
+                                   rest_speed, goal.margin)
+            dist += object_on_object_distance(objects[:, k], objects[:, j], geometry, name, support, goal.margin)
             continue
         ok &= object_on_table(objects[:, k], speeds[:, k], geometry, name, support, rest_speed)
         dist += object_on_table_distance(objects[:, k], geometry, name, support)

@@ -70,7 +70,7 @@ def settled_goal(task: TaskSpec, upto: int) -> GoalSpec:
     def keep(m: Mapping[str, str]) -> dict[str, str]:
         return {o: s for o, s in m.items() if o in done and s not in moved_later}
 
-    return GoalSpec(on=keep(task.goal.on), inside=keep(task.goal.inside))
+    return GoalSpec(on=keep(task.goal.on), inside=keep(task.goal.inside), margin=task.goal.margin)
 
 
 def place_cuts(task: TaskSpec) -> list[int]:

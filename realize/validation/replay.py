@@ -133,10 +133,10 @@ def returned_z(run: BestPlan, nominal: bool = False) -> PlanChoice:
                       f"{v.get('reason', '?')})")
 
 
-def build_replay_spec(run: BestPlan, backend: str | None = None) -> RunSpec:
+def build_replay_spec(run: BestPlan, backend: str | None = None, judged: bool = False) -> RunSpec:
     """The run's ``RunSpec``, rebuilt from its saved config, on the simulator backend the run's
     config names (``sim.backend`` and ``device``, as the run resolved them), or with ``backend``
-    (cpu | gpu | auto) forced; made a replay's by ``replay_spec``."""
+    (cpu | gpu | auto) forced; made a replay's by ``replay_spec`` (``judged``: see there)."""
     if backend not in (None, "cpu", "gpu", "auto"):
         raise ReplayError(f"backend = {backend!r} is invalid: allowed 'cpu', 'gpu', 'auto' (None: the run's own)")
     cfg = json.loads(json.dumps(run.config))  # deep copy of plain data
@@ -148,12 +148,14 @@ def build_replay_spec(run: BestPlan, backend: str | None = None) -> RunSpec:
         spec = build_run_spec(cfg)
     except ValueError as e:
         raise ReplayError(f"{run.run_dir / RESULT_FILE}: its config: {e}") from None
-    return replay_spec(spec, run)
+    return replay_spec(spec, run, judged)
 
 
-def replay_spec(spec: RunSpec, run: BestPlan) -> RunSpec:
+def replay_spec(spec: RunSpec, run: BestPlan, judged: bool = False) -> RunSpec:
     """``spec`` (the run's, in memory or rebuilt) made a replay's, as a new spec: a top-k run's
-    leading candidate as the task (``best_z`` belongs to it), and every row realized to its end."""
+    leading candidate as the task (``best_z`` belongs to it), and every row realized to its end.
+    ``judged``: the goal as validation and execution judge it, without the search's
+    ``goal.margin`` (``GoalSpec.judged``); a replay of the run keeps it (the run's own outcome)."""
     task = spec.task
     lead = run.leader
     if spec.halving and lead is not None:
@@ -169,7 +171,11 @@ def replay_spec(spec: RunSpec, run: BestPlan) -> RunSpec:
             f"{run.run_dir / RESULT_FILE}: best_z has {len(run.best_z)} values, the task's parameters "
             f"{task.layout.dim}"
         )
-    return dataclasses.replace(spec, task=task, ce=dataclasses.replace(spec.ce, prune=False))
+    candidates = spec.candidates
+    if judged:
+        task = dataclasses.replace(task, goal=task.goal.judged())
+        candidates = [dataclasses.replace(c, goal=c.goal.judged()) for c in candidates]
+    return dataclasses.replace(spec, task=task, candidates=candidates, ce=dataclasses.replace(spec.ce, prune=False))
 
 
 def best_z_rows(run: BestPlan, k: int = 1) -> torch.Tensor:

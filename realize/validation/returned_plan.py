@@ -142,8 +142,10 @@ def replica_spec(run: Any, backend: str | None, perturbation: Perturbation | Non
     """The run's replay spec (``track_objects`` overriding its controller's) and the perturbation
     model (``perturbation`` or the run task's, with ``overrides`` of its fields). ``spec``: the
     run's spec in memory (a run validating itself), taken as it is where no ``backend`` is forced;
-    else the spec is rebuilt from the run's saved config."""
-    spec = build_replay_spec(run, backend) if spec is None or backend is not None else replay_spec(spec, run)
+    else the spec is rebuilt from the run's saved config. The goal is judged without the search's
+    ``goal.margin``."""
+    spec = (build_replay_spec(run, backend, judged=True) if spec is None or backend is not None
+            else replay_spec(spec, run, judged=True))  # the goal itself, not the search's margin
     if track_objects is not None:
         spec = dataclasses.replace(spec, rollout=dataclasses.replace(spec.rollout, track_objects=bool(track_objects)))
     try:
