@@ -252,6 +252,26 @@ def test_a_pick_place_resequence_turns_the_tasks_planner_off(tmp_path) -> None:
     assert task_cfg["planner"]["enabled"] is True  # the caller's mapping is left as it was
 
 
+def test_a_cube_tipped_against_a_tables_edge_is_picked_up_where_it_lies(tmp_path) -> None:
+    """knocked_out's world 9 (2026-12-07): the cube dropped in a place and came to rest tipped
+    against table 2's edge, its centre 1 cm past the top, 8 mm above resting height. It is on no
+    table's top and not on the floor; it gets a site of its own where it lies (as one on the
+    floor does), so the planner picks it up from there instead of calling the problem
+    unsolvable."""
+    from realize.repair.resequence import lying_site, on_floor, pickup_region
+
+    cfg = compose_config("task.planner.enabled=true")
+    geometry = build_geometry(GeometryCfg.from_mapping(cfg["scene"], "scene"))
+    t2 = geometry.table("table2")
+    edge = (t2.center[0] + 0.09, t2.center[1] + t2.half_size[1] + 0.01, t2.top_z + 0.0225 + 0.008)
+    state = SceneState(base=(0.1, -0.2, 0.0), objects={"cube": ObjectPose(edge)})
+    assert not on_floor(state, geometry, "cube")
+    new = resequence_task(dict(cfg["task"]), geometry, state, tmp_path)
+    assert new["plan"][:2] == [f"move_to({pickup_region('cube')})", "grasp(cube, Cube_g)"], new["plan"]
+    assert pickup_region("cube") in new["params"]
+    assert f"(item-at cube {lying_site('cube')})" in (tmp_path / "resequence.pddl").read_text()
+
+
 def test_a_new_plan_that_starts_by_placing_the_held_block_builds_from_a_state_that_holds_it(tower3, tmp_path) -> None:
     """A re-sequence from a state that holds cube B (grasp_slip's worlds 10 and 13: cube C in
     hand, cube B knocked down) begins with a place: its task builds where the plan starts with

@@ -83,7 +83,7 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
            ) -> tuple[ReplanRecord, Segment | None]:
     """Re-parameterize (the remaining actions from the state) or re-sequence (a new plan)."""
     from realize.validation.replay import build_replay_spec, saved_plan
-    from realize.repair.resequence import floor_region, resequence_task
+    from realize.repair.resequence import on_floor, pickup_region, resequence_task
     from realize.tasks.suffix import check_suffix_start, task_suffix
 
     t0 = time.perf_counter()
@@ -107,7 +107,8 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
             now_geo = build_geometry(ex.layout(obs))
             task_cfg = resequence_task(saved_plan(source).config["task"], now_geo, state, rdir,
                                        pickup=dict(zip(("r_min", "r_max"), ex.settings.pickup_m)))
-            if any(floor_region(o) in (task_cfg.get("params") or {}) for o in state.objects):
+            if any(pickup_region(o) in (task_cfg.get("params") or {}) and on_floor(state, now_geo, o)
+                   for o in state.objects):
                 changes = [*changes, "controller.fabric.floor_exclude=true"]  # the fingers reach the floor
             if not task_cfg["plan"] and a >= seg.task.n_actions:
                 # symbolically done, geometrically not (the base just outside the exit): the last action again
@@ -159,10 +160,10 @@ def why_no_plan(rec: ReplanRecord, state: Any) -> str:
     found no realization of; objects lying on the floor are named with where they lie."""
     refused = [r[len("refused: "):] for r in rec.reason if r.startswith("refused: ")]
     text = refused[0][:300] if refused else f"no realization of {rec.plan or 'the plan'} reached the goal"
-    from realize.repair.resequence import floor_region
+    from realize.repair.resequence import pickup_region
 
-    floor = [f"{o} lies on the floor at ({p.position[0]:.2f}, {p.position[1]:.2f})"
-             for o, p in state.objects.items() if floor_region(o) in rec.plan]
+    floor = [f"{o} lies at ({p.position[0]:.2f}, {p.position[1]:.2f}, {p.position[2]:.3f})"
+             for o, p in state.objects.items() if pickup_region(o) in rec.plan]
     if refused and "unsolvable" in text.casefold():  # where the objects lie that no fact placed
         floor += [f"{o} at ({p.position[0]:.2f}, {p.position[1]:.2f}, {p.position[2]:.3f})"
                   for o, p in state.objects.items() if o != state.held]

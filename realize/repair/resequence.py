@@ -18,11 +18,12 @@ in one line):
   * ``(holding O)`` for the held object, else ``(hand-empty)``;
   * ``(item-at O loc_T)`` for an object that rests on table T (its centre above T's top
     footprint, within ``REST_SLACK_M`` of the top): the site is ``loc_<table name>``;
-  * ``(item-at O loc_floor_O)`` for an object on the floor (its bottom within ``REST_SLACK_M``
-    of it): the problem gets that site, a base region ``Near_O`` (an annulus framed by O, radii
-    ``pickup``, default ``execute.pickup_m``; the task gets it as a parameter) and ``(base-near Near_O
-    loc_floor_O)``, so any domain whose grasp takes an item from the site it is at picks it up
-    from the floor; an object elsewhere (on another object, tipped on an edge) gets no ``item-at``;
+  * ``(item-at O loc_lying_O)`` for an object anywhere else (on the floor, tipped against a
+    table's edge, on another object): the problem gets that site, where the object lies, a base
+    region ``Near_O`` (an annulus framed by O, radii ``pickup``, default ``execute.pickup_m``; the
+    task gets it as a parameter) and ``(base-near Near_O loc_lying_O)``, so any domain whose grasp
+    takes an item from the site it is at picks it up from there (its grasp region is framed by
+    the object already);
 every other fact of the problem's ``:init`` (the static ones) is kept as written.
 
 A domain of the blocks conventions (``on``, ``ontable``, ``clear``; no ``item-at``) is read by
@@ -45,7 +46,7 @@ from realize.config import ConfigError
 from realize.world.geometry import SceneGeometry
 from realize.world.state import SceneState
 
-__all__ = ["symbolic_facts", "resequence_task", "floor_site", "floor_region", "DYNAMIC_PREDICATES", "RESEQUENCE_PROBLEM"]
+__all__ = ["symbolic_facts", "resequence_task", "lying_site", "pickup_region", "on_floor", "DYNAMIC_PREDICATES", "RESEQUENCE_PROBLEM"]
 
 DYNAMIC_PREDICATES = ("robot-at", "hand-empty", "holding", "item-at")
 RESEQUENCE_PROBLEM = "resequence.pddl"
@@ -80,34 +81,38 @@ def symbolic_facts(state: SceneState, geometry: SceneGeometry, task: Any, static
             if t.contains_xy(x, y) and abs((z - o.half_height) - t.top_z) <= REST_SLACK_M:
                 facts.append(("item-at", name, f"loc_{t.name}"))
                 break
-        else:
-            if abs(z - o.half_height) <= REST_SLACK_M:  # on the floor: a site of its own, where it lies
-                facts.append(("item-at", name, floor_site(name)))
+        else:  # not on a table's top: a site of its own, where it lies
+            facts.append(("item-at", name, lying_site(name)))
     return facts
 
 
-def floor_site(obj: str) -> str:
-    """The PDDL site of object ``obj`` lying on the floor."""
-    return f"loc_floor_{obj}"
+def on_floor(state: SceneState, geometry: SceneGeometry, obj: str) -> bool:
+    """Object ``obj`` of ``state`` lies on the floor (its bottom within ``REST_SLACK_M`` of it)."""
+    return abs(state.objects[obj].position[2] - geometry.object(obj).half_height) <= REST_SLACK_M
 
 
-def floor_region(obj: str) -> str:
-    """The base region (a task parameter) from which the robot picks ``obj`` off the floor."""
+def lying_site(obj: str) -> str:
+    """The PDDL site of object ``obj`` lying off every table's top (the floor, a table's edge)."""
+    return f"loc_lying_{obj}"
+
+
+def pickup_region(obj: str) -> str:
+    """The base region (a task parameter) from which the robot picks ``obj`` up where it lies."""
     return f"Near_{obj}"
 
 
-def _add_floor_sites(text: str, task_cfg: dict[str, Any], objects: list[str], pickup: Mapping[str, float]) -> str:
-    """``text`` (the problem) with a site and a base region per object on the floor, and their
+def _add_lying_sites(text: str, task_cfg: dict[str, Any], objects: list[str], pickup: Mapping[str, float]) -> str:
+    """``text`` (the problem) with a site and a base region per object off the tables, and their
     ``base-near`` facts; ``task_cfg['params']`` with each region: an annulus framed by the object
     (so it follows where the object lies, ``controller.track_objects``) of radii ``pickup``."""
     if not objects:
         return text
     lo, hi = section(text, ":objects")
-    decl = "".join(f"\n    {floor_region(o)} - base_region\n    {floor_site(o)} - site" for o in objects)
+    decl = "".join(f"\n    {pickup_region(o)} - base_region\n    {lying_site(o)} - site" for o in objects)
     text = text[:hi - 1] + decl + ")" + text[hi:]
     params = dict(task_cfg.get("params") or {})
     for o in objects:
-        params[floor_region(o)] = {"type": "annulus", "frame": o, "center": [0.0, 0.0],
+        params[pickup_region(o)] = {"type": "annulus", "frame": o, "center": [0.0, 0.0],
                                    "r_min": float(pickup["r_min"]), "r_max": float(pickup["r_max"])}
     task_cfg["params"] = params
     return text
@@ -147,16 +152,16 @@ def resequence_task(task_cfg: Mapping[str, Any], geometry: SceneGeometry, state:
     plain["planner"] = dict(planner, enabled=False, top_k=1)
     task = build_task(plain, geometry, "re-sequence")
     facts = symbolic_facts(state, geometry, task, static, start)
-    on_floor = [f[1] for f in facts if f[0] == "item-at" and f[2] == floor_site(f[1])]
-    if on_floor:
+    lying = [f[1] for f in facts if f[0] == "item-at" and f[2] == lying_site(f[1])]
+    if lying:
         plain = dict(plain)
         if pickup is None:  # execute.pickup_m's default
             from realize.execution.settings import ExecuteSettings
 
             pickup = dict(zip(("r_min", "r_max"), ExecuteSettings().pickup_m))
-        text = _add_floor_sites(text, plain, on_floor, pickup)
+        text = _add_lying_sites(text, plain, lying, pickup)
         lo, hi = section(text, ":init")
-        static += [("base-near", floor_region(o), floor_site(o)) for o in on_floor]
+        static += [("base-near", pickup_region(o), lying_site(o)) for o in lying]
         task = build_task(plain, geometry, "re-sequence")
         facts = symbolic_facts(state, geometry, task, static, start)
     init = "(:init\n" + "".join(f"    ({' '.join(f)})\n" for f in static + facts) + "  )"
