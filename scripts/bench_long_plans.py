@@ -88,7 +88,7 @@ def variant_label(name: str, extra: list[str]) -> str:
 
 def run_dir_name(preset: str, variant: str, seed: int) -> str:
     """A row's kept run directory (the variant's overrides made a file name)."""
-    return re.sub(r"[^\w.=+-]+", "_", f"{preset}-{variant}-s{seed}")
+    return re.sub(r"[^\w.-]+", "_", f"{preset}-{variant}-s{seed}")  # (it goes into a Hydra override)
 
 
 def measure(preset: str, overrides: list[str], seed: int, run_dir: Path) -> dict[str, object]:

@@ -66,7 +66,9 @@ def test_runs_with_other_options_keep_their_own_rows(capsys) -> None:
     (not collapsed into the plain one), compared with tower3 as searched today."""
     lifted = blp.variant_label("plain", ["controller.place_lift=true"])
     assert lifted == "plain[controller.place_lift=true]" and blp.variant_label("plain", []) == "plain"
-    assert blp.run_dir_name("tower5", lifted, 0) == "tower5-plain_controller.place_lift=true_-s0"
+    assert blp.run_dir_name("tower5", lifted, 0) == "tower5-plain_controller.place_lift_true_-s0"
+    assert blp.run_dir_name("tower5", blp.variant_label("plain", ["+task.goal.margin=0.01"]), 1) == \
+        "tower5-plain_task.goal.margin_0.01_-s1"
     rows = [_row("tower3", 4, 100, 0.95), _row("tower5", 8, 300, 0.75), _row("tower5", 8, 200, 0.91, variant=lifted)]
     blp.report(rows)
     out = capsys.readouterr().out
