@@ -251,3 +251,55 @@ def test_a_block_carried_to_the_top_of_a_tower_with_avoid_movable_goes_over_it(a
     assert moved <= 0.002, moved  # the tower stands
     e = poses[ie, :3].tolist()
     assert math.dist(e[:2], tower[3][:2]) <= 0.015 and abs(e[2] - tower[3][2] - H) <= 0.003  # cube E on top
+
+
+class _Scene:
+    """What ``StepContext`` reads of a scene: two copies, a cube, a can lying on its side and a block."""
+
+    n_envs, device, control_dt = 2, torch.device("cpu"), 0.05
+
+    def __init__(self, fab: WholeBodyFabric):
+        from types import SimpleNamespace
+        self.n_dof = fab.kin.n_dof
+        self.geometry = SimpleNamespace(objects=(
+            SimpleNamespace(shape="box", half_size=(0.02, 0.02, 0.02)),
+            SimpleNamespace(shape="cylinder", half_size=(0.03, 0.03, 0.04)),
+            SimpleNamespace(shape="box", half_size=(0.05, 0.01, 0.01))))
+
+    def whole_body_q(self) -> torch.Tensor:
+        return torch.zeros(2, self.n_dof)
+
+    whole_body_qd = whole_body_q
+
+    def object_poses(self) -> torch.Tensor:
+        poses = torch.zeros(2, 3, 7)
+        poses[:, :, 3] = 1.0  # upright
+        poses[:, :, :3] = torch.tensor([[0.5, 0.0, 0.8], [0.5, 0.2, 0.8], [0.5, -0.2, 0.8]])
+        poses[1, 1, 3:7] = torch.tensor([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])  # the can on its side
+        return poses
+
+    def object_velocities(self) -> torch.Tensor:
+        return torch.zeros(2, 3, 6)
+
+
+def test_the_step_context_builds_the_boxes_leaves_out_the_held_object_and_sizes_its_sphere(fabric) -> None:
+    from realize.realization.config import RolloutConfig
+    from realize.realization.context import StepContext
+
+    ctx = StepContext(_Scene(fabric), RolloutConfig(avoid_movable=True), fabric, None, torch.zeros(4, 4, dtype=torch.bool))
+    ctx.read()
+    ctx.begin_step()
+    goal = torch.zeros(1, 3)
+    ctx.fabric_goal(torch.tensor([1]), goal, goal, goal, torch.tensor([[True, False, False]]), torch.tensor([1]))
+    ctx.fabric_goal(torch.tensor([0]), goal, goal, goal)  # a template that leaves nothing out
+    mv = ctx._movable(torch.tensor([1, 0]))
+    # row 1 (first): the cube left out by its template, the held can left out as a box too
+    assert mv.ignore.tolist() == [[True, True, False], [False, False, False]]
+    assert mv.held_radius.tolist() == pytest.approx([0.05, 0.0])  # hypot(3 cm, 4 cm); nothing held
+    assert mv.held_centre[0].tolist() == pytest.approx([0.5, 0.2, 0.8])
+    # the can lying on its side (turned 90 degrees about x): its height now lies along y
+    assert mv.boxes[0, 1, BOX_HALF].tolist() == pytest.approx([0.03, 0.04, 0.03], abs=1e-6)
+    assert mv.boxes[1, 1, BOX_HALF].tolist() == pytest.approx([0.03, 0.03, 0.04], abs=1e-6)
+    assert mv.boxes[1, 2, BOX_HALF].tolist() == pytest.approx([0.05, 0.01, 0.01], abs=1e-6)
+    ctx.run_fabric()  # and the step runs with them
+    assert not bool(ctx.fab_invalid.any())
