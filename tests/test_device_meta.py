@@ -110,3 +110,34 @@ def test_prefix_ends_built_on_the_cpu_are_each_points_last_moving_dof() -> None:
     L = fab.cfg.axis_length
     expected = fab.kin.tcp_offset + torch.tensor([[0.0, 0.0, 0.0], [-L, 0.0, 0.0], [0.0, L, 0.0]], dtype=torch.float64)
     assert torch.equal(fab.map._offsets, expected)
+
+
+class _MetaSceneWithGeometry(_MetaScene):
+    """``_MetaScene`` with the geometry whose one movable object (the cube) ``avoid_movable`` reads."""
+
+    def __init__(self, geometry) -> None:
+        self.geometry = geometry
+
+
+def test_rollout_context_fabric_with_movable_objects_on_meta(geometry) -> None:
+    """``controller.avoid_movable``: the movable boxes, the rows' left-out objects and the held
+    object's sphere are built and stepped on the device too."""
+    fab = _meta_fabric(geometry)
+    occupancy = torch.zeros(4, 4, dtype=torch.bool, device=META)
+    cfg = RolloutConfig(avoid_movable=True)
+    ctx = _on_meta("building StepContext", lambda: StepContext(_MetaSceneWithGeometry(geometry), cfg, fab, None, occupancy))
+    rows = torch.tensor([0, 2, 3], device=META)
+    goal = torch.zeros(3, 3, device=META)
+    ignore = torch.zeros(3, 1, dtype=torch.bool, device=META)
+    held = torch.zeros(3, dtype=torch.long, device=META)
+
+    def one_step() -> None:
+        ctx.read()
+        ctx.begin_step()
+        ctx.start_fabric(rows)
+        ctx.fabric_goal(rows[:2], goal[:2], goal[:2], goal[:2], ignore[:2], held[:2])
+        ctx.fabric_goal(rows[2:], goal[2:], goal[2:], goal[2:])
+        ctx.run_fabric()
+
+    _on_meta("StepContext run_fabric with avoid_movable", one_step)
+    assert ctx.fab_state.q.device == META and ctx.base_cmd.device == META

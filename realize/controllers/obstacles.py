@@ -12,6 +12,8 @@ wires these boxes into the fabric of ``realize.controllers.fabrics``).
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
@@ -41,13 +43,24 @@ class BoxDistance:
 
     ``__call__(points (N,K,3), radii (N,K), boxes (N,M,BOX_COLUMNS)) -> (N,K,M)``. Pairs that
     must not interact (``box_ok[k]`` False for a box, ``floor_ok[k]`` False for the floor) get a
-    constant far distance, hence no force.
+    constant far distance, hence no force. Per step, ``pair_ok`` (N, K, M) bool further leaves
+    pairs out row by row (``controller.avoid_movable``: the objects a row handles, a held-object
+    sphere where none is held). Pairs marked ``soft`` (N, K, M) bool (a movable object, or the
+    held one) get no leaf farther apart than ``soft_range`` (leaf units): a leaf has no cut-off of
+    its own, and the metrics of many far pairs add up and slow every motion; and their value is
+    floored at ``SOFT_FLOOR``: a block knocked against the arm, or a held object whose sphere
+    overlaps something when the carry begins, starts inside the leaf's barrier, where the value
+    would be negative (a negative metric that pulls in and blows up); floored, such a pair brakes
+    every motion further in, and the direction of its push stays the true one.
     """
 
     FAR = 10.0
+    SOFT_FLOOR = 0.05
 
-    def __init__(self, box_ok: Tensor, floor_ok: Tensor):
+    def __init__(self, box_ok: Tensor, floor_ok: Tensor, pair_ok: Tensor | None = None,
+                 soft: Tensor | None = None, soft_range: float = math.inf):
         self.box_ok, self.floor_ok = box_ok, floor_ok
+        self.pair_ok, self.soft, self.soft_range = pair_ok, soft, soft_range
 
     def _local(self, points: Tensor, boxes: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         c, h = boxes[..., BOX_CENTER], boxes[..., BOX_HALF]
@@ -66,7 +79,18 @@ class BoxDistance:
     def _ok(self, boxes: Tensor) -> Tensor:
         floor = boxes[..., BOX_FLOOR][:, None, :] > 0.5
         dev = boxes.device
-        return torch.where(floor, self.floor_ok.to(dev)[None, :, None], self.box_ok.to(dev)[None, :, None])
+        ok = torch.where(floor, self.floor_ok.to(dev)[None, :, None], self.box_ok.to(dev)[None, :, None])
+        return ok if self.pair_ok is None else ok & self.pair_ok
+
+    def _soft_off(self, ok: Tensor, val: Tensor) -> Tensor:
+        """``ok`` without the ``soft`` pairs out of range now."""
+        return ok if self.soft is None else ok & ~(self.soft & (val > self.soft_range))
+
+    def _soft_floor(self, val: Tensor) -> Tensor:
+        """``val`` with the ``soft`` pairs' values floored at ``SOFT_FLOOR``."""
+        if self.soft is None:
+            return val
+        return torch.where(self.soft, val.clamp(min=self.SOFT_FLOOR), val)
 
     def __call__(self, points: Tensor, body_radii: Tensor, boxes: Tensor) -> Tensor:
         _, local, h = self._local(points, boxes)
@@ -76,7 +100,7 @@ class BoxDistance:
         # dimensionless like the reference's sphere leaf (|p - c| / (r_o + r_b) - 1): the gap
         # in units of the body sphere's radius, which keeps the leaves well-conditioned at dt
         dist = (outside + inside) / body_radii[:, :, None] - 1.0
-        return torch.where(self._ok(boxes), dist, torch.full_like(dist, self.FAR))
+        return torch.where(self._soft_off(self._ok(boxes), dist), self._soft_floor(dist), torch.full_like(dist, self.FAR))
 
     def jets(self, p: Tensor, Jp: Tensor, pd: Tensor, ap: Tensor, radii: Tensor, boxes: Tensor
              ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
@@ -100,6 +124,8 @@ class BoxDistance:
         g_local = torch.where(is_out[..., None], act * s * w / wn[..., None], e_k * s)
         r = radii[:, :, None]
         ok = self._ok(boxes).expand_as(qmax)
+        if self.soft is not None:
+            ok = self._soft_off(ok, torch.where(is_out, wn, qmax) / r - 1.0)
         # d phi / d p (world); zero on pairs that must not interact
         g = torch.where(ok[..., None], matvec3(rot[:, None], g_local) / r[..., None], torch.zeros_like(g_local))
         val = torch.where(is_out, wn, qmax) / r - 1.0
@@ -110,7 +136,7 @@ class BoxDistance:
         curv_out = (_dot3(v, v) - _dot3(w, v) ** 2 / wn ** 2) / wn
         a = _dot3(g, ap[:, :, None, :]) + torch.where(is_out & ok, curv_out, torch.zeros_like(curv_out)) / r
         phid = _dot3(g, pd[:, :, None, :])
-        val = torch.where(ok, val, torch.full_like(val, self.FAR))
+        val = torch.where(ok, self._soft_floor(val), torch.full_like(val, self.FAR))
         return val.flatten(1), J.flatten(1, 2), phid.flatten(1), a.flatten(1)
 
 

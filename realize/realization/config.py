@@ -54,6 +54,8 @@ class RolloutConfig(Settings):
     place_align_yaw: bool = False  # place: turn the held box about the approach so it lands square on its support (the region's frame), modulo 90 degrees
     place_level: float | None = setting(None, ge=0, le=1.5707963267948966)  # rad, place of a box: the hand turns by at most this so the held box lands level (its face nearest horizontal flat) instead of on an edge; null: as held
     place_lift: bool = False  # place: the hand first rises straight up to the pre-place's height, then crosses to it, so the held object does not sweep through what stands on the way (a tower the fabric does not see)
+    avoid_movable: bool = False  # the whole-body fabric also keeps off the movable objects where they stand (save those the action handles) and keeps the held object off everything (realize/controllers/movable.py)
+    avoid_range: float = setting(1.0, gt=0)  # with avoid_movable: a sphere and a movable object (or the held one) interact in the fabric only within this gap, in units of the sphere's radius (a leaf has no cut-off; far pairs' metrics add up and slow every motion)
     place_drop: float = setting(0.004, ge=0)  # m, the held object is released this high above its place point
     place_pre_height: float = setting(0.12, gt=0)  # m, pre-place above a release point (place with a 3-D box region)
     retreat_share: float = setting(0.6, gt=0)  # retreat done once the TCP is this share of the way back out

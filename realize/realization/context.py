@@ -6,7 +6,9 @@ movable object's pose and speed, which objects the fingers hold), the shared con
 fabric, the A* grid and occupancy), and the commands the action templates write this step
 (base velocity, upper-joint targets, gripper). Templates that want the fabric register a goal
 for their rows (``fabric_goal``); ``run_fabric`` then runs ONE batched fabric step for all of
-them and turns the fabric's reference into commands. Every field is declared below; templates
+them and turns the fabric's reference into commands. With ``controller.avoid_movable`` that step
+also avoids the movable objects where they stand now, save those each row's template leaves out,
+and the object a row carries (``realize.controllers.movable``). Every field is declared below; templates
 get everything else they need as arguments.
 What it doesn't: decide which action a plan is in or when it ends (``realize.realization.rollout``
 and the templates), or write to the simulator (the rollout does).
@@ -20,10 +22,11 @@ import torch
 from torch import Tensor
 
 from realize.robot.layout import BASE, N_BASE, UPPER
+from realize.controllers.movable import MovableObstacles, bounding_radius, object_boxes
 from realize.controllers.occupancy import GridSpec
 from realize.controllers.whole_body import FabricState, WholeBodyFabric
 from realize.realization.config import RolloutConfig
-from realize.scene import BatchedScene
+from realize.scene import BatchedScene, quat_to_matrix
 from realize.world.geometry import SceneGeometry
 
 
@@ -93,8 +96,11 @@ class StepContext:
         self._fab_goals: list[Tensor] = []
         self._fab_approach: list[Tensor] = []
         self._fab_closing: list[Tensor] = []
+        self._fab_ignore: list[Tensor | None] = []
+        self._fab_held: list[Tensor | None] = []
         self.fab_invalid = torch.zeros(n, dtype=torch.bool, device=dev)
         self._holds: Tensor | None = None
+        self._object_shape: tuple[Tensor, Tensor] | None = None  # half sizes (m, 3), bounding radii (m,)
         # where the robot's localization has its base, as an offset (N, 3: x, y, yaw) from where it
         # is; None: exact. Everything read below (q, the TCP, the base) is then the believed one
         self.base_offset: Callable[[], Tensor] | None = None
@@ -140,12 +146,42 @@ class StepContext:
         self.fab_state.q[rows] = st.q
         self.fab_state.qd[rows] = st.qd
 
-    def fabric_goal(self, rows: Tensor, position: Tensor, approach: Tensor, closing: Tensor) -> None:
-        """Ask for a fabric step of ``rows`` towards a TCP position and gripper axes (len, 3)."""
+    def fabric_goal(self, rows: Tensor, position: Tensor, approach: Tensor, closing: Tensor,
+                    ignore: Tensor | None = None, held: Tensor | None = None) -> None:
+        """Ask for a fabric step of ``rows`` towards a TCP position and gripper axes (len, 3).
+
+        With ``controller.avoid_movable`` (else unused): ``ignore`` (len, m) bool, the movable
+        objects the rows leave out (None: none); ``held`` (len,) long, the object each row carries
+        as a collision sphere fixed to the hand, -1 none (None: none)."""
         self._fab_rows.append(rows)
         self._fab_goals.append(position)
         self._fab_approach.append(approach)
         self._fab_closing.append(closing)
+        self._fab_ignore.append(ignore)
+        self._fab_held.append(held)
+
+    def _movable(self, rows: Tensor) -> MovableObstacles:
+        """The movable objects the fabric step of ``rows`` (the requests' rows, in order) avoids."""
+        n, m = len(rows), self.objects.shape[1]
+        ignore = torch.cat([torch.zeros(len(r), m, dtype=torch.bool, device=self.device) if i is None else i
+                            for r, i in zip(self._fab_rows, self._fab_ignore)])
+        held = torch.cat([torch.full((len(r),), -1, dtype=torch.long, device=self.device) if h is None else h
+                          for r, h in zip(self._fab_rows, self._fab_held)])
+        if self._object_shape is None:
+            objs = self.scene.geometry.objects
+            self._object_shape = (torch.tensor([o.half_size for o in objs], device=self.device),
+                                  torch.tensor([bounding_radius(o.shape, o.half_size) for o in objs], device=self.device))
+        half, radius = self._object_shape
+        poses = self.objects[rows]
+        boxes = object_boxes(poses[..., :3], quat_to_matrix(poses[..., 3:7]), half)
+        carried = held >= 0
+        idx = held.clamp(min=0)
+        ar = torch.arange(n, device=self.device)
+        # the held object never avoids itself
+        ignore = ignore | (torch.nn.functional.one_hot(idx, m).bool() & carried[:, None])
+        centre = poses[ar, idx, :3]
+        return MovableObstacles(boxes, ignore, centre, torch.where(carried, radius[idx], torch.zeros_like(radius[idx])),
+                                self.cfg.avoid_range)
 
     def begin_step(self) -> None:
         """Reset the commands: base still, arm at ``arm_hold``, no fabric goals."""
@@ -153,6 +189,7 @@ class StepContext:
         self.arm_cmd.copy_(self.arm_hold)
         self.arm_vel_cmd.zero_()
         self._fab_rows, self._fab_goals, self._fab_approach, self._fab_closing = [], [], [], []
+        self._fab_ignore, self._fab_held = [], []
         self.fab_invalid.zero_()
 
     def run_fabric(self) -> None:
@@ -164,7 +201,8 @@ class StepContext:
         goal = self.fabric.goal_points(torch.cat(self._fab_goals).to(dt), torch.cat(self._fab_approach).to(dt),
                                        torch.cat(self._fab_closing).to(dt))
         st = FabricState(self.fab_state.q[rows], self.fab_state.qd[rows])
-        new, valid = self.fabric.step(st, self.q[rows], goal)
+        movable = self._movable(rows) if self.cfg.avoid_movable else None
+        new, valid = self.fabric.step(st, self.q[rows], goal, movable=movable)
         self.fab_state.q[rows] = new.q
         self.fab_state.qd[rows] = new.qd
         # the base is velocity-driven: feed back its position error to the fabric's reference

@@ -6,6 +6,8 @@ at ``approach_speed``, GRIP: close / open the gripper with the arm still, RETREA
 out) on the object the plan names, with the target geometry (TCP goal backed off so the
 fingertips clear the supporting surface, closing axis on two faces of a box, or across a
 cylinder's axis).
+With ``controller.avoid_movable`` the fabric keeps off the movable objects, save the one the
+action handles (``_avoid``; ``place`` adds its support and the held object).
 What it doesn't: decide success (``grasp`` and ``place`` do, from finger contacts and the object).
 """
 
@@ -211,11 +213,20 @@ class Manipulate(Template):
         moving = ph != GRIP
         mr = rows[moving]
         if len(mr):
-            ctx.fabric_goal(mr, self._goal(mr, ctx), self.approach[mr], self.closing[mr])
+            ignore, held = self._avoid(ctx, mr) if ctx.cfg.avoid_movable else (None, None)
+            ctx.fabric_goal(mr, self._goal(mr, ctx), self.approach[mr], self.closing[mr], ignore, held)
         grip = (ph >= GRIP) if self.closes_gripper else (ph < GRIP)
         ctx.grip_cmd[rows] = grip
         self.t[rows] += 1
         self.phase_t[rows] += 1
+
+    def _avoid(self, ctx: StepContext, rows: Tensor) -> tuple[Tensor, Tensor | None]:
+        """``controller.avoid_movable``: the movable objects ``rows`` leave out of the fabric's
+        collision leaves ((len, m) bool) and the object each carries as a sphere ((len,), -1 none;
+        None: none). Here the object the action handles, through all its phases: the hand must
+        close on it (a grasp) or hold it (a place)."""
+        m = ctx.objects.shape[1]
+        return torch.nn.functional.one_hot(self.obj[rows], m).bool(), None
 
     def _advance(self, ctx: StepContext, rows: Tensor) -> tuple[Tensor, Tensor]:
         """Shared phase transitions; returns (tcp error to current goal, reached-target flag)."""

@@ -9,6 +9,11 @@ it turns the hand so the held box lands level (``realize.realization.actions.lev
 ``controller.place_lift`` the hand first rises straight up to the pre-place's height and only
 then crosses to it: the fabric does not see movable objects, and a held block carried on the
 straight way from a low grasp up to a pre-place above a tower sweeps through the tower's top.
+With ``controller.avoid_movable`` (``_avoid``) the carry to the pre-place keeps the held object,
+as a sphere fixed to the hand, off everything, and the hand off every movable object but the
+held one; from the straight move in on, the support is left out too (the held object is set down
+on it) and the held object is no sphere any more (it comes down onto its support, a table or a
+block, on a straight line the plan chose).
 What it doesn't: check where the object came to rest (the plan's goal does, ``goals``).
 """
 
@@ -50,6 +55,7 @@ class Place(Manipulate):
         super().__init__(n_envs, device)
         self.via = torch.zeros(n_envs, 3, device=device)  # controller.place_lift: above where the hand began
         self.lifting = torch.zeros(n_envs, dtype=torch.bool, device=device)  # still rising to ``via``
+        self.support = torch.full((n_envs,), -1, dtype=torch.long, device=device)  # the movable object set down on, -1: none
 
     @classmethod
     def accepts(cls, region: Region) -> bool:
@@ -58,6 +64,7 @@ class Place(Manipulate):
     def begin(self, ctx: StepContext, rows: Tensor, params: Tensor, region: Region, obj: int = -1,
               shift: Tensor | None = None, support: int = -1) -> Tensor:
         code = super().begin(ctx, rows, params, region, obj, shift, support)
+        self.support[rows] = support
         if ctx.cfg.place_align_yaw and ctx.scene.geometry.objects[obj].shape == "box":
             self.closing[rows] = self._square_on(ctx, rows, obj, support)
         if ctx.cfg.place_level is not None and ctx.scene.geometry.objects[obj].shape == "box" \
@@ -122,6 +129,19 @@ class Place(Manipulate):
             return goal
         up = self.lifting[rows] & (self.phase[rows] == APPROACH)
         return torch.where(up[:, None], self.via[rows], goal)
+
+    def _avoid(self, ctx: StepContext, rows: Tensor) -> tuple[Tensor, Tensor | None]:
+        """``Manipulate._avoid`` for a place: the held object is left out as a box through every
+        phase and carried as a sphere in the APPROACH (the carry to the pre-place, where a held
+        block swept through a tower's top); from DESCEND on the support is left out as well and
+        nothing is carried: the straight move in sets the held object down on the support."""
+        ignore, _ = super()._avoid(ctx, rows)
+        ph = self.phase[rows]
+        sup = self.support[rows]
+        down = (ph != APPROACH) & (sup >= 0)
+        ignore = ignore | (torch.nn.functional.one_hot(sup.clamp(min=0), ignore.shape[1]).bool() & down[:, None])
+        held = torch.where(ph == APPROACH, self.obj[rows], torch.full_like(self.obj[rows], -1))
+        return ignore, held
 
     def act(self, ctx: StepContext, rows: Tensor) -> None:
         if ctx.cfg.place_lift:  # risen to within the pre-pose tolerance of the via point: cross over

@@ -102,7 +102,11 @@ class Push(Template):
         return torch.where((ph == PUSH_APPROACH)[:, None], pre, ramp)
 
     def act(self, ctx: StepContext, rows: Tensor) -> None:
-        ctx.fabric_goal(rows, self._goal(ctx, rows), self.dir[rows], self.closing[rows])
+        # controller.avoid_movable: a push is made to touch movable objects (the one pushed and what
+        # rests on it): it leaves every one out
+        ignore = torch.ones(len(rows), ctx.objects.shape[1], dtype=torch.bool, device=self.device) \
+            if ctx.cfg.avoid_movable else None
+        ctx.fabric_goal(rows, self._goal(ctx, rows), self.dir[rows], self.closing[rows], ignore)
         ctx.grip_cmd[rows] = True
         self.t[rows] += 1
         self.phase_t[rows] += 1
