@@ -213,7 +213,7 @@ def test_a_block_carried_to_the_top_of_a_tower_with_avoid_movable_goes_over_it(a
     parameters, the arm 4 cm back): the plain fabric brings cube E in 7.5 cm below the tower's
     top; avoiding the tower, cube E comes in above the top, is never below it while over it,
     lands on cube D and the tower stands."""
-    from realize.app.run_config import build_run_spec
+    from realize.spec.run_spec import build_run_spec
     from realize.realization.rollout import PlanRealizer
     from realize.scene import BatchedScene
     from realize.tasks.suffix import task_suffix
