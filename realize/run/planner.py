@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -334,7 +335,7 @@ class Planner:
             outcome = RunOutcome(run_dir, status, feasible, cost, int(d.get("iterations_done") or 0),
                                  float(d.get("wall_time_s") or 0.0))
         return PlanResult(
-            plan=plan, actions=tuple(a.strip() for a in _split_plan(plan)), params=params, z=z, columns=columns,
+            plan=plan, actions=tuple(plan_actions(plan)), params=params, z=z, columns=columns,
             cost=cost, feasible=feasible, status=status, iterations_done=int(d.get("iterations_done") or 0),
             validation=d.get("validation") if isinstance(d.get("validation"), dict) else None, run_dir=run_dir,
             timings=PlanTimings(setup, search, validation, total), outcome=outcome,
@@ -359,20 +360,9 @@ class Planner:
         self.close()
 
 
-def _split_plan(plan: str) -> list[str]:
-    """``"move_to(A), grasp(cube, G)"`` -> its actions (commas inside parentheses kept)."""
-    out, depth, cur = [], 0, ""
-    for ch in plan:
-        depth += ch == "("
-        depth -= ch == ")"
-        if ch == "," and depth == 0:
-            out.append(cur)
-            cur = ""
-        else:
-            cur += ch
-    if cur.strip():
-        out.append(cur)
-    return out
+def plan_actions(plan: str) -> list[str]:
+    """``"move_to(A), grasp(cube, G)"`` -> its actions, ``["move_to(A)", "grasp(cube, G)"]``."""
+    return re.findall(r"\w+\([^()]*\)", plan)
 
 
 def _next_dir(parent: Path, stem: str) -> Path:
@@ -400,10 +390,8 @@ def realized_task(task: Mapping[str, Any], run_dir: str | Path) -> dict[str, Any
     PDDL planner chose it (``task.planner.enabled``, no ``plan`` written), the plan its
     ``result.json`` names, so a re-sequence that plans the same actions again is recognised as
     a replan of them (warm-started) rather than searched cold."""
-    import re
-
     out = dict(task)
     if not out.get("plan"):
         done = RunDir(run_dir).result_json() or {}
-        out["plan"] = re.findall(r"\w+\([^()]*\)", str(done.get("plan") or ""))
+        out["plan"] = plan_actions(str(done.get("plan") or ""))
     return out
