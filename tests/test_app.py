@@ -484,18 +484,18 @@ def _read_summary(path: Path) -> list[dict[str, str]]:
     return rows
 
 
-def test_multirun_two_jobs_write_a_summary(tmp_path: Path) -> None:
-    """The sweep smoke test of make test: two jobs, both done, a row each in summary.csv."""
+def test_a_one_job_sweep_writes_its_summary(tmp_path: Path) -> None:
+    """The sweep smoke test of make test: ``-m`` with one job through the launcher, its row in
+    summary.csv (several jobs and swept keys: the 2x2 sweep in make test-slow)."""
     sweep = tmp_path / "sweep"
-    p = realize_cli("-m", *tiny(ce__iterations=1, controller__max_time_s=3), "seed=0,1",
+    p = realize_cli("-m", *tiny(ce__iterations=1, controller__max_time_s=3), "seed=1",
                     f"hydra.sweep.dir={sweep}", cwd=tmp_path, timeout=240)
     assert p.returncode == 0, p.stderr[-3000:]
     rows = _read_summary(sweep / "summary.csv")
-    assert [(r["job"], r["seed"], r["status"]) for r in rows] == [("0", "0", "done"), ("1", "1", "done")]
+    assert [(r["job"], r["status"]) for r in rows] == [("0", "done")]
     assert f"sweep summary: {sweep / 'summary.csv'}" in p.stdout
-    for r in rows:
-        res = json.loads((sweep / r["run_dir"] / RESULT_FILE).read_text())
-        assert float(r["final_success"]) == res["success_per_iter"][-1] and res["seed"] == int(r["seed"])
+    res = json.loads((sweep / rows[0]["run_dir"] / RESULT_FILE).read_text())
+    assert float(rows[0]["final_success"]) == res["success_per_iter"][-1] and res["seed"] == 1
 
 
 @pytest.mark.slow  # four jobs of two swept keys: make test-all (the two-job smoke test above stays)
