@@ -475,3 +475,61 @@ def fabric_states(robot: Any, dtype: "torch.dtype", seed: int) -> tuple["torch.T
     pos = torch.tensor([0.0, 1.2, 0.82], dtype=torch.float64) + 0.2 * torch.randn(n, 3, generator=g,
                                                                                   dtype=torch.float64)
     return q.to(dtype), qd.to(dtype), pos.to(dtype)
+
+
+# ----------------------------------------------------------------------------- a carry onto a tower
+@dataclass
+class TowerCarry:
+    """Cube E carried onto a four-block tower (``carry_onto_tower``): the rollout result, each step
+    cube E was held as (distance from the tower's axis, its bottom above the tower's top), the
+    tower's four centres and cube E's at the end, and where cube A stands."""
+
+    result: Any
+    held: list[tuple[float, float]]
+    tower: list[list[float]]
+    cube_e: list[float]
+    cube_a: tuple[float, float, float]
+
+
+CUBE = 0.045  # m: the tower cubes' edge
+CARRY_G_OFF = (0.027, 0.007, 0.147)  # m: cube E's pre-grasp from its centre (tower5's seed-0 run's)
+CARRY_P_OFF = (0.010, 0.010, 0.199)  # m: the pre-place from cube D's centre (its region is framed by cube D)
+CARRY_BACK = 0.04  # m: the arm's base this much farther from the table (the perturbed worlds' robot_xy reaches 5 cm)
+
+
+def carry_onto_tower(*overrides: str) -> TowerCarry:
+    """``experiment=tower5`` (with ``overrides``), cubes B, C and D stacked on cube A, the arm
+    ``CARRY_BACK`` farther back, and the seed-0 search's grasp and place of cube E realized in one
+    copy (tests/test_place_lift.py, tests/test_avoid_movable.py)."""
+    import torch
+
+    from realize.realization.rollout import PlanRealizer
+    from realize.scene import BatchedScene
+    from realize.spec.run_spec import build_run_spec
+    from realize.tasks.suffix import task_suffix
+    from realize.world.state import ObjectPose, SceneState
+
+    spec = build_run_spec(compose_config("experiment=tower5", *overrides))
+    g = spec.geometry
+    pa, pd, pe = (g.object(n).position for n in ("cube_a", "cube_d", "cube_e"))
+    stack = {n: ObjectPose((pa[0], pa[1], pa[2] + CUBE * k)) for k, n in enumerate(("cube_b", "cube_c", "cube_d"), 1)}
+    bx, by, yaw = g.robot_start
+    task = task_suffix(spec.task, 6)  # grasp(cube_e, CubeE_g), place(cube_e, CubeE_on_d)
+    z = {"CubeE_g": [p + o for p, o in zip(pe, CARRY_G_OFF)], "CubeE_on_d": [p + o for p, o in zip(pd, CARRY_P_OFF)]}
+    Z = torch.tensor([[v for name in task.layout.names for v in z[name]]], dtype=torch.float64)
+    top = pa[2] + 3 * CUBE + CUBE / 2  # the tower's top (cube D's top face)
+    held: list[tuple[float, float]] = []
+    with BatchedScene(1, spec.geometry_cfg, spec.sim, robot=spec.robot) as scene:
+        ie = scene.object_index("cube_e")
+
+        def watch(_: object) -> None:
+            if bool(scene.holds("cube_e")[0]):
+                e = scene.object_poses()[0, ie, :3].tolist()
+                held.append((math.dist(e[:2], pa[:2]), e[2] - CUBE / 2 - top))
+
+        scene.add_step_hook(watch)
+        res = PlanRealizer(task, scene, spec.rollout, seed=spec.seed,
+                           start=SceneState(base=(bx - CARRY_BACK, by, yaw), objects=stack)).rollout(Z)
+        poses = scene.object_poses()[0]
+    tower = [poses[g.object_index(n), :3].tolist() for n in ("cube_a", "cube_b", "cube_c", "cube_d")]
+    return TowerCarry(res, held, tower, poses[ie, :3].tolist(), tuple(pa))

@@ -213,43 +213,16 @@ def test_a_block_carried_to_the_top_of_a_tower_with_avoid_movable_goes_over_it(a
     parameters, the arm 4 cm back): the plain fabric brings cube E in 7.5 cm below the tower's
     top; avoiding the tower, cube E comes in above the top, is never below it while over it,
     lands on cube D and the tower stands."""
-    from realize.spec.run_spec import build_run_spec
-    from realize.realization.rollout import PlanRealizer
-    from realize.scene import BatchedScene
-    from realize.tasks.suffix import task_suffix
-    from realize.world.state import ObjectPose, SceneState
+    from helpers import CUBE as H, carry_onto_tower
 
-    H, G_OFF, P_OFF, BACK = 0.045, (0.027, 0.007, 0.147), (0.010, 0.010, 0.199), 0.04
-    spec = build_run_spec(compose_config("experiment=tower5", f"controller.avoid_movable={avoid}"))
-    g = spec.geometry
-    pa, pd, pe = (g.object(n).position for n in ("cube_a", "cube_d", "cube_e"))
-    stack = {n: ObjectPose((pa[0], pa[1], pa[2] + H * k)) for k, n in enumerate(("cube_b", "cube_c", "cube_d"), 1)}
-    bx, by, yaw = g.robot_start
-    task = task_suffix(spec.task, 6)  # grasp(cube_e, CubeE_g), place(cube_e, CubeE_on_d)
-    z = {"CubeE_g": [p + o for p, o in zip(pe, G_OFF)], "CubeE_on_d": [p + o for p, o in zip(pd, P_OFF)]}
-    Z = torch.tensor([[v for name in task.layout.names for v in z[name]]], dtype=F64)
-    top = pa[2] + 3 * H + H / 2
-    held: list[tuple[float, float]] = []
-    with BatchedScene(1, spec.geometry_cfg, spec.sim, robot=spec.robot) as scene:
-        ie = scene.object_index("cube_e")
-
-        def watch(_: object) -> None:
-            if bool(scene.holds("cube_e")[0]):
-                e = scene.object_poses()[0, ie, :3].tolist()
-                held.append((math.dist(e[:2], pa[:2]), e[2] - H / 2 - top))
-
-        scene.add_step_hook(watch)
-        res = PlanRealizer(task, scene, spec.rollout, seed=spec.seed,
-                           start=SceneState(base=(bx - BACK, by, yaw), objects=stack)).rollout(Z)
-        poses = scene.object_poses()[0]
-    tower = [poses[g.object_index(n), :3].tolist() for n in ("cube_a", "cube_b", "cube_c", "cube_d")]
+    c = carry_onto_tower(f"controller.avoid_movable={avoid}")
+    res, held, tower, e, pa = c.result, c.held, c.tower, c.cube_e, c.cube_a
     moved = max(math.dist(tower[k], (pa[0], pa[1], pa[2] + H * k)) for k in range(4))
     near = [gap for d, gap in held if d <= 2 * H]
     assert bool(res.feasible[0]) and bool(res.goal[0]), res.failure
     assert near[0] >= 0.0, near[0]  # it comes in above the top (the plain fabric: 7.5 cm below)
     assert min(gap for d, gap in held if d <= H) >= -0.002  # never below the top while over it
     assert moved <= 0.002, moved  # the tower stands
-    e = poses[ie, :3].tolist()
     assert math.dist(e[:2], tower[3][:2]) <= 0.015 and abs(e[2] - tower[3][2] - H) <= 0.003  # cube E on top
 
 
