@@ -83,17 +83,21 @@ def test_a_box_grasped_askew_lands_level_on_the_tower(level: float | None) -> No
     assert float(speeds.max()) <= 0.01
 
 
-def test_repairs_level_only_the_places_of_a_plan_that_stacks() -> None:
-    """A repair searches and executes with ``place_level`` where the run's plan stacks a block on
-    another (``robot=panda experiment=tower3``), not where it places on a table (the seed task),
-    nor where the run's own controllers level already."""
-    from realize.repair.on_deviation import level_places
+def test_repairs_level_and_avoid_only_in_a_plan_that_stacks() -> None:
+    """A repair searches and executes with ``place_level`` and ``avoid_movable`` where the run's
+    plan stacks a block on another (``robot=panda experiment=tower3``), not where it places on a
+    table (the seed task), nor where the run's own controllers set them already."""
+    from realize.repair.on_deviation import stack_changes
     from realize.execution.settings import ExecuteSettings
 
-    turn = ExecuteSettings().stack_level_rad
+    st = ExecuteSettings()
+    turn, avoid = st.stack_level_rad, st.stack_avoid_movable
     tower = build_run_spec(compose_config("robot=panda", "experiment=tower3"))
-    assert turn is not None and level_places(tower, turn) == [f"++controller.place_level={turn}"]
-    assert level_places(tower, None) == []  # execute.stack_level_rad: null turns it off
-    assert level_places(build_run_spec(compose_config()), turn) == []
-    leveled = build_run_spec(compose_config("robot=panda", "experiment=tower3", "controller.place_level=0.5"))
-    assert level_places(leveled, turn) == []
+    assert turn is not None and avoid
+    assert stack_changes(tower, turn, avoid) == [f"++controller.place_level={turn}", "++controller.avoid_movable=true"]
+    assert stack_changes(tower, None, avoid) == ["++controller.avoid_movable=true"]  # stack_level_rad: null
+    assert stack_changes(tower, turn, False) == [f"++controller.place_level={turn}"]  # stack_avoid_movable: false
+    assert stack_changes(build_run_spec(compose_config()), turn, avoid) == []
+    own = build_run_spec(compose_config("robot=panda", "experiment=tower3", "controller.place_level=0.5",
+                                        "controller.avoid_movable=true"))
+    assert stack_changes(own, turn, avoid) == []

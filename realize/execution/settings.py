@@ -97,8 +97,11 @@ class ExecuteSettings(Settings):
     think: Any = setting("measured", check=_think)  # the world while the planner thinks (module docstring)
     budget: ReplanBudget = field(default_factory=ReplanBudget)  # each replan's search
     # rad: a repair of a plan that stacks sets a held box down level, turning the hand by at most
-    # this (controller.place_level; realize.repair.on_deviation.level_places); null: as the run's controller
+    # this (controller.place_level; realize.repair.on_deviation.stack_changes); null: as the run's controller
     stack_level_rad: float | None = setting(0.8, ge=0)
+    # a repair of a plan that stacks also keeps the fabric off the movable objects where they stand
+    # (controller.avoid_movable): its carries go around the tower it rebuilds; false: as the run's controller
+    stack_avoid_movable: bool = True
     disturbances: list[Any] = field(default_factory=list)  # raw entries: realize.execution.disturbances
 
 

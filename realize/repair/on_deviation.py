@@ -25,7 +25,7 @@ from realize.config import ConfigError
 from realize.execution.layout_updates import geometry_changes
 from realize.execution.world import Observation
 
-__all__ = ["Segment", "go_on", "repair", "why_no_plan", "level_places", "EXECUTION_BACKEND"]
+__all__ = ["Segment", "go_on", "repair", "why_no_plan", "stack_changes", "EXECUTION_BACKEND"]
 
 # an executed world is one copy restored and disturbed through the CPU backend's setters (the GPU
 # backend's restore has never run), whatever backend the run searched on
@@ -89,7 +89,7 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     t0 = time.perf_counter()
     state = obs.state
     changes = geometry_changes(obs, ex.spec.geometry_cfg, ex.moved_m())
-    changes = [*changes, *level_places(ex.spec, ex.settings.stack_level_rad)]
+    changes = [*changes, *stack_changes(ex.spec, ex.settings.stack_level_rad, ex.settings.stack_avoid_movable)]
     kind = "re-parameterize"
     if a >= seg.task.n_actions or _restack(reasons):  # all done but no goal, or the tower it builds on fell
         kind = "re-sequence"
@@ -141,18 +141,30 @@ def repair(ex: Any, seg: Segment, source: Any, obs: Observation, a: int, reasons
     return rec, Segment(rspec.task, res.z, rspec.start, rspec.geometry, offset, rspec.rollout)
 
 
-def level_places(spec: Any, max_turn: float | None) -> list[str]:
-    """The controller change a repair of a plan that stacks searches and executes with: a held box
-    set down level (``controller.place_level`` = ``max_turn``, rad; ``execute.stack_level_rad``),
-    where the run's plan places an object on a region framed by another movable object and its own
-    controllers do not level already (None: no change). Released as held, a box grasped 20-30
-    degrees off its axis and placed down a tilted approach meets the block below on one edge and
-    tips it or itself off (``tests/test_level_place.py``)."""
-    if max_turn is None:
-        return []
+def stacks_blocks(spec: Any) -> bool:
+    """Whether the spec's plan places an object on a region framed by another movable object."""
     task, names = spec.task, set(spec.geometry.object_names)
-    stacks = any(a.template == "place" and any(task.frame_of(p) in names for p in a.params) for a in task.plan)
-    return [f"++controller.place_level={max_turn}"] if stacks and spec.rollout.place_level is None else []
+    return any(a.template == "place" and any(task.frame_of(p) in names for p in a.params) for a in task.plan)
+
+
+def stack_changes(spec: Any, max_turn: float | None, avoid_movable: bool) -> list[str]:
+    """The controller changes a repair of a plan that stacks searches and executes with (none for
+    a plan that does not stack, nor for one its run's own controllers already set):
+
+    * a held box set down level (``controller.place_level`` = ``max_turn``, rad;
+      ``execute.stack_level_rad``, None: no change). Released as held, a box grasped 20-30 degrees
+      off its axis and placed down a tilted approach meets the block below on one edge and tips it
+      or itself off (``tests/test_level_place.py``).
+    * the fabric kept off the movable objects where they stand (``controller.avoid_movable``;
+      ``execute.stack_avoid_movable``). Without it a rebuild's carry can sweep the block it just
+      set back on the tower off again, and the world uses its replans on the same deviation.
+    """
+    if not stacks_blocks(spec):
+        return []
+    out = [f"++controller.place_level={max_turn}"] if max_turn is not None and spec.rollout.place_level is None else []
+    if avoid_movable and not spec.rollout.avoid_movable:
+        out.append("++controller.avoid_movable=true")
+    return out
 
 
 def why_no_plan(rec: ReplanRecord, state: Any) -> str:
