@@ -68,14 +68,17 @@ FIELDS = ["preset", "variant", "actions", "segment_s", "validation_s", "load", "
 
 
 def copy_steps(run_dir: Path) -> int:
-    """Control steps of every copy of every batch of the run in ``run_dir``: each batch's rows
-    times its longest plan, over every history file (a stitched run has one per segment)."""
+    """Control steps of every copy of every batch of the run in ``run_dir``: each batch's copies
+    times its longest plan, over every history file (a stitched run has one per segment). A
+    robust search's row is a sample realized in R worlds (``world_cost_i`` (N, R)): R copies."""
     total = 0
     for path in sorted(run_dir.glob("history*.npz")):
         with np.load(path) as h:
             for k in h.files:
                 if k.startswith("steps_"):
-                    total += int(h[k].size) * int(h[k].max(initial=0))
+                    worlds = f"world_cost_{k[len('steps_'):]}"
+                    copies = int(h[k].size) * (int(h[worlds].shape[1]) if worlds in h.files else 1)
+                    total += copies * int(h[k].max(initial=0))
     return total
 
 

@@ -55,6 +55,13 @@ def test_copy_steps_count_every_copy_of_every_batch_to_its_longest_plan(tmp_path
     assert blp.copy_steps(tmp_path) == 3 * 30 + 2 * 5 + 1 * 7
 
 
+def test_a_robust_searchs_sample_counts_one_copy_per_world(tmp_path: Path) -> None:
+    import numpy as np
+    np.savez(tmp_path / "history.npz", steps_000=np.array([10, 30]), world_cost_000=np.zeros((2, 4)),
+             steps_001=np.array([8, 6]), world_cost_001=np.zeros((2, 4)))
+    assert blp.copy_steps(tmp_path) == 2 * 4 * 30 + 2 * 4 * 8
+
+
 def test_the_work_ratio_is_printed_beside_the_time_ratio(capsys) -> None:
     rows = [{**_row("tower3", 4, 100, 0.95), "copy_steps": "1000"}, {**_row("tower4", 6, 150, 0.95), "copy_steps": "1500"}]
     blp.report(rows)
