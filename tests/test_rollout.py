@@ -35,7 +35,7 @@ from realize.realization.result import RolloutResult
 from realize.realization.rollout import PlanRealizer
 from realize.spec.run_spec import RunSpec, build_run_spec
 from realize.spec.task_plans import build_task, load_task_file
-from realize.scene import BatchedScene
+from realize.scene import BatchedScene, quat_to_matrix
 
 VECTORS = torch.tensor([GOOD, SIDE, FAR_SIDE])  # two feasible plans of the seed task, one infeasible
 
@@ -202,10 +202,26 @@ def test_same_seed_same_numbers(spec: RunSpec, batch: dict[str, Any]) -> None:
     again = run_fresh(spec, VECTORS, _readback, record=True)[0]
     r1, r2 = batch["res"], again["res"]
     for name in ("cost", "feasible", "action_success", "goal", "steps", "progress", "distance",
-                 "traj_t", "traj_base", "traj_ee", "traj_objects"):
+                 "traj_t", "traj_base", "traj_ee", "traj_objects", "traj_object_quats"):
         assert torch.equal(getattr(r1, name), getattr(r2, name)), name
     assert r1.failure == r2.failure
     assert torch.equal(batch["cube"], again["cube"]) and torch.equal(batch["base"], again["base"])
+
+
+def test_recorded_orientations_are_the_objects_own(spec: RunSpec, batch: dict[str, Any]) -> None:
+    """Each recorded frame has every object's orientation beside its centre: unit quaternions;
+    the first frame the cube as the scene set it (upright); the last frame of a plan that
+    reached the goal the orientation the simulator reads at the end (the cube at rest by then)."""
+    res, end = batch["res"], batch["cube"]
+    q = res.traj_object_quats
+    assert q is not None and q.shape == (*res.traj_objects.shape[:3], 4)
+    assert torch.allclose(q.norm(dim=-1), torch.ones(q.shape[:3]), atol=1e-4)
+    k = spec.geometry.object_index("cube")
+    up = quat_to_matrix(q[:, 0, k].float())[:, 2, 2]  # the cube's z axis against the world's
+    assert (up > 0.999).all(), up
+    for i in torch.nonzero(res.feasible).flatten().tolist():
+        dot = float((q[i, -1, k] * end[i, 3:7]).sum().abs())  # q and -q are one orientation
+        assert dot > math.cos(math.radians(1.0) / 2), dot
 
 
 # ---- a grasp pose 30 cm from the cube

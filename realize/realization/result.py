@@ -2,8 +2,8 @@
 
 What it does: ``RolloutResult`` (one row per plan; ``to_eval`` adapts it to the cross-entropy
 optimizer's ``EvalResult``) and ``TrajectoryRecorder``, which samples base, TCP and object
-positions, the whole-body joints and each plan's current action every ``record_every`` control
-steps and stores them into a result.
+positions and orientations, the whole-body joints and each plan's current action every
+``record_every`` control steps and stores them into a result (``TRAJECTORIES``: their fields).
 What it doesn't: simulate (``realize.realization.rollout``) or write files (the run directory's
 sinks do).
 """
@@ -22,6 +22,9 @@ from realize.search.protocol import EvalResult
 from realize.realization.context import StepContext
 from realize.world.state import SceneState
 
+# the recorded per-copy trajectories of a RolloutResult, each (N, T, ...): what joining row blocks
+# or folding a robust search's worlds carries along
+TRAJECTORIES = ("traj_base", "traj_ee", "traj_objects", "traj_object_quats", "traj_q", "traj_action")
 
 @dataclass
 class RolloutResult:
@@ -39,6 +42,7 @@ class RolloutResult:
     traj_base: Tensor | None = None  # (N, T, 2)
     traj_ee: Tensor | None = None  # (N, T, 3)
     traj_objects: Tensor | None = None  # (N, T, m, 3) every object's centre
+    traj_object_quats: Tensor | None = None  # (N, T, m, 4) every object's orientation (w, x, y, z)
     traj_q: Tensor | None = None  # (N, T, n_dof) whole-body joints (the rerun recording's robot in 3-D)
     traj_action: Tensor | None = None  # (N, T) the action each plan was in (its index in the plan)
     wall_time_s: float = 0.0
@@ -65,7 +69,7 @@ class RolloutResult:
 
 
 class TrajectoryRecorder:
-    """Base (x, y), TCP and object positions of every copy, every ``every`` control steps."""
+    """Base (x, y), TCP, object positions and orientations of every copy, every ``every`` control steps."""
 
     def __init__(self, every: int):
         self.every = every
@@ -73,6 +77,7 @@ class TrajectoryRecorder:
         self.base: list[Tensor] = []
         self.ee: list[Tensor] = []
         self.objects: list[Tensor] = []
+        self.quats: list[Tensor] = []
         self.q: list[Tensor] = []
         self.action: list[Tensor] = []
 
@@ -84,6 +89,7 @@ class TrajectoryRecorder:
             self.base.append(ctx.base[:, BASE_XY].clone())
             self.ee.append(ctx.tcp.clone())
             self.objects.append(ctx.objects[:, :, :3].clone())
+            self.quats.append(ctx.objects[:, :, 3:7].clone())
             self.q.append(ctx.q.clone())
             if action is not None:
                 self.action.append(action.clone())
@@ -96,6 +102,7 @@ class TrajectoryRecorder:
         res.traj_base = torch.stack(self.base, dim=1)[:m].cpu()
         res.traj_ee = torch.stack(self.ee, dim=1)[:m].cpu()
         res.traj_objects = torch.stack(self.objects, dim=1)[:m].cpu()
+        res.traj_object_quats = torch.stack(self.quats, dim=1)[:m].cpu()
         res.traj_q = torch.stack(self.q, dim=1)[:m].cpu()
         if len(self.action) == len(self.t):
             res.traj_action = torch.stack(self.action, dim=1)[:m].cpu()

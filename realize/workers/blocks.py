@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
-from realize.realization.result import RolloutResult
+from realize.realization.result import TRAJECTORIES, RolloutResult
 from realize.scene.shards import RowBlock, deal_rows
 from realize.world.state import SceneState
 
@@ -77,7 +77,7 @@ def join_results(parts: Sequence[RolloutResult]) -> RolloutResult:
         longest = max(recorded, key=lambda p: len(p.traj_t))
         frames = len(longest.traj_t)
         res.traj_t = longest.traj_t
-        for name in ("traj_base", "traj_ee", "traj_objects", "traj_q", "traj_action"):
+        for name in TRAJECTORIES:
             if all(getattr(p, name) is not None for p in parts):
                 setattr(res, name, torch.cat([_pad_frames(getattr(p, name), frames) for p in parts]))
     return res

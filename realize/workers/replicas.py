@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from torch import Tensor
 
-from realize.realization.result import RolloutResult
+from realize.realization.result import TRAJECTORIES, RolloutResult
 from realize.search.ce.risk import fold_worlds
 from realize.tasks.worlds import SEARCH_STREAM, Worlds, draw_worlds
 
@@ -53,7 +53,7 @@ def fold_result(res: RolloutResult, replicas: int, risk: str, alpha: float) -> R
     w = fold_worlds(res.cost, res.feasible, res.progress, res.distance, R, risk, alpha)
     first = slice(None, None, R)
     traj = {f: (None if getattr(res, f) is None else getattr(res, f)[first])
-            for f in ("traj_base", "traj_ee", "traj_objects", "traj_q", "traj_action")}
+            for f in TRAJECTORIES}
     return dataclasses.replace(
         res, cost=w.cost.to(res.cost.dtype), feasible=w.feasible, progress=w.progress.to(res.progress.dtype),
         distance=w.distance.to(res.distance.dtype), action_success=res.action_success[first], goal=res.goal[first],
