@@ -26,6 +26,7 @@ from realize.world.state import SceneState
 # or folding a robust search's worlds carries along
 TRAJECTORIES = ("traj_base", "traj_ee", "traj_objects", "traj_object_quats", "traj_q", "traj_action")
 
+
 @dataclass
 class RolloutResult:
     """Outcome of N realized plans (one row per plan)."""
