@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import math
 import os
@@ -82,6 +83,9 @@ def copy_steps(run_dir: Path) -> int:
     return total
 
 
+MAX_NAME = 120  # characters of a kept run directory's name
+
+
 def variant_label(name: str, extra: list[str]) -> str:
     """The ``variant`` column of a row: the search's name, with the ``--extra`` overrides after it
     (``plain[controller.place_lift=true]``), so that runs of one preset with other options keep
@@ -90,8 +94,14 @@ def variant_label(name: str, extra: list[str]) -> str:
 
 
 def run_dir_name(preset: str, variant: str, seed: int) -> str:
-    """A row's kept run directory (the variant's overrides made a file name)."""
-    return re.sub(r"[^\w.-]+", "_", f"{preset}-{variant}-s{seed}")  # (it goes into a Hydra override)
+    """A row's kept run directory (the variant's overrides made a file name). A name longer than
+    ``MAX_NAME`` (a file system refuses past 255 bytes; six region overrides reach it) keeps its
+    head and ends in a digest of the whole, so two variants never share a directory."""
+    name = re.sub(r"[^\w.-]+", "_", f"{preset}-{variant}-s{seed}")  # (it goes into a Hydra override)
+    if len(name) <= MAX_NAME:
+        return name
+    digest = hashlib.sha1(name.encode()).hexdigest()[:12]
+    return f"{name[:MAX_NAME - 20]}-{digest}-s{seed}"
 
 
 def measure(preset: str, overrides: list[str], seed: int, run_dir: Path) -> dict[str, object]:

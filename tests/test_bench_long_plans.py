@@ -80,3 +80,14 @@ def test_runs_with_other_options_keep_their_own_rows(capsys) -> None:
     blp.report(rows)
     out = capsys.readouterr().out
     assert f"== {lifted}" in out and "x tower3 3.00" in out and "x tower3 2.00" in out
+
+
+def test_a_variant_of_many_overrides_gets_a_short_name_of_its_own() -> None:
+    """Six region overrides made a directory name past the file system's 255 bytes (the run
+    failed on mkdir): a long name is cut and ends in a digest of the whole, one per variant."""
+    def regions(v: float) -> str:
+        return blp.variant_label("plain", [f"task.params.Cube{c}_{k}.polar_max={v}" for c in "BCD" for k in ("g", "on")])
+    a, b = blp.run_dir_name("tower4", regions(0.2), 2), blp.run_dir_name("tower4", regions(0.1), 2)
+    assert len(a) <= blp.MAX_NAME and len(b) <= blp.MAX_NAME and a != b
+    assert a.startswith("tower4-plain_task.params.CubeB_g") and a.endswith("-s2")
+    assert blp.run_dir_name("tower4", regions(0.2), 2) == a  # the same variant, the same directory
