@@ -64,6 +64,7 @@ PRESETS = {
 CHAIN = ["levers=stitched", "stitch.cut=after_each_place", "stitch.credit=3"]
 RATIO_BOUND = {"tower4": 1.6, "tower5": 2.2}
 MIN_VALIDATED = 0.90
+MAX_NAME = 120  # characters of a kept run directory's name (run_dir_name)
 FIELDS = ["preset", "variant", "actions", "segment_s", "validation_s", "load", "copy_steps",
           *(f for f in LEVER_FIELDS if f not in ("experiment", "variant"))]
 
@@ -81,9 +82,6 @@ def copy_steps(run_dir: Path) -> int:
                     copies = int(h[k].size) * (int(h[worlds].shape[1]) if worlds in h.files else 1)
                     total += copies * int(h[k].max(initial=0))
     return total
-
-
-MAX_NAME = 120  # characters of a kept run directory's name
 
 
 def variant_label(name: str, extra: list[str]) -> str:
