@@ -7,7 +7,7 @@ distribution by cross-entropy optimization.
 
 from realize.reproducible import pin_cpu_math
 
-pin_cpu_math()  # before any torch op: the same torch/MKL kernel paths on every x86-64 CPU with AVX2
+pin_cpu_math()  # before numpy, OpenBLAS, torch or MKL loads: the same kernels on every x86-64 host
 
 __version__ = "0.1.0"
 

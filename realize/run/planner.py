@@ -38,6 +38,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
+from realize.reproducible import warn_unpinned
 from realize.spec.compose import set_key
 from realize.spec.replan_from import saved_config
 from realize.run.plan_result import PlanResult, PlanTimings, ReplanBudget
@@ -95,6 +96,7 @@ class Planner:
         given = not isinstance(config, (DictConfig, Mapping))
         self.cli_overrides = list(cli_overrides) if cli_overrides or not given else [str(o) for o in config]
         self.max_pools = max(1, int(max_pools))
+        warn_unpinned()  # numpy or torch loaded before realize pinned their kernels (a notebook): said once here
         self._pools: dict[str, tuple[RolloutPool, str]] = {}  # processes key -> (workers, scenes key)
         self._built: set[str] = set()  # keys whose workers the current call built
         self.last: PlanResult | None = None

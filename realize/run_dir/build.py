@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from realize.reproducible import PINNED
+from realize.reproducible import PINNED, in_force
 from realize.run_dir.jsonio import json_safe
 from realize.run_dir.result_doc import EliteStats, FailureDoc, HalvingDoc, PlanRef, ResultDoc
 from realize.run_dir.summaries import IterationSummary, best_params
@@ -70,8 +70,9 @@ class RunInfo:
 
 
 def package_versions() -> dict[str, str | None]:
-    """Versions of the packages that decide a run's numbers, and the CPU math paths pinned by
-    ``realize.reproducible`` (they decide its last bits)."""
+    """Versions of the packages that decide a run's numbers, the CPU math paths pinned by
+    ``realize.reproducible`` (they decide its last bits) and, as ``cpu_math.LIB``, the kernels
+    each loaded library runs (``realize.reproducible.in_force``)."""
     out: dict[str, str | None] = {}
     for name in ("realize", "torch", "mani_skill", "sapien", "numpy", "hydra-core", "rerun-sdk"):
         try:
@@ -80,6 +81,8 @@ def package_versions() -> dict[str, str | None]:
             out[name] = None
     for key in PINNED:
         out[key] = os.environ.get(key)
+    for lib, kernels in in_force().items():  # what each library runs, read back from it
+        out[f"cpu_math.{lib}"] = kernels
     return out
 
 
