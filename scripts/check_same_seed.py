@@ -4,7 +4,8 @@ The contract of a CPU run is that the same config and seed give the same numbers
 and host. This script checks it where a unit test cannot: the full default search
 (``realize experiment=seed_paper seed=S``, validation off, since it only picks among the
 search's plans) for each seed, one run at a time, compared bit for bit (``best_z``, ``best_cost``,
-the best cost of every batch) with ``scripts/bench_data/same_seed.json``. Each line says which
+the best cost of every batch and, where the record has them, a digest of every batch's per-row
+costs) with ``scripts/bench_data/same_seed.json``. Each line says which
 seeds matched, on which host (CPU model, torch's CPU capability, the package versions).
 ``--record`` writes the record instead (only when a change is meant to move the search's
 numbers; say so in the commit). Exit 1 when a seed differs.
@@ -29,6 +30,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
 from bench_seed_paper import commit_of, parse_seeds  # noqa: E402  (the same seed list and commit stamp)
+from realize.run_dir.history import batch_digests  # noqa: E402
 
 RECORD = REPO / "scripts" / "bench_data" / "same_seed.json"
 OVERRIDES = ["experiment=seed_paper", "validation=off", "logging.progress=false", "logging.rerun=false"]
@@ -62,7 +64,19 @@ def run_seed(seed: int, run_dir: Path) -> dict[str, object]:
     if proc.returncode != 0:
         raise SystemExit(f"seed {seed}: realize exited {proc.returncode}:\n{proc.stderr[-2000:]}")
     doc = json.loads((run_dir / "result.json").read_text())
-    return {"seed": seed, **{k: doc[k] for k in KEYS}, "versions": doc.get("versions", {})}
+    return {"seed": seed, **{k: doc[k] for k in KEYS}, "batch_digests": batch_digests(run_dir),
+            "versions": doc.get("versions", {})}
+
+
+def first_parting(got: dict[str, list[str]], want: dict[str, list[str]]) -> str:
+    """Where two runs' batch digests first differ, per history file ("" where they agree or one
+    has none)."""
+    parts = []
+    for name in sorted(set(got) & set(want)):
+        first = next((i for i, (a, b) in enumerate(zip(got[name], want[name])) if a != b), None)
+        if first is not None:
+            parts.append(f"{name} batch {first}")
+    return ", ".join(parts)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,6 +109,9 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             want = recorded[seed]
             bad = [k for k in KEYS if got[k] != want[k]]
+            parting = first_parting(got["batch_digests"], want.get("batch_digests") or {})
+            if parting:
+                bad.append(f"batch_digests (first at {parting})")
             if bad:
                 differ.append(seed)
                 print(f"seed {seed}: DIFFERS in {bad}: best cost {got['best_cost']} here, {want['best_cost']} "

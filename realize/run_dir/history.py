@@ -18,6 +18,8 @@ the distribution is still uniform). ``column_names`` (D,) names Z's columns. A m
 arrays work unchanged) and all modes in ``mode_mean``/``mode_std`` (I, k, D) and
 ``mode_weight`` (I, k); those three arrays exist only for mixture runs. The sample count may
 change between iterations (linear schedule), hence one array per iteration.
+``batch_digests(run_dir)`` reads every history file of a run down to one digest per batch (the
+same-seed checks compare runs, hosts and fixtures by it).
 What it doesn't: decide where the file goes (``realize.run_dir.directory.RunDir``).
 """
 
@@ -32,7 +34,7 @@ import numpy as np
 
 from realize.run_dir.jsonio import atomic_write_npz
 
-__all__ = ["History", "load_history"]
+__all__ = ["History", "load_history", "batch_digests"]
 
 Modes = tuple[np.ndarray, np.ndarray, np.ndarray]  # mean (k, D), std (k, D), weight (k,)
 
@@ -147,3 +149,24 @@ def load_history(path: Path, keep: int | None = None) -> History:
     """Read a history file without unpickling (``allow_pickle=False``)."""
     with np.load(path, allow_pickle=False) as z:
         return History.from_arrays({k: z[k] for k in z.files}, keep=keep)
+
+
+def batch_digests(run_dir: Path) -> dict[str, list[str]]:
+    """A digest of every batch's per-row costs, feasibility and final distances, per history file
+    of ``run_dir`` (``history.npz``; a segment search's ``history_cK.npz``), in batch order. Finer
+    than the best cost per batch: two runs whose last bits differ part first in the distances of
+    rows that are not the best, and only later in a cost."""
+    import hashlib
+
+    out: dict[str, list[str]] = {}
+    for path in sorted(Path(run_dir).glob("history*.npz")):
+        with np.load(path, allow_pickle=False) as h:
+            rows = []
+            for i in range(sum(1 for k in h.files if k.startswith("cost_"))):
+                d = hashlib.sha256()
+                for key in (f"cost_{i:03d}", f"feasible_{i:03d}", f"distance_{i:03d}"):
+                    if key in h.files:
+                        d.update(np.ascontiguousarray(h[key]).tobytes())
+                rows.append(d.hexdigest()[:16])
+        out[path.name] = rows
+    return out
