@@ -7,9 +7,8 @@
 #      on Debian 12 it comes from bookworm-backports, elsewhere we say what to install,
 #   5. where there is an NVIDIA GPU: SAPIEN's PhysX GPU library (it would otherwise download it
 #      with no time limit the first time GPU physics starts); without network it says so and goes on,
-#   6. the compiled fabric step of the default robot (controller.fabric.compiled, a speed lever that
-#      is off by default), built once per machine and source version (about a minute; g++ needed), so
-#      that its tests and the first run with it load it in seconds.
+#   (the compiled fabric step, controller.fabric.compiled, a speed lever no preset uses, is built by
+#   the first run that asks for it, about a minute with g++; `python -m realize.cli.prebuild` builds it ahead)
 # Re-run it any time; it only does what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -29,18 +28,9 @@ physx_gpu() {
     || say "warning: no PhysX GPU library: device=cuda will refuse to start until it is there (see above)"
 }
 
-# 6. the compiled fabric step (checked on every run: its key follows the source; seconds when built)
-fabric_step() {
-  command -v "${CXX:-g++}" >/dev/null 2>&1 \
-    || { say "warning: no C++ compiler (${CXX:-g++}): runs with controller.fabric.compiled=true will stop; install g++"; return 0; }
-  "$VENV/bin/python" -m realize.cli.prebuild \
-    || say "warning: the compiled fabric step did not build (above); runs with controller.fabric.compiled=true will stop"
-}
-
 want=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
 if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$want" ] && [ -x "$VENV/bin/python" ]; then
   physx_gpu
-  fabric_step
   exit 0
 fi
 
@@ -109,6 +99,5 @@ MSG
   fi
 fi
 physx_gpu
-fabric_step
 echo "$want" > "$STAMP"
 say "done"

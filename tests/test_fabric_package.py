@@ -4,7 +4,8 @@ The oracle is the eager ``WholeBodyFabric.step`` (itself checked against the ref
 package in tests/test_fabrics*.py): the same valid rows, joint targets within float32 rounding of
 the compiler's other summation order, one package for every batch size and scene, a row's result
 independent of its batch mates bit for bit, and a clear error when the build fails. The package is
-built once per machine (``make setup`` builds the default robot's) and shared with the runs.
+built once per machine by the first run or test that loads it (about a minute: no preset uses it,
+so setup does not build it) and shared with the runs: the tests that load it are marked slow.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ def _inputs(fab: WholeBodyFabric, seed: int):
     return fab.start(q, qd), q_meas, goal
 
 
+@pytest.mark.slow  # loads the built package: its first build on a machine takes about a minute
 def test_built_step_matches_the_eager_step(pair) -> None:
     eager, built = pair
     assert built._package is not None and eager._package is None
@@ -57,6 +59,7 @@ def test_built_step_matches_the_eager_step(pair) -> None:
             assert not torch.equal(a.q, b.q) or n == 1  # it is the package that ran, not the eager step
 
 
+@pytest.mark.slow  # loads the built package: its first build on a machine takes about a minute
 def test_a_row_of_the_built_step_ignores_its_batch_mates(pair) -> None:
     _, built = pair
     state, q_meas, goal = _inputs(built, seed=3)
@@ -68,6 +71,7 @@ def test_a_row_of_the_built_step_ignores_its_batch_mates(pair) -> None:
             assert torch.equal(v, valid[rows])
 
 
+@pytest.mark.slow  # loads the built package: its first build on a machine takes about a minute
 def test_one_package_serves_every_scene_and_follows_the_settings(pair) -> None:
     eager, built = pair
     walls = GeometryCfg(variant="wall", walls=[WallCfg()])
@@ -87,6 +91,7 @@ def test_one_package_serves_every_scene_and_follows_the_settings(pair) -> None:
         WholeBodyFabric(build_geometry(GeometryCfg()), dt=0.05, dtype=torch.float64)) != path
 
 
+@pytest.mark.slow  # loads the built package: its first build on a machine takes about a minute
 def test_a_per_plan_weight_runs_the_eager_step(pair) -> None:
     eager, built = pair
     state, q_meas, goal = _inputs(eager, seed=6)
@@ -109,6 +114,7 @@ def test_a_failed_build_names_the_key_and_the_way_out(monkeypatch, tmp_path) -> 
     assert not list((tmp_path / "realize" / "fabric").glob("*.pt2"))  # no half package left behind
 
 
+@pytest.mark.slow  # loads the built package: its first build on a machine takes about a minute
 def test_prebuild_finds_the_package_a_run_loads(pair, monkeypatch, capsys) -> None:
     from realize.cli import prebuild as pb
 

@@ -4,8 +4,9 @@ will load: ``python -m realize.cli.prebuild [ROBOT ...]`` (default: the default 
 What it does: for each robot named, the fabric a run builds with the default controller and
 simulation settings (the ``controller`` and ``sim`` groups: the same package key), loaded or
 built into ``realize.paths.cache_dir("fabric")`` (``realize.controllers.fabric_package``).
-``scripts/setup.sh`` runs it, so that the first ``make run`` and the tests do not build it; a
-package already there costs about two seconds (its key is computed, nothing is loaded). A failed build is reported, not raised: a run
+Setup does not run it (no preset uses the compiled step): the first run that asks for the
+package builds it, and this builds it ahead of time; a package already there costs about two
+seconds (its key is computed, nothing is loaded). A failed build is reported, not raised: a run
 that needs the package says the same and how to run without it.
 What it doesn't: build packages for non-default controller settings (a run builds its own
 the first time), or for other devices than the CPU.
