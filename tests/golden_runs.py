@@ -50,11 +50,13 @@ EXPECTED: dict[str, Any] = json.loads(FIXTURE.read_text()) if FIXTURE.exists() e
 SMOKE = "seed_paper_default"
 
 
-def run_golden(name: str, run_dir: Path, levers: list[str] | None = None) -> dict[str, Any]:
+def run_golden(name: str, run_dir: Path, levers: list[str] | None = None,
+               env: dict[str, str] | None = None) -> dict[str, Any]:
     """Run ``GOLDEN_RUNS[name]`` into ``run_dir`` with ``levers`` (default: ``PRESET_LEVERS[name]``
-    where it has one, else ``EXACT``, every speed lever off); the compared numbers of its result.json."""
+    where it has one, else ``EXACT``, every speed lever off) and ``env`` added to the environment;
+    the compared numbers of its result.json."""
     levers = PRESET_LEVERS.get(name, EXACT) if levers is None else levers
-    p = realize_cli(*GOLDEN_RUNS[name], *levers, *_QUIET, f"hydra.run.dir={run_dir}", cwd=REPO, timeout=900)
+    p = realize_cli(*GOLDEN_RUNS[name], *levers, *_QUIET, f"hydra.run.dir={run_dir}", cwd=REPO, timeout=900, env=env)
     if p.returncode != 0:
         raise RuntimeError(f"golden run {name} failed ({p.returncode}):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}")
     doc = json.loads((run_dir / "result.json").read_text())
@@ -68,11 +70,12 @@ def run_golden(name: str, run_dir: Path, levers: list[str] | None = None) -> dic
     return out
 
 
-def check_golden(name: str, tmp_path: Path) -> None:
-    """Run the golden run ``name`` and compare its numbers with the fixture's, bit for bit."""
+def check_golden(name: str, tmp_path: Path, env: dict[str, str] | None = None) -> None:
+    """Run the golden run ``name`` (``env`` added to its environment) and compare its numbers with
+    the fixture's, bit for bit."""
     want = EXPECTED[name]
     assert want["overrides"] == GOLDEN_RUNS[name], "the run's overrides changed: re-record the fixture on purpose"
-    got = run_golden(name, tmp_path / name)
+    got = run_golden(name, tmp_path / name, env=env)
     recorded = {k: v for k, v in want.items() if k != "overrides"}
     assert sorted(got) == sorted(recorded), f"{name}: the run's keys changed (a key the fixture holds is gone?)"
     for key, value in got.items():
