@@ -15,6 +15,7 @@ reader (grasp geometry, sphere fitting, the recording, the derived URDF), found 
 URDF loader (which ManiSkill uses) finds it: a ``package://`` name with the prefix dropped, in
 the URDF's folder or else in the nearest folder above it that has it (SAPIEN's ``package_dir``
 argument is never passed here); any other name relative to the URDF's folder, or absolute.
+:func:`urdf_for_pytorch_kinematics` gives a URDF's text as pytorch_kinematics' parser takes it.
 
 Errors: a URDF that is not readable XML, a joint without its parent or child link, and a mesh
 found nowhere are each one ``realize.config.ConfigError`` line naming the URDF file and what is
@@ -42,7 +43,7 @@ from realize.config import ConfigError
 from realize.paths import REPO_ROOT, cache_dir
 
 __all__ = ["fixed_base_joints", "JointSpec", "resolve_urdf", "source_urdf", "read_urdf", "parse_urdf_joints",
-           "urdf_floats", "element_origin", "mesh_candidates", "mesh_file",
+           "urdf_floats", "element_origin", "mesh_candidates", "mesh_file", "urdf_for_pytorch_kinematics",
            "rpy_matrix", "skew", "axis_rotation"]
 
 MANI_SKILL_PREFIX = "mani_skill:"
@@ -166,6 +167,20 @@ def mesh_file(filename: str, urdf: str | os.PathLike[str]) -> Path:
     else:
         places = str(tried[0])
     raise ConfigError(f"{where}: mesh file {filename!r} not found (tried {places})")
+
+
+def urdf_for_pytorch_kinematics(path: str | os.PathLike[str]) -> bytes:
+    """The URDF file's XML as pytorch_kinematics' parser takes it: it requires ``effort`` and
+    ``velocity`` on every joint's ``<limit>`` (ManiSkill's Koch arm gives neither, the mobile
+    Panda's base no effort); where absent they are set to 0. Neither plays any part in
+    kinematics; everything else is as in the file."""
+    root = read_urdf(path)
+    for joint in root.findall("joint"):
+        limit = joint.find("limit")
+        if limit is not None:
+            limit.attrib.setdefault("effort", "0")
+            limit.attrib.setdefault("velocity", "0")
+    return ET.tostring(root)
 
 
 def parse_urdf_joints(path: str | os.PathLike[str]) -> dict[str, JointSpec]:
