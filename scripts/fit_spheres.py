@@ -35,6 +35,10 @@ was written by this script (so ``fit_spheres.py ROBOT`` refits a robot as commit
 ``--max-radius`` rule. A file not written by this script (Fetch's hand-made one) is never
 overwritten; write elsewhere with ``--out``.
 
+Mesh files are found as SAPIEN finds them (``package://`` names searched up the URDF's folders,
+``realize.robot.urdf.mesh_file``); a robot config, URDF or mesh it cannot read is one ``error:``
+line, exit code 2.
+
 What it doesn't: fit self-collision models, or change a sphere file it is only comparing.
 """
 
@@ -52,6 +56,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from realize.config import ConfigError
 from realize.paths import REPO_ROOT
 from realize.robot.sphere_file import SPHERE_DIR, SphereSpec, load_spheres, sphere_file_path, write_spheres
 from realize.robot.sphere_fit import (Coverage, LinkGeometry, Sphere, collision_links, coverage, fit_spheres,
@@ -192,6 +197,15 @@ def _parse_counts(items: list[str]) -> dict[str, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the script; a robot config, URDF or mesh it cannot read is one ``error:`` line (exit 2)."""
+    try:
+        return _fit(argv)
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+
+def _fit(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("robot", nargs="?", help="configs/robot/ROBOT.yaml (needed unless --urdf and --out are given)")
     ap.add_argument("--urdf", help="read this URDF instead of the robot config's")

@@ -1,6 +1,9 @@
 """Every robot's kinematics against pytorch_kinematics (an independent implementation, and one of
 the project's declared dependencies): on 1,000 random configurations in float64, the TCP pose,
-every collision-sphere centre, and their Jacobians agree within 1e-9."""
+every collision-sphere centre, and their Jacobians agree within 1e-9. The URDF goes to
+pytorch_kinematics through ``realize.robot.urdf.urdf_for_pytorch_kinematics`` (its parser needs
+``effort`` and ``velocity`` on every limit), so a URDF without them, as ManiSkill's Koch arm
+(``tests/_koch.py``), is checked the same way."""
 
 from __future__ import annotations
 
@@ -10,7 +13,10 @@ import pytorch_kinematics as pk
 import torch
 
 from realize.robot.kinematics import RobotKinematics
-from realize.robot.spec import known_robots, load_robot_spec
+from realize.robot.sphere_file import SphereSpec
+from realize.robot.spec import RobotSpec, known_robots, load_robot_spec
+from realize.robot.urdf import urdf_for_pytorch_kinematics
+from _koch import koch_spec
 from helpers import full_qpos, random_q
 
 F64 = torch.float64
@@ -33,17 +39,6 @@ def float64_urdf_origins(monkeypatch: pytest.MonkeyPatch) -> None:
                               dtype=F64)
 
     monkeypatch.setattr(pk_urdf, "_convert_transform", convert)
-
-
-def _with_efforts(urdf: bytes) -> bytes:
-    """pytorch_kinematics' URDF parser requires ``effort`` on every ``<limit>`` (the mobile Panda's
-    base and lift give none); it plays no part in kinematics."""
-    import xml.etree.ElementTree as ET
-
-    root = ET.fromstring(urdf)
-    for limit in root.iter("limit"):
-        limit.attrib.setdefault("effort", "0")
-    return ET.tostring(root)
 
 
 def _with_planar_base(urdf: bytes, names: tuple[str, ...], height: float) -> bytes:
@@ -78,9 +73,33 @@ def _point(t: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
 @pytest.mark.parametrize("robot", known_robots())
 def test_tcp_spheres_and_jacobians_match_pytorch_kinematics(robot: str) -> None:
     spec = load_robot_spec(robot)
-    kin = RobotKinematics(spec, dtype=F64)
+    _check_against_pytorch_kinematics(spec, RobotKinematics(spec, dtype=F64))
+
+
+def test_a_urdf_without_effort_or_velocity_limits_matches_pytorch_kinematics() -> None:
+    """The Koch's URDF gives no effort or velocity on its limits: read as it comes, pytorch_kinematics'
+    parser refuses it; through ``urdf_for_pytorch_kinematics`` it agrees with ours (spheres: one on
+    each arm link, off its origin). Batched rows equal the same configurations one at a time."""
+    spec = koch_spec()
+    links = ("link_2", "link_3", "link_4", "link_5", "link_6", "gripper")
+    spheres = [SphereSpec(f"{lk}_0", lk, (0.01, -0.02, 0.03), 0.02) for lk in links]
+    kin = RobotKinematics(spec, dtype=F64, spheres=spheres)
     with open(kin.urdf_path, "rb") as f:
-        urdf = _with_efforts(f.read())
+        with pytest.raises(Exception, match="velocity|effort"):
+            pk.build_chain_from_urdf(f.read())
+    _check_against_pytorch_kinematics(spec, kin)
+    q = random_q(kin, 5, seed=3)
+    pose, jac = kin.tcp_jacobian(q)
+    for i in range(len(q)):
+        one_pose, one_jac = kin.tcp_jacobian(q[i:i + 1])
+        torch.testing.assert_close(one_pose[0], pose[i], atol=1e-12, rtol=0)
+        torch.testing.assert_close(one_jac[0], jac[i], atol=1e-12, rtol=0)
+
+
+def _check_against_pytorch_kinematics(spec: RobotSpec, kin: RobotKinematics) -> None:
+    """TCP pose, sphere centres and their Jacobians of ``kin`` against pytorch_kinematics (module docstring)."""
+    robot = spec.name
+    urdf = urdf_for_pytorch_kinematics(kin.urdf_path)
     if spec.base.fixed:
         urdf = _with_planar_base(urdf, spec.whole_body_joints[:3], spec.base.height)
     q = random_q(kin, N, seed=7)

@@ -6,6 +6,8 @@ What it does:
   * ``link_meshes(urdf)``: per URDF link, a mesh rerun can show (``Asset3D``: STL, OBJ, glTF/GLB)
     with its origin and scale: the smallest of its visual and collision meshes in such a format
     (Fetch's visuals are COLLADA ``.dae``, its collision meshes STL), up to ``MAX_MESH_BYTES``;
+    files found as SAPIEN finds them (``realize.robot.urdf.mesh_file``), a mesh found nowhere
+    left out (the robot is shown without it);
   * ``RobotLogger``: logs the meshes statically under ``<root>/<link>/mesh`` and, for a
     whole-body trajectory ``q (T, n_dof)``, the pose of every link with a mesh (``Transform3D``:
     translation and quaternion) as columns on the given time columns (``rr.send_columns``: one
@@ -25,7 +27,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import rerun as rr
 
-from realize.robot.urdf import element_origin, mesh_path, rpy_matrix, urdf_floats
+from realize.config import ConfigError
+from realize.robot.urdf import element_origin, mesh_file, read_urdf, rpy_matrix, urdf_floats
 
 if TYPE_CHECKING:
     from realize.robot.kinematics import RobotKinematics
@@ -56,15 +59,16 @@ class LinkMesh:
     scale: tuple[float, float, float]
 
 
-def _meshes_of(link: ET.Element, base: Path) -> list[LinkMesh]:
-    """The link's visual and collision meshes in a format rerun reads."""
+def _meshes_of(link: ET.Element, urdf: Path) -> list[LinkMesh]:
+    """The link's visual and collision meshes in a format rerun reads (those found)."""
     out = []
     for el in link.findall("visual") + link.findall("collision"):
         mesh = el.find("geometry/mesh")
-        if mesh is None:
+        if mesh is None or Path(mesh.get("filename", "")).suffix.lower() not in _MEDIA:
             continue
-        path = mesh_path(mesh.get("filename", ""), base).resolve()
-        if path.suffix.lower() not in _MEDIA or not path.is_file():
+        try:
+            path = mesh_file(mesh.get("filename", ""), urdf).resolve()
+        except ConfigError:  # a mesh found nowhere: the recording shows the robot without it
             continue
         xyz, rpy = element_origin(el)
         out.append(LinkMesh(link.get("name", ""), path, xyz, rpy, urdf_floats(mesh.get("scale"), (1.0, 1.0, 1.0))))
@@ -76,10 +80,10 @@ def link_meshes(urdf: str | Path, max_bytes: int = MAX_MESH_BYTES) -> dict[str, 
     in a format rerun reads, if at most ``max_bytes`` (Fetch's 0.4 MB e-stop and laser meshes
     are left out); links without one are absent."""
     path = Path(urdf)
-    root = ET.parse(path).getroot()
+    root = read_urdf(path)
     out = {}
     for link in root.findall("link"):
-        found = sorted(_meshes_of(link, path.parent), key=lambda m: m.path.stat().st_size)
+        found = sorted(_meshes_of(link, path), key=lambda m: m.path.stat().st_size)
         if found and found[0].path.stat().st_size <= max_bytes:
             out[found[0].link] = found[0]
     return out

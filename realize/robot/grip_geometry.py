@@ -172,12 +172,14 @@ def grip_geometry(spec: RobotSpec, where: str = "robot") -> GripGeometry:
     """The gripper's geometry (module docstring); refuses what ``check_gripper`` refuses, naming
     ``<where>.gripper.<key>``."""
     g = spec.gripper
-    joints = {j.name: j for j in parse_urdf_joints(str(source_urdf(spec.urdf))).values()}
+    urdf_name = source_urdf(spec.urdf).name
+    joints = {j.name: j for j in parse_urdf_joints(source_urdf(spec.urdf)).values()}
     by_child = {j.child: j for j in joints.values()}
     top, where = where, f"{where}.gripper"
-    first = joints.get(g.joints[0])
-    if first is None:
-        raise ConfigError(f"{where}.joints: {g.joints[0]!r} is not a joint of {source_urdf(spec.urdf).name}")
+    for n in g.joints:
+        if n not in joints:
+            raise ConfigError(f"{where}.joints: {n!r} is not a joint of {urdf_name}")
+    first = joints[g.joints[0]]
     for n in g.joints:
         j = joints[n]
         if j.type not in UNITS:
@@ -194,7 +196,7 @@ def grip_geometry(spec: RobotSpec, where: str = "robot") -> GripGeometry:
                           f"[{lo:g}, {hi:g}] {unit} (a {first.type} joint: open and closed are in {unit})")
     for f in g.finger_links:
         if f not in by_child and f != spec.tcp.link:
-            raise ConfigError(f"{where}.finger_links: {f!r} is not a link of {source_urdf(spec.urdf).name}")
+            raise ConfigError(f"{where}.finger_links: {f!r} is not a link of {urdf_name}")
     if not any(_moved_by(by_child, f, set(g.joints)) for f in g.finger_links):
         raise ConfigError(f"{where}.finger_links = {list(g.finger_links)}: neither is moved by {where}.joints "
                           f"{list(g.joints)}, so the gripper cannot open or close them")
@@ -205,7 +207,7 @@ def grip_geometry(spec: RobotSpec, where: str = "robot") -> GripGeometry:
         widths, centres, reach, tip_half = _measure(spec.urdf, tuple(g.joints), tuple(g.finger_links), spec.tcp.link,
                                    tuple(spec.tcp.offset), tuple(spec.tcp.approach_axis),
                                    tuple(spec.tcp.closing_axis), values)
-    except ValueError as e:  # a finger link without collision geometry
+    except ValueError as e:  # a finger link without collision geometry, or a mesh not found or not readable
         raise ConfigError(f"{where}.finger_links = {list(g.finger_links)}: {e}") from None
     geo = GripGeometry(first.type, unit, values, widths, centres, len(g.joints), reach, tip_half)
     if g.fingertip_reach < reach - REACH_TOL:

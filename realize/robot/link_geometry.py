@@ -5,7 +5,10 @@ What it does: :func:`link_geometry` reads one link's ``<collision>`` elements (m
 number of elements) into a :class:`LinkGeometry`, which samples its surface, finds points along
 its sharp edges, tells inside from outside (generalized winding number, robust to meshes that are
 not closed) and measures exact point-to-solid distances. :func:`collision_links` lists the links
-with any collision geometry.
+with any collision geometry. Mesh files are found as SAPIEN finds them
+(``realize.robot.urdf.mesh_file``: ``package://`` names searched up the URDF's folders); a mesh
+found nowhere, or a file that is not a mesh with triangles, is one ``ConfigError`` line naming
+the URDF and the file.
 What it doesn't: fit or judge spheres (``realize.robot.sphere_fit``), or know any robot.
 """
 
@@ -21,7 +24,8 @@ import trimesh
 
 import torch
 
-from realize.robot.urdf import JointSpec, axis_rotation, element_origin, mesh_path, rpy_matrix, urdf_floats
+from realize.config import ConfigError
+from realize.robot.urdf import JointSpec, axis_rotation, element_origin, mesh_file, read_urdf, rpy_matrix, urdf_floats
 
 __all__ = ["LinkGeometry", "collision_links", "link_geometry", "origin_matrix", "joint_transform"]
 
@@ -139,7 +143,21 @@ def _primitive_mesh(geom: ET.Element) -> trimesh.Trimesh:
     raise ValueError(f"unsupported collision geometry <{geom.tag}>")
 
 
-def _collision_meshes(link: ET.Element, base_dir: str) -> list[trimesh.Trimesh]:
+def _load_mesh(filename: str, urdf: str | os.PathLike[str]) -> trimesh.Trimesh:
+    """The triangle mesh a ``<mesh filename>`` of ``urdf`` names; a file trimesh cannot read, or
+    one without triangles, is one ``ConfigError`` line naming both files."""
+    path = mesh_file(filename, urdf)
+    where = f"URDF {os.fspath(urdf)}: mesh file {filename!r} ({path})"
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except Exception as e:  # trimesh's loaders raise anything from ValueError to ImportError
+        raise ConfigError(f"{where} is not a readable mesh ({type(e).__name__}: {' '.join(str(e).split())})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ConfigError(f"{where} is not a readable mesh (no triangles in it)")
+    return mesh
+
+
+def _collision_meshes(link: ET.Element, urdf: str | os.PathLike[str]) -> list[trimesh.Trimesh]:
     meshes = []
     for col in link.findall("collision"):
         geom_el = col.find("geometry")
@@ -147,7 +165,7 @@ def _collision_meshes(link: ET.Element, base_dir: str) -> list[trimesh.Trimesh]:
             continue
         geom = geom_el[0]
         if geom.tag == "mesh":
-            mesh = trimesh.load(mesh_path(geom.get("filename", ""), base_dir), force="mesh")
+            mesh = _load_mesh(geom.get("filename", ""), urdf)
             scale = urdf_floats(geom.get("scale"), (1.0, 1.0, 1.0))
             mesh.apply_transform(np.diag([*scale, 1.0]))
         else:
@@ -159,17 +177,18 @@ def _collision_meshes(link: ET.Element, base_dir: str) -> list[trimesh.Trimesh]:
 
 def collision_links(urdf_path: str | os.PathLike[str]) -> list[str]:
     """Names of the URDF's links that have at least one ``<collision>`` geometry, in file order."""
-    root = ET.parse(urdf_path).getroot()
+    root = read_urdf(urdf_path)
     return [l.get("name", "") for l in root.findall("link") if l.find("collision/geometry") is not None]
 
 
 def link_geometry(urdf_path: str | os.PathLike[str], link: str) -> LinkGeometry:
-    """One link's collision geometry, in the link frame (mesh paths relative to the URDF)."""
-    root = ET.parse(urdf_path).getroot()
+    """One link's collision geometry, in the link frame (mesh files: ``realize.robot.urdf.mesh_file``);
+    a link the URDF lacks is one ``ConfigError`` line."""
+    root = read_urdf(urdf_path)
     for el in root.findall("link"):
         if el.get("name") == link:
-            return LinkGeometry(link, _collision_meshes(el, os.path.dirname(os.fspath(urdf_path))))
-    raise KeyError(f"no link {link!r} in {urdf_path}")
+            return LinkGeometry(link, _collision_meshes(el, urdf_path))
+    raise ConfigError(f"URDF {os.fspath(urdf_path)}: no link {link!r}")
 
 
 # ----------------------------------------------------------------------------- geometry kernels

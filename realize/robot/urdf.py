@@ -5,13 +5,25 @@ bundled assets, or a path relative to the repository) into a file to load; where
 visual-mesh extensions (``visual_mesh_ext``, e.g. ``.dae`` -> ``.glb`` for a URDF that names files
 ManiSkill does not ship), it writes a derived URDF into a cache folder, every mesh path made
 absolute (pointing at the bundled files) and the visual ones swapped; nothing is copied into
-the repository. :func:`parse_urdf_joints` reads every joint into a :class:`JointSpec` (origin,
-axis, limits), keyed by child link; :func:`rpy_matrix`, :func:`skew` and :func:`axis_rotation`
-turn URDF origins and axes into float64 rotation matrices. All of it runs once, when a model
-is built.
+the repository. :func:`read_urdf` parses a URDF file; :func:`parse_urdf_joints` reads every
+joint into a :class:`JointSpec` (origin, axis, limits), keyed by child link; :func:`rpy_matrix`,
+:func:`skew` and :func:`axis_rotation` turn URDF origins and axes into float64 rotation
+matrices. All of it runs once, when a model is built.
+
+Mesh files: :func:`mesh_file` is the one place a ``<mesh filename>`` becomes a file, for every
+reader (grasp geometry, sphere fitting, the recording, the derived URDF), found where SAPIEN's
+URDF loader (which ManiSkill uses) finds it: a ``package://`` name with the prefix dropped, in
+the URDF's folder or else in the nearest folder above it that has it (SAPIEN's ``package_dir``
+argument is never passed here); any other name relative to the URDF's folder, or absolute.
+:func:`urdf_for_pytorch_kinematics` gives a URDF's text as pytorch_kinematics' parser takes it.
+
+Errors: a URDF that is not readable XML, a joint without its parent or child link, and a mesh
+found nowhere are each one ``realize.config.ConfigError`` line naming the URDF file and what is
+missing (for a mesh: the filename as written and the places tried).
 
 What it doesn't: build the kinematic tree or compute anything batched (``realize.robot.chain``
-and ``realize.robot.kinematics`` do), read inertials, or load anything into the simulator.
+and ``realize.robot.kinematics`` do), read inertials, read the meshes themselves
+(``realize.robot.link_geometry`` does), or load anything into the simulator.
 """
 
 from __future__ import annotations
@@ -30,10 +42,12 @@ from torch import Tensor
 from realize.config import ConfigError
 from realize.paths import REPO_ROOT, cache_dir
 
-__all__ = ["fixed_base_joints", "JointSpec", "resolve_urdf", "source_urdf", "parse_urdf_joints", "urdf_floats", "element_origin", "mesh_path",
+__all__ = ["fixed_base_joints", "JointSpec", "resolve_urdf", "source_urdf", "read_urdf", "parse_urdf_joints",
+           "urdf_floats", "element_origin", "mesh_candidates", "mesh_file", "urdf_for_pytorch_kinematics",
            "rpy_matrix", "skew", "axis_rotation"]
 
 MANI_SKILL_PREFIX = "mani_skill:"
+PACKAGE_PREFIX = "package://"
 
 
 @dataclass(frozen=True)
@@ -72,23 +86,19 @@ def resolve_urdf(urdf: str, visual_mesh_ext: dict[str, str] | None = None) -> st
     src = source_urdf(urdf)
     if not visual_mesh_ext:
         return str(src)
-    tree = ET.parse(src)
-    missing: list[str] = []
+    root = read_urdf(src)
     for kind in ("visual", "collision"):
-        for mesh in tree.getroot().iter():
-            if mesh.tag != kind:
-                continue
-            for m in mesh.iter("mesh"):
-                path = mesh_path(m.get("filename", ""), src.parent)
-                if kind == "visual" and path.suffix in visual_mesh_ext:
-                    path = path.with_suffix(visual_mesh_ext[path.suffix])
-                if not path.is_file():
-                    missing.append(str(path))
-                m.set("filename", str(path))
-    if missing:
-        raise ConfigError(f"robot.urdf = {urdf!r}: mesh files missing after visual_mesh_ext = "
-                          f"{visual_mesh_ext}: {missing[:3]}{' ...' if len(missing) > 3 else ''}")
-    text = ET.tostring(tree.getroot(), encoding="unicode")
+        for el in root.iter(kind):
+            for m in el.iter("mesh"):
+                name = m.get("filename", "")
+                suffix = Path(name).suffix
+                if kind == "visual" and suffix in visual_mesh_ext:
+                    name = name[:-len(suffix)] + visual_mesh_ext[suffix]
+                try:
+                    m.set("filename", str(mesh_file(name, src)))
+                except ConfigError as e:
+                    raise ConfigError(f"robot.urdf = {urdf!r} with visual_mesh_ext = {visual_mesh_ext}: {e}") from None
+    text = ET.tostring(root, encoding="unicode")
     key = hashlib.sha256((str(src) + text).encode()).hexdigest()[:12]
     out = cache_dir("urdf") / f"{src.stem}-{key}.urdf"
     if not out.is_file() or out.read_text() != text:
@@ -114,42 +124,110 @@ def element_origin(el: ET.Element) -> tuple[tuple[float, ...], tuple[float, ...]
     return urdf_floats(get("xyz"), (0.0, 0.0, 0.0)), urdf_floats(get("rpy"), (0.0, 0.0, 0.0))
 
 
-def mesh_path(filename: str, urdf_dir: str | os.PathLike[str]) -> Path:
-    """The file a URDF ``<mesh filename>`` names (``package://`` dropped; relative to the URDF's folder)."""
-    name = filename[len("package://"):] if filename.startswith("package://") else filename
-    return Path(name) if Path(name).is_absolute() else Path(urdf_dir) / name
+def read_urdf(path: str | os.PathLike[str]) -> ET.Element:
+    """The root ``<robot>`` element of a URDF file; a file that cannot be read, is not XML or is
+    not a URDF is one ``ConfigError`` line naming it."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        raise ConfigError(f"URDF {os.fspath(path)}: not readable XML ({e})") from None
+    except OSError as e:
+        raise ConfigError(f"URDF {os.fspath(path)}: cannot be read ({e.strerror or e})") from None
+    if root.tag != "robot":
+        raise ConfigError(f"URDF {os.fspath(path)}: its root element is <{root.tag}>, not <robot>")
+    return root
 
 
-def parse_urdf_joints(path: str) -> dict[str, JointSpec]:
-    """All joints of a URDF, keyed by the name of their child link."""
-    root = ET.parse(path).getroot()
-    joints: dict[str, JointSpec] = {}
-    for j in root.findall("joint"):
-        xyz, rpy = element_origin(j)
-        axis = j.find("axis")
-        limit = j.find("limit")
-        jtype = j.get("type", "fixed")
-        lower, upper = -math.inf, math.inf
-        velocity = math.inf
+def mesh_candidates(filename: str, urdf: str | os.PathLike[str]) -> list[Path]:
+    """Where a ``<mesh filename>`` of the URDF file ``urdf`` may be, in the order SAPIEN's URDF
+    loader looks (module docstring): for ``package://<name>``, ``<name>`` in the URDF's folder,
+    then in each folder above it up to the file system's root; for any other name, that name in
+    the URDF's folder (an absolute name: itself)."""
+    folder = Path(os.fspath(urdf)).parent.absolute()
+    if not filename.startswith(PACKAGE_PREFIX):
+        return [folder / filename]
+    name = filename[len(PACKAGE_PREFIX):]
+    return list(dict.fromkeys(d / name for d in (folder, *folder.parents)))
+
+
+def mesh_file(filename: str, urdf: str | os.PathLike[str]) -> Path:
+    """The file a ``<mesh filename>`` of the URDF file ``urdf`` names: the first of
+    :func:`mesh_candidates` that exists. None existing is one ``ConfigError`` line naming the
+    URDF, the filename as written and the places tried."""
+    where = f"URDF {os.fspath(urdf)}"
+    if not filename.strip():
+        raise ConfigError(f"{where}: a <mesh> without a filename")
+    tried = mesh_candidates(filename, urdf)
+    for path in tried:
+        if path.is_file():
+            return path
+    if len(tried) > 1:
+        folder = Path(os.fspath(urdf)).parent.absolute()
+        places = f"{filename[len(PACKAGE_PREFIX):]} in {folder} and in each of the {len(tried) - 1} folders above it"
+    else:
+        places = str(tried[0])
+    raise ConfigError(f"{where}: mesh file {filename!r} not found (tried {places})")
+
+
+def urdf_for_pytorch_kinematics(path: str | os.PathLike[str]) -> bytes:
+    """The URDF file's XML as pytorch_kinematics' parser takes it: it requires ``effort`` and
+    ``velocity`` on every joint's ``<limit>`` (ManiSkill's Koch arm gives neither, the mobile
+    Panda's base no effort); where absent they are set to 0. Neither plays any part in
+    kinematics; everything else is as in the file."""
+    root = read_urdf(path)
+    for joint in root.findall("joint"):
+        limit = joint.find("limit")
         if limit is not None:
-            velocity = float(limit.get("velocity", "inf"))
-            if jtype in ("revolute", "prismatic"):
-                lower = float(limit.get("lower", "-inf"))
-                upper = float(limit.get("upper", "inf"))
-        spec = JointSpec(
-            name=j.get("name", ""),
-            type=jtype,
-            parent=j.find("parent").get("link"),  # type: ignore[union-attr]
-            child=j.find("child").get("link"),  # type: ignore[union-attr]
-            xyz=xyz,  # type: ignore[arg-type]
-            rpy=rpy,  # type: ignore[arg-type]
-            axis=urdf_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)),  # type: ignore[arg-type]
-            lower=lower,
-            upper=upper,
-            velocity=velocity,
-        )
+            limit.attrib.setdefault("effort", "0")
+            limit.attrib.setdefault("velocity", "0")
+    return ET.tostring(root)
+
+
+def parse_urdf_joints(path: str | os.PathLike[str]) -> dict[str, JointSpec]:
+    """All joints of a URDF, keyed by the name of their child link; a joint without its parent
+    or child link, or with a number that is not one, is one ``ConfigError`` line."""
+    joints: dict[str, JointSpec] = {}
+    for j in read_urdf(path).findall("joint"):
+        name = j.get("name", "")
+        try:
+            spec = _joint_spec(j, name)
+        except ValueError as e:
+            raise ConfigError(f"URDF {os.fspath(path)}: joint {name!r}: {e}") from None
         joints[spec.child] = spec
     return joints
+
+
+def _joint_spec(j: ET.Element, name: str) -> JointSpec:
+    links = {}
+    for end in ("parent", "child"):
+        el = j.find(end)
+        link = el.get("link") if el is not None else None
+        if not link:
+            raise ValueError(f"no <{end} link=...>")
+        links[end] = link
+    xyz, rpy = element_origin(j)
+    axis = j.find("axis")
+    limit = j.find("limit")
+    jtype = j.get("type", "fixed")
+    lower, upper = -math.inf, math.inf
+    velocity = math.inf
+    if limit is not None:
+        velocity = float(limit.get("velocity", "inf"))
+        if jtype in ("revolute", "prismatic"):
+            lower = float(limit.get("lower", "-inf"))
+            upper = float(limit.get("upper", "inf"))
+    return JointSpec(
+        name=name,
+        type=jtype,
+        parent=links["parent"],
+        child=links["child"],
+        xyz=xyz,  # type: ignore[arg-type]
+        rpy=rpy,  # type: ignore[arg-type]
+        axis=urdf_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)),  # type: ignore[arg-type]
+        lower=lower,
+        upper=upper,
+        velocity=velocity,
+    )
 
 
 def fixed_base_joints(joints: dict[str, JointSpec], names: Sequence[str], height: float) -> dict[str, JointSpec]:

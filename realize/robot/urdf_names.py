@@ -1,7 +1,8 @@
 """A robot config's joint and link names against its URDF, before anything is built.
 
 What it does: ``check_urdf_names(spec, where)`` reads the spec's URDF (``robot.urdf``; the
-XML only, no meshes) and refuses, in one ``ConfigError`` line naming the key, a joint the spec
+XML only, no meshes; a file that is not a readable URDF is one line naming the key and the
+file) and refuses, in one ``ConfigError`` line naming the key, a joint the spec
 drives or holds that the URDF does not have as a movable joint (``base.joints``,
 ``upper.joints``, ``gripper.joints``, ``held``, ``rest``) and a link it names that the URDF does
 not have (``base.link``, ``tcp.link``, ``gripper.finger_links``, ``collision.*``). Without it, a
@@ -32,14 +33,17 @@ def urdf_names(path: str) -> tuple[set[str], set[str]]:
 def _refuse(key: str, kind: str, names: Iterable[str], known: set[str], urdf: str) -> None:
     for name in names:
         if name not in known:
-            raise ConfigError(f"{key}: {kind} {name!r} is not in {urdf}{did_you_mean(name, sorted(known))}; "
-                              f"its {kind}s: {', '.join(sorted(known))}")
+            has = f"its {kind}s: {', '.join(sorted(known))}" if known else f"it has no {kind}s"
+            raise ConfigError(f"{key}: {kind} {name!r} is not in {urdf}{did_you_mean(name, sorted(known))}; {has}")
 
 
 def check_urdf_names(spec: RobotSpec, where: str = "robot") -> None:
     """Refuse a joint or link name of ``spec`` that its URDF lacks (module docstring)."""
     path = source_urdf(spec.urdf)
-    joints, links = urdf_names(str(path))
+    try:
+        joints, links = urdf_names(str(path))
+    except ConfigError as e:  # not readable XML, a joint without its links: the key, then the file's line
+        raise ConfigError(f"{where}.urdf = {spec.urdf!r}: {e}") from None
     name = path.name
     for key, names in ((f"{where}.base.joints", spec.base.joints), (f"{where}.upper.joints", spec.upper.joints),
                        (f"{where}.gripper.joints", spec.gripper.joints), (f"{where}.held", spec.held),
