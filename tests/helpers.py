@@ -429,13 +429,14 @@ def execute_budget() -> Any:
     return ReplanBudget(n_envs=8, n_elite=2, iterations=2, shard_rows=None, workers=1)
 
 
-def closed_loop_world(run: Path, settings: Any, out: Path, trajectory: Path | None = None) -> Any:
+def closed_loop_world(run: Path, settings: Any, out: Path, trajectory: Path | None = None,
+                      budget: Any = None) -> Any:
     """World 0 of ``settings`` carried out closed loop from ``run`` by a warmed-up planner (its
-    ``WorldLog``)."""
+    ``WorldLog``), replanning with ``budget`` (default ``execute_budget()``)."""
     from realize.repair.study import execute_world
     from realize.run.planner import Planner
 
-    budget = execute_budget()
+    budget = budget or execute_budget()
     planner = Planner.from_run(run)
     try:
         planner.warm_up(budget)

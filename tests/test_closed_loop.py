@@ -14,6 +14,7 @@ import pytest
 from realize.execution.perception import load_noise
 from realize.execution.settings import ExecuteSettings
 from realize.execution.trajectory import read_trajectory
+from realize.run.plan_result import ReplanBudget
 from helpers import TABLE_MOVED, closed_loop_world, one_world, write_known_run
 
 
@@ -88,7 +89,11 @@ def test_a_cube_on_the_floor_is_picked_up_again_and_reaches_the_goal(run: Path, 
     """The re-sequence reads the cube on the floor as a site of its own, with a base region
     around it, and the PDDL planner's new plan drives there, grasps it off the floor (the
     fingers allowed down to it: controller.fabric.floor_exclude) and carries it to table 2."""
-    wl = closed_loop_world(run, one_world(DROPPED), tmp_path)
+    # a re-sequence from the floor needs more than the tests' 8 x 2 samples: with 8 its first plan
+    # held in 1 of 8 rows and dropped the cube again on AMD's MKL branch (on Intel's it held); at
+    # 16 x 2 it is carried out on both branches
+    budget = ReplanBudget(n_envs=16, n_elite=4, iterations=2, shard_rows=None, workers=1)
+    wl = closed_loop_world(run, one_world(DROPPED), tmp_path, budget=budget)
     assert "onto floor" in wl.disturbances[0]["what"]
     first = wl.replans[0]
     assert first.kind == "re-sequence" and first.plan.startswith("move_to(Near_cube), grasp(cube"), first.plan

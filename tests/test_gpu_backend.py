@@ -284,7 +284,7 @@ def test_realize_device_cuda_without_the_library_exits_in_one_line(tmp_path: Pat
     """``realize device=cuda``, CUDA mocked as available, HOME an empty folder, no network used."""
     home = tmp_path / "home"
     home.mkdir()
-    driver = ("import sys, torch; torch.cuda.is_available = lambda: True\n"
+    driver = ("import realize, sys, torch; torch.cuda.is_available = lambda: True\n"  # realize first, as the CLI
               "from realize.cli.main import main; main(sys.argv[1:])\n")
     p = subprocess.run([sys.executable, "-c", driver, "device=cuda", f"hydra.run.dir={tmp_path / 'run'}"],
                        cwd=REPO, capture_output=True, text=True, timeout=60,

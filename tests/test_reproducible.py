@@ -105,3 +105,17 @@ def test_a_library_loaded_and_used_before_realize_is_named() -> None:
             "from realize.reproducible import unpinned; print(unpinned())")
     out = _fresh(code).stdout
     assert "mkl runs OFF, pinned COMPATIBLE" in out
+
+
+@pytest.mark.skipif(not X86, reason="pins apply on x86-64 only")
+def test_the_test_processes_run_pinned_too() -> None:
+    # in-process runs (execution worlds, replans) compute here: pyproject's `-p realize` imports
+    # realize before pytest's plugins load numpy
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
+    import torch
+
+    torch.randn(8, 8) @ torch.randn(8, 8)
+    assert unpinned() == []
+    loaded = list(sys.modules)  # in import order: realize pinned before numpy and torch loaded
+    assert loaded.index("realize") < min(loaded.index("numpy"), loaded.index("torch"))
