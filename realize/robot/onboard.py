@@ -109,12 +109,12 @@ def _srdf_pairs(path: Path, s: Survey) -> list[list[str]]:
     from realize.robot.urdf import parse_urdf_joints
 
     adjacent = {frozenset((j.parent, j.child)) for j in parse_urdf_joints(str(path)).values()}
-    out = []
+    out = set()
     for d in ET.parse(srdf).getroot().iter("disable_collisions"):
         a, b = d.get("link1", ""), d.get("link2", "")
         if d.get("reason") == "Default" and frozenset((a, b)) not in adjacent:
-            out.append(sorted((a, b)))
-    return sorted(out)
+            out.add(tuple(sorted((a, b))))
+    return [list(p) for p in sorted(out)]
 
 
 def _hand_links(path: Path, s: Survey) -> list[str]:
@@ -218,7 +218,7 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     reach = math.ceil(geo.reach * 2000) / 2000
     pad = max(0.001, round(geo.tip_half_width, 4))
     chose.append(f"gripper.fingertip_reach {reach} m, pad_half_width {pad} m (measured: grip_geometry); "
-                 f"{geo.width_open * 1e3:.1f} mm between the pads open, {geo.width_closed * 1e3:.1f} mm closed")
+                 f"{geo.width_open * 1e3:.1f} mm between the pads open, {abs(geo.width_closed) * 1e3:.1f} mm closed")
     fitted = fit_robot_spheres(path, fit)
     write_fitted_spheres(spheres_out, name, path, fitted, fit.samples,
                          command or f"-m realize.robot.onboard {name} --urdf {ref}")

@@ -4,11 +4,12 @@ What it does: :func:`survey_urdf` reads a URDF's joint tree and its finger links
 geometry and decides, each choice with a one-line reason in ``Survey.why``:
 
 * the **gripper**: the movable joints with no movable joint after them, grouped by the joint
-  they follow; a group of one revolute jaw, or two prismatic fingers (one mimicking the other),
-  is a candidate; of several, the one at the end of the longest chain (``--gripper-joints`` picks
-  one). Its finger links (two fingers: the joints' children; one jaw: the fixed jaw, the joint's
-  parent, then the moving one), which limit opens them (the nearest distance from a moving finger's
-  far end, its last 2 cm from its joint, to the other finger at each limit: open is wider);
+  they follow; a group of one revolute jaw, or two prismatic fingers (the second may mimic the
+  first), is a candidate; of several, the one at the end of the longest chain (``--gripper-joints``
+  picks one); its fingers must close to within 5 mm at one limit (an arm's last joint is no jaw).
+  Its finger links (two fingers: the joints' children; one jaw: the fixed jaw, the joint's parent,
+  then the moving one) and which limit opens them (the nearest distance from a moving finger's far
+  end, its last 2 cm from its joint, to the other finger at each limit: open is wider);
 * the **base**: mobile where the chain from the root starts with prismatic x, prismatic y and a
   revolute (or continuous) z joint, as ManiSkill's mobile Panda and Fetch; else fixed at the root;
 * the **upper joints**: the movable joints from the base to the gripper, in order; every other
@@ -43,6 +44,7 @@ from realize.robot.urdf import JointSpec, parse_urdf_joints, read_urdf
 __all__ = ["GripperDraft", "TcpDraft", "Survey", "survey_urdf", "TIP_DEPTH"]
 
 TIP_DEPTH = 0.02  # m: the pads' tips are each finger's last 2 cm along the approach; the TCP is their middle
+CLOSES = 0.005  # m: a gripper found by itself closes its fingers to within this at one limit
 SNAP_COS = math.cos(math.radians(10.0))  # an axis this close to a frame axis is that axis
 SAMPLES = 1500  # surface samples per finger link
 
@@ -247,6 +249,10 @@ def survey_urdf(path: Path, gripper_joints: Sequence[str] | None = None, tcp_lin
             fixed, moving = moving, fixed
         d = np.linalg.norm(moving - np.asarray(joints[-1 if len(joints) == 1 else 0].xyz), axis=1)
         widths[v] = _gap(moving[d >= d.max() - TIP_DEPTH], fixed)
+    if not gripper_joints and min(widths.values()) > CLOSES:
+        raise ConfigError(f"URDF {path}: no gripper joints found: {', '.join(names)}, the only candidate, never brings "
+                          f"{f1}'s far end within {CLOSES * 1e3:.0f} mm of {f0} (nearest {min(widths.values()) * 1e3:.1f} mm "
+                          "at its limits); name the gripper with --gripper-joints")
     if abs(widths[hi] - widths[lo]) < 1e-3:
         raise ConfigError(f"URDF {path}: the fingers {f0}, {f1} are as far apart at {names[0]}'s lower limit as at "
                           f"its upper ({widths[lo] * 1e3:.1f} mm): cannot tell open from closed")
