@@ -5,7 +5,7 @@
   at each test);
 * the Koch (no committed config; ``tests/_koch.py`` is one by hand): the draft loads and passes
   ``check_urdf_names`` and ``grip_geometry``;
-* the mobile Panda's survey: a mobile base (x, y, yaw) and the lift first in ``upper``;
+* the mobile Panda: a mobile base (x, y, yaw), the lift first in ``upper``, its shipped .glb meshes;
 * a URDF without gripper joints, and an existing config without ``--force``: one line each.
 
 Drafts go to tmp folders; the sphere fit is capped (200 samples, one sphere a link) to keep the
@@ -102,12 +102,15 @@ def test_koch_draft_loads_and_passes_the_checks(tmp_path: Path) -> None:
     assert spec.gripper.fingertip_reach >= geo.reach - 1e-3
 
 
-def test_mobile_panda_survey_finds_its_base_and_lift() -> None:
+def test_mobile_panda_draft_finds_its_base_lift_and_shipped_meshes(tmp_path: Path) -> None:
     want = load_robot_spec("mobile_panda")
-    s = survey_urdf(source_urdf(want.urdf))
-    assert s.base_joints == want.base.joints and s.base_link == want.base.link
-    assert s.upper == want.upper.joints and s.gripper.joints == want.gripper.joints
-    assert s.tcp.link == want.tcp.link
+    done = _draft(tmp_path, "mobile_panda_draft", want.urdf)
+    got = done.spec
+    assert got.base.joints == want.base.joints and got.base.link == want.base.link and got.base.height == 0.0
+    assert got.upper.joints == want.upper.joints and got.gripper.joints == want.gripper.joints
+    assert got.tcp.link == want.tcp.link
+    assert got.visual_mesh_ext == want.visual_mesh_ext == {".dae": ".glb"}  # .dae named, .glb shipped
+    assert "realize robot=mobile_panda_draft ce.n_envs=40 ce.iterations=1" in done.report()  # the mobile smoke run
 
 
 ARM = """<?xml version="1.0"?>

@@ -101,6 +101,41 @@ def _footprint(path: Path, link: str) -> tuple[float, str]:
     return r, f"base.footprint_radius {r} m ({link}'s collision geometry reaches that far from its axis)"
 
 
+MESH_EXTS = (".glb", ".obj", ".stl", ".dae", ".ply")  # where a visual mesh is missing, the shipped file it may be
+
+
+def _visual_mesh_ext(path: Path) -> tuple[dict[str, str] | None, str | None]:
+    """``visual_mesh_ext`` where the URDF names visual meshes that are missing but ship with another
+    extension (ManiSkill's mobile Panda: .dae named, .glb shipped); a mesh found under no extension
+    is a one-line ``ConfigError``."""
+    from realize.robot.urdf import mesh_file, read_urdf
+
+    swap: dict[str, str] = {}
+    for el in read_urdf(path).iter("visual"):
+        for m in el.iter("mesh"):
+            name = m.get("filename", "")
+            try:
+                mesh_file(name, path)
+                continue
+            except ConfigError as e:
+                missing = e
+            stem, ext = os.path.splitext(name)
+            if ext in swap:
+                continue
+            for other in MESH_EXTS:
+                try:
+                    mesh_file(stem + other, path)
+                    swap[ext] = other
+                    break
+                except ConfigError:
+                    pass
+            else:
+                raise missing
+    if not swap:
+        return None, None
+    return swap, f"visual_mesh_ext {swap} (the URDF's visual meshes of those extensions are missing; these are shipped)"
+
+
 def _srdf_pairs(path: Path, s: Survey) -> list[list[str]]:
     """An SRDF beside the URDF: its disabled pairs of reason "Default" that are not parent and child."""
     srdf = path.with_suffix(".srdf")
@@ -135,15 +170,15 @@ def _default(cls: type, key: str) -> float:
     return float(cls.__dataclass_fields__[key].default)  # type: ignore[attr-defined]
 
 
-def _mapping(name: str, urdf: str, s: Survey, spheres_file: str, height: float, footprint: float,
-             hand: list[str], pairs: list[list[str]], reach: float, pad: float) -> dict[str, Any]:
+def _mapping(name: str, urdf: str, mesh_ext: dict[str, str] | None, s: Survey, spheres_file: str, height: float,
+             footprint: float, hand: list[str], pairs: list[list[str]], reach: float, pad: float) -> dict[str, Any]:
     g = s.gripper
     d = {k: _default(Drive, k) for k in ("stiffness", "damping", "force")}
     gd = {k: _default(GripperSpec, k) for k in ("stiffness", "damping", "force")}
     base: dict[str, Any] = {"joints": list(s.base_joints), "link": s.base_link,
                             "height": 0.0 if s.base_joints else height, "footprint_radius": footprint}
     return {
-        "name": name, "urdf": urdf, "base": base,
+        "name": name, "urdf": urdf, **({"visual_mesh_ext": mesh_ext} if mesh_ext else {}), "base": base,
         "upper": {"joints": list(s.upper), "drives": [{"joints": list(s.upper), **d}]},
         "held": dict(s.held),
         "held_drive": {"stiffness": 1.0e5, "damping": 1.0e4, "force": 1.0e4},
@@ -198,6 +233,9 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     path = source_urdf(ref)
     s = survey_urdf(path, gripper_joints, tcp_link)
     chose = [f"urdf: {ref}", *s.why]
+    mesh_ext, why = _visual_mesh_ext(path)
+    if why:
+        chose.append(why)
     todo = []
     if Path(ref).is_absolute():
         todo.append(f"the URDF lies outside the repository and ManiSkill's assets ({ref}): copy it into the repository "
@@ -212,7 +250,7 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
         chose.append(f"collision.ignore_pairs: the {len(pairs)} non-adjacent 'Default' pairs of {path.with_suffix('.srdf').name}")
     spheres_file = name if Path(spheres_dir).resolve() == SPHERE_DIR.resolve() else str(spheres_out)
     # the gripper's measured reach and pad width: first with a reach that cannot fall short
-    probe = RobotSpec.from_mapping(_mapping(name, ref, s, spheres_file, height, footprint, hand, pairs, 1.0, 0.01),
+    probe = RobotSpec.from_mapping(_mapping(name, ref, mesh_ext, s, spheres_file, height, footprint, hand, pairs, 1.0, 0.01),
                                    f"robot ({name}, drafted)")
     geo = grip_geometry(probe)
     reach = math.ceil(geo.reach * 2000) / 2000
@@ -222,7 +260,7 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     fitted = fit_robot_spheres(path, fit)
     write_fitted_spheres(spheres_out, name, path, fitted, fit.samples,
                          command or f"-m realize.robot.onboard {name} --urdf {ref}")
-    mapping = _mapping(name, ref, s, spheres_file, height, footprint, hand, pairs, reach, pad)
+    mapping = _mapping(name, ref, mesh_ext, s, spheres_file, height, footprint, hand, pairs, reach, pad)
     mapping["fabric_exclude"] = [sp.name for sp in fitted if sp.link in hand]
     chose.append(f"spheres: {len(fitted)} on {len({sp.link for sp in fitted})} links ({fit.samples} samples, at most "
                  f"{fit.max_spheres} a link); fabric_exclude: the {len(mapping['fabric_exclude'])} on the hand and fingers")
