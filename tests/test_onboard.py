@@ -144,3 +144,16 @@ def test_an_existing_config_is_kept_without_force(tmp_path: Path) -> None:
     (tmp_path / "c" / "koch.yaml").write_text("name: koch\n")
     with pytest.raises(ConfigError, match="exists: pass --force"):
         onboard_robot("koch", KOCH_URDF, tmp_path / "c", tmp_path / "s", fit=FAST)
+
+
+def test_the_koch_draft_s_kinematics_match_pytorch_kinematics(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The drafted TCP and spheres through ``RobotKinematics``, against pytorch_kinematics as every
+    committed robot is (``tests/test_robot_kinematics.py``, whose check and float64 reader this reuses)."""
+    import test_robot_kinematics as trk
+    import torch
+
+    from realize.robot.kinematics import RobotKinematics
+
+    trk.float64_urdf_origins.__wrapped__(monkeypatch)
+    spec = _draft(tmp_path, "koch_draft", KOCH_URDF).spec
+    trk._check_against_pytorch_kinematics(spec, RobotKinematics(spec, dtype=torch.float64))
