@@ -6,7 +6,9 @@
 * the Koch (no committed config; ``tests/_koch.py`` is one by hand): the draft loads and passes
   ``check_urdf_names`` and ``grip_geometry``;
 * the mobile Panda: a mobile base (x, y, yaw), the lift first in ``upper``, its shipped .glb meshes;
-* a URDF without gripper joints, and an existing config without ``--force``: one line each.
+* the Koch draft's TCP and spheres against pytorch_kinematics (``tests/test_robot_kinematics.py``'s check);
+* a URDF without gripper joints, two equal arms (``--gripper-joints`` picks one), an existing config
+  without ``--force``: one line each.
 
 Drafts go to tmp folders; the sphere fit is capped (200 samples, one sphere a link) to keep the
 file fast: the fit itself is ``tests/test_sphere_fit.py``'s.
@@ -137,6 +139,17 @@ def test_a_urdf_without_gripper_joints_is_one_line(kind: str, tmp_path: Path, ca
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and "no gripper joints found" in err and "\n" not in err
     assert not (tmp_path / "c" / "bare.yaml").exists()
+
+
+def test_two_equal_arms_are_one_line_and_gripper_joints_picks_one() -> None:
+    """ManiSkill's two-armed mobile Panda: two grippers at the end of equally long chains."""
+    urdf = source_urdf("mani_skill:robots/panda/mobile_panda_dual_arm.urdf")
+    with pytest.raises(ConfigError, match="several candidate grippers.*--gripper-joints") as e:
+        survey_urdf(urdf)
+    assert "\n" not in str(e.value) and str(urdf) in str(e.value)
+    s = survey_urdf(urdf, ["left_panda_finger_joint1", "left_panda_finger_joint2"])
+    assert s.upper[0] == "linear_actuator_height" and s.upper[1:] == tuple(f"left_panda_joint{i}" for i in range(1, 8))
+    assert s.tcp.link == "left_panda_hand_tcp" and "right_panda_joint1" in s.held  # the other arm is held
 
 
 def test_an_existing_config_is_kept_without_force(tmp_path: Path) -> None:

@@ -136,7 +136,7 @@ def _visual_mesh_ext(path: Path) -> tuple[dict[str, str] | None, str | None]:
     return swap, f"visual_mesh_ext {swap} (the URDF's visual meshes of those extensions are missing; these are shipped)"
 
 
-def _srdf_pairs(path: Path, s: Survey) -> list[list[str]]:
+def _srdf_pairs(path: Path) -> list[list[str]]:
     """An SRDF beside the URDF: its disabled pairs of reason "Default" that are not parent and child."""
     srdf = path.with_suffix(".srdf")
     if not srdf.is_file():
@@ -245,7 +245,7 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     if not s.base_joints:
         chose.append(f"base.height {height} m (--height: the stand a fixed base is bolted on)")
     hand = _hand_links(path, s)
-    pairs = _srdf_pairs(path, s)
+    pairs = _srdf_pairs(path)
     if pairs:
         chose.append(f"collision.ignore_pairs: the {len(pairs)} non-adjacent 'Default' pairs of {path.with_suffix('.srdf').name}")
     spheres_file = name if Path(spheres_dir).resolve() == SPHERE_DIR.resolve() else str(spheres_out)
