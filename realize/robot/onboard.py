@@ -247,11 +247,12 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     hand = _hand_links(path, s)
     pairs = _srdf_pairs(path)
     if pairs:
-        chose.append(f"collision.ignore_pairs: the {len(pairs)} non-adjacent 'Default' pairs of {path.with_suffix('.srdf').name}")
+        chose.append(f"collision.ignore_pairs: the {len(pairs)} non-adjacent 'Default' pairs of "
+                     f"{path.with_suffix('.srdf').name}")
     spheres_file = name if Path(spheres_dir).resolve() == SPHERE_DIR.resolve() else str(spheres_out)
     # the gripper's measured reach and pad width: first with a reach that cannot fall short
-    probe = RobotSpec.from_mapping(_mapping(name, ref, mesh_ext, s, spheres_file, height, footprint, hand, pairs, 1.0, 0.01),
-                                   f"robot ({name}, drafted)")
+    first = _mapping(name, ref, mesh_ext, s, spheres_file, height, footprint, hand, pairs, 1.0, 0.01)
+    probe = RobotSpec.from_mapping(first, f"robot ({name}, drafted)")
     geo = grip_geometry(probe)
     reach = math.ceil(geo.reach * 2000) / 2000
     pad = max(0.001, round(geo.tip_half_width, 4))
@@ -263,7 +264,8 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     mapping = _mapping(name, ref, mesh_ext, s, spheres_file, height, footprint, hand, pairs, reach, pad)
     mapping["fabric_exclude"] = [sp.name for sp in fitted if sp.link in hand]
     chose.append(f"spheres: {len(fitted)} on {len({sp.link for sp in fitted})} links ({fit.samples} samples, at most "
-                 f"{fit.max_spheres} a link); fabric_exclude: the {len(mapping['fabric_exclude'])} on the hand and fingers")
+                 f"{fit.max_spheres} a link); fabric_exclude: the {len(mapping['fabric_exclude'])} on the hand and "
+                 "fingers")
     header = [f"{name}: DRAFTED by python -m realize.robot.onboard from {Path(path).name}; not calibrated.",
               *[f"  {c}" for c in chose]]
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -278,7 +280,8 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
         "the gripper's open, closed, stiffness, damping, force and finger material are not calibrated: "
         "docs/robots.md, Grippers",
         "the drive gains are realize.robot.spec's defaults, not calibrated; the rest pose: the arm clear of the body",
-        "run .venv/bin/python -m pytest tests/test_robot_kinematics.py tests/test_env_robots.py tests/test_sphere_fit.py",
+        "run .venv/bin/python -m pytest tests/test_robot_kinematics.py tests/test_env_robots.py "
+        "tests/test_sphere_fit.py",
     ]
     if s.base_joints:
         todo.append(f"smoke run: .venv/bin/realize robot={name} ce.n_envs=40 ce.iterations=1")

@@ -9,16 +9,20 @@ geometry and decides, each choice with a one-line reason in ``Survey.why``:
   picks one); its fingers must close to within 5 mm at one limit (an arm's last joint is no jaw).
   Its finger links (two fingers: the joints' children; one jaw: the fixed jaw, the joint's parent,
   then the moving one) and which limit opens them (the nearest distance from a moving finger's far
-  end, its last 2 cm from its joint, to the other finger at each limit: open is wider);
+  end, its last 2 cm from its joint, to the other finger at each limit: open is wider); the
+  targets: a prismatic pair opens to its open limit and closes a quarter of its range past the
+  other (a squeeze, as the Panda's), a jaw opens to mid-range and closes to its limit;
 * the **base**: mobile where the chain from the root starts with prismatic x, prismatic y and a
   revolute (or continuous) z joint, as ManiSkill's mobile Panda and Fetch; else fixed at the root;
 * the **upper joints**: the movable joints from the base to the gripper, in order; every other
-  movable joint that mimics nothing is held;
+  movable joint that mimics nothing is held; the rest pose: 0, or mid-range where 0 is outside
+  a joint's limits, the gripper open;
 * the **TCP**: a frame-only child of the hand named ``*tcp*`` (the one nearest the pads), else the
   hand link (``--tcp-link`` picks one); the closing axis (a prismatic finger's axis; a jaw's
-  sweep), the approach (the way the fingers stand out from their joints, or the last arm joint's
-  axis where it is within 30 degrees of that: a wrist roll), each snapped to a frame axis within 10 degrees, and the offset of the point between the pads' tips at a middle
-  opening (:data:`TIP_DEPTH`).
+  sweep); the approach (the way the fingers stand out from their joints, or the last arm joint's
+  axis where it is within 30 degrees of that: a wrist roll), each snapped to a frame axis within
+  10 degrees; and the offset of the point between the pads' tips (each finger's last
+  :data:`TIP_DEPTH` along the approach) at a middle opening.
 
 Anything it cannot decide is one ``ConfigError`` line naming the URDF, what is missing, and the
 flag that settles it.
@@ -250,9 +254,9 @@ def survey_urdf(path: Path, gripper_joints: Sequence[str] | None = None, tcp_lin
         d = np.linalg.norm(moving - np.asarray(joints[-1 if len(joints) == 1 else 0].xyz), axis=1)
         widths[v] = _gap(moving[d >= d.max() - TIP_DEPTH], fixed)
     if not gripper_joints and min(widths.values()) > CLOSES:
-        raise ConfigError(f"URDF {path}: no gripper joints found: {', '.join(names)}, the only candidate, never brings "
-                          f"{f1}'s far end within {CLOSES * 1e3:.0f} mm of {f0} (nearest {min(widths.values()) * 1e3:.1f} mm "
-                          "at its limits); name the gripper with --gripper-joints")
+        raise ConfigError(f"URDF {path}: no gripper joints found: {', '.join(names)}, the only candidate, never "
+                          f"brings {f1}'s far end within {CLOSES * 1e3:.0f} mm of {f0} (nearest "
+                          f"{min(widths.values()) * 1e3:.1f} mm at its limits); name the gripper with --gripper-joints")
     if abs(widths[hi] - widths[lo]) < 1e-3:
         raise ConfigError(f"URDF {path}: the fingers {f0}, {f1} are as far apart at {names[0]}'s lower limit as at "
                           f"its upper ({widths[lo] * 1e3:.1f} mm): cannot tell open from closed")
@@ -381,8 +385,8 @@ def _tcp(t: _Tree, g: GripperDraft, wrist: JointSpec, tcp_link: str | None, why:
     ax = tuple(round(float(v), 6) + 0.0 for v in _snap(r @ a))
     cl = tuple(round(float(v), 6) + 0.0 for v in _snap(r @ c))
     why.append(f"tcp.offset {list(off)}: between the fingers' last {TIP_DEPTH * 1e3:.0f} mm at a middle opening "
-               f"({mid:g}); approach {list(ax)} (the way the fingers stand out, or {wrist.name}'s axis within 30 degrees of it), closing {list(cl)} "
-               f"(toward {g.finger_links[0]})")
+               f"({mid:g}); approach {list(ax)} (the way the fingers stand out, or {wrist.name}'s axis within 30 "
+               f"degrees of it), closing {list(cl)} (toward {g.finger_links[0]})")
     return TcpDraft(tcp_link, off, ax, cl)  # type: ignore[arg-type]
 
 
