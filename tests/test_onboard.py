@@ -104,6 +104,19 @@ def test_koch_draft_loads_and_passes_the_checks(tmp_path: Path) -> None:
     assert spec.gripper.fingertip_reach >= geo.reach - 1e-3
 
 
+def test_tcp_link_picks_the_tcp_frame() -> None:
+    """The Koch's hand link_6 has two *tcp* frames: the draft takes the one nearer the pads' middle
+    (gripper_tcp, 12.6 mm; back_tcp is 4 cm behind it); ``--tcp-link`` takes link_6 itself, the
+    point the same; a link not fixed to the hand is one line."""
+    path = source_urdf(KOCH_URDF)
+    auto, mine = survey_urdf(path), survey_urdf(path, tcp_link="link_6")
+    assert auto.tcp.link == "gripper_tcp" and mine.tcp.link == "link_6"
+    gripper_tcp_in_link_6 = np.array([-0.008, 0.0, -0.065])  # the URDF's gripper_tcp_joint origin
+    assert np.abs(np.add(auto.tcp.offset, gripper_tcp_in_link_6) - mine.tcp.offset).max() < 2e-4  # rounding
+    with pytest.raises(ConfigError, match="--tcp-link 'link_2' is not link_6 or a link fixed to it"):
+        survey_urdf(path, tcp_link="link_2")
+
+
 def test_mobile_panda_draft_finds_its_base_lift_and_shipped_meshes(tmp_path: Path) -> None:
     want = load_robot_spec("mobile_panda")
     done = _draft(tmp_path, "mobile_panda_draft", want.urdf)
