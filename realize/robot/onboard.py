@@ -6,7 +6,7 @@ finger links, open side, base, arm chain, TCP), fits the collision spheres
 ``configs/robot/NAME.yaml`` (every choice a comment in its header), reads the draft back as
 ``realize`` reads a robot config and runs the checks a run's config load runs (the URDF's names,
 ``realize.robot.urdf_names``; the gripper's geometry, ``realize.robot.grip_geometry``, whose
-measured fingertip reach and pad width it writes in), and returns an :class:`Onboarded` with a
+measured fingertip reach and pad width it writes in; nothing is written unless they pass), and returns an :class:`Onboarded` with a
 short report: what it chose and why (one line each), what the user must still check.
 
 Drive gains are the documented defaults of ``realize.robot.spec`` (``Drive``, ``GripperSpec``),
@@ -259,8 +259,6 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
     chose.append(f"gripper.fingertip_reach {reach} m, pad_half_width {pad} m (measured: grip_geometry); "
                  f"{geo.width_open * 1e3:.1f} mm between the pads open, {abs(geo.width_closed) * 1e3:.1f} mm closed")
     fitted = fit_robot_spheres(path, fit)
-    write_fitted_spheres(spheres_out, name, path, fitted, fit.samples,
-                         command or f"-m realize.robot.onboard {name} --urdf {ref}")
     mapping = _mapping(name, ref, mesh_ext, s, spheres_file, height, footprint, hand, pairs, reach, pad)
     mapping["fabric_exclude"] = [sp.name for sp in fitted if sp.link in hand]
     chose.append(f"spheres: {len(fitted)} on {len({sp.link for sp in fitted})} links ({fit.samples} samples, at most "
@@ -268,12 +266,18 @@ def onboard_robot(name: str, urdf: str, out_dir: Path = ROBOT_CONFIG_DIR, sphere
                  "fingers")
     header = [f"{name}: DRAFTED by python -m realize.robot.onboard from {Path(path).name}; not calibrated.",
               *[f"  {c}" for c in chose]]
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(_text(mapping, header))
-    with open(out) as f:
-        spec = RobotSpec.from_mapping(yaml.safe_load(f), f"robot ({out.name})")
+    text = _text(mapping, header)
+    # checked as a run's config load checks it before anything is written: a draft that fails leaves
+    # no file in configs/robot/ (where every robot test would pick it up)
+    spec = RobotSpec.from_mapping(yaml.safe_load(text), f"robot ({out.name})")
     check_urdf_names(spec, f"robot ({out.name})")
-    spec.fabric_exclusions(None, [sp.name for sp in load_spheres(spec.spheres_file)])
+    spec.fabric_exclusions(None, [sp.name for sp in fitted])
+    spheres_out.parent.mkdir(parents=True, exist_ok=True)
+    write_fitted_spheres(spheres_out, name, path, fitted, fit.samples,
+                         command or f"-m realize.robot.onboard {name} --urdf {ref}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    load_spheres(spec.spheres_file)  # the file the config names reads back
     chose.append("checks passed: the config loads, its names are in the URDF (urdf_names), the gripper's geometry "
                  "(grip_geometry), the sphere file")
     todo += [
