@@ -2,12 +2,13 @@
 
 What it does: :func:`onboard_robot` surveys the URDF (``realize.robot.urdf_survey``: gripper,
 finger links, open side, base, arm chain, TCP), fits the collision spheres
-(``realize.robot.robot_spheres``, as ``scripts/fit_spheres.py``) and writes them, drafts
-``configs/robot/NAME.yaml`` (every choice a comment in its header), reads the draft back as
-``realize`` reads a robot config and runs the checks a run's config load runs (the URDF's names,
+(``realize.robot.robot_spheres``, as ``scripts/fit_spheres.py``), drafts
+``configs/robot/NAME.yaml`` (every choice a comment in its header), reads the draft as ``realize``
+reads a robot config and runs the checks a run's config load runs (the URDF's names,
 ``realize.robot.urdf_names``; the gripper's geometry, ``realize.robot.grip_geometry``, whose
-measured fingertip reach and pad width it writes in; nothing is written unless they pass), and returns an :class:`Onboarded` with a
-short report: what it chose and why (one line each), what the user must still check.
+measured fingertip reach and pad width it writes in), writes the config and the sphere file only
+once they pass, and returns an :class:`Onboarded` with a short report: what it chose and why (one
+line each), what the user must still check.
 
 Drive gains are the documented defaults of ``realize.robot.spec`` (``Drive``, ``GripperSpec``),
 not calibrated; a fixed base is mounted ``--height`` (0.72 m) up, as the Panda and SO-100.
