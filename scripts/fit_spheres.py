@@ -18,7 +18,7 @@ report (per link: spheres, share of fresh surface samples inside the link's own 
 far the worst sample is outside, largest overshoot; and in total) is printed. ``--compare FILE``
 also reports an existing sphere file (a name in ``realize/robot/spheres/`` or a path), and for
 links that file gives no spheres of their own, the share covered by all its spheres with the
-robot at its joint-limit corners (see ``_corner_configs``).
+robot at its joint-limit corners (``realize.robot.robot_spheres.corner_configs``).
 
 ``check_floor`` (whether the fabric keeps a sphere above the floor) is false where that cannot
 hold at any height: for every sphere of a link whose collision geometry reaches the floor
@@ -39,14 +39,15 @@ Mesh files are found as SAPIEN finds them (``package://`` names searched up the 
 ``realize.robot.urdf.mesh_file``); a robot config, URDF or mesh it cannot read is one ``error:``
 line, exit code 2.
 
+The fitting itself is ``realize.robot.robot_spheres`` (``realize.robot.onboard`` calls it too);
+this script is its command line and coverage report.
+
 What it doesn't: fit self-collision models, or change a sphere file it is only comparing.
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import itertools
 from collections import Counter
 import shlex
 import sys
@@ -58,14 +59,11 @@ import torch
 
 from realize.config import ConfigError
 from realize.paths import REPO_ROOT
-from realize.robot.sphere_file import SPHERE_DIR, SphereSpec, load_spheres, sphere_file_path, write_spheres
-from realize.robot.sphere_fit import (Coverage, LinkGeometry, Sphere, collision_links, coverage, fit_spheres,
-                                      link_geometry)
-from realize.robot.link_geometry import joint_transform
+from realize.robot.robot_spheres import (FITTED_MARK, FitSettings, corner_configs, fit_robot_spheres, link_poses,
+                                         write_fitted_spheres)
+from realize.robot.sphere_file import SPHERE_DIR, SphereSpec, load_spheres, sphere_file_path
+from realize.robot.sphere_fit import Coverage, LinkGeometry, Sphere, collision_links, coverage, link_geometry
 from realize.robot.urdf import JointSpec, parse_urdf_joints
-
-FITTED_MARK = "fitted by scripts/fit_spheres.py"
-PRISMATIC_RANGE = 2.0  # m: prismatic joints of at most this range are a lift, torso or finger; wider ones a planar base
 
 
 @dataclass(frozen=True)
@@ -74,58 +72,6 @@ class LinkReport:
     spheres: int
     cov: Coverage
     area: float
-
-
-# ----------------------------------------------------------------------------- kinematics (numpy, once)
-
-
-def link_poses(joints: dict[str, JointSpec], values: dict[str, float], links: list[str]) -> dict[str, np.ndarray]:
-    """4x4 pose of each link in the URDF root frame, joints at ``values`` (absent: 0)."""
-    out: dict[str, np.ndarray] = {}
-
-    def pose(link: str) -> np.ndarray:
-        if link not in out:
-            j = joints.get(link)
-            out[link] = np.eye(4) if j is None else pose(j.parent) @ joint_transform(j, values.get(j.name, 0.0))
-        return out[link]
-
-    return {l: pose(l) for l in links}
-
-
-def _chain(joints: dict[str, JointSpec], link: str) -> list[JointSpec]:
-    chain = []
-    while link in joints:
-        chain.append(joints[link])
-        link = joints[link].parent
-    return chain
-
-
-def _short_prismatic(j: JointSpec) -> bool:
-    finite = np.isfinite(j.lower) and np.isfinite(j.upper)
-    return j.type == "prismatic" and finite and j.upper - j.lower <= PRISMATIC_RANGE
-
-
-def _corner_configs(joints: list[JointSpec]) -> list[dict[str, float]]:
-    """Every combination of the short-range prismatic joints at their limits; all else at 0."""
-    lifts = [j for j in joints if _short_prismatic(j)]
-    combos = itertools.product(*[(j.lower, j.upper) for j in lifts])
-    return [{j.name: v for j, v in zip(lifts, combo)} for combo in combos]
-
-
-def _lowest(joints: dict[str, JointSpec], link: str, local: np.ndarray, radius: float = 0.0) -> list[float]:
-    """Lowest root-frame z of ``local`` points of ``link`` (minus ``radius``), at each corner configuration."""
-    out = []
-    for cfg in _corner_configs(_chain(joints, link)):
-        t = link_poses(joints, cfg, [link])[link]
-        out.append(float((local @ t[:3, :3].T + t[:3, 3])[:, 2].min()) - radius)
-    return out
-
-
-def floor_checks(joints: dict[str, JointSpec], geom: LinkGeometry, spheres: list[Sphere], tol: float) -> list[bool]:
-    """``check_floor`` of each sphere of ``geom``'s link (rule in the module docstring)."""
-    if max(_lowest(joints, geom.link, geom.vertices)) <= tol:
-        return [False] * len(spheres)
-    return [max(_lowest(joints, geom.link, np.asarray([s.centre]), s.radius)) > tol for s in spheres]
 
 
 # ----------------------------------------------------------------------------- reports
@@ -167,7 +113,7 @@ def borrowed_coverage(joints: dict[str, JointSpec], geoms: dict[str, LinkGeometr
     """Share of ``link``'s surface inside any sphere of the robot, at each corner configuration."""
     links = sorted({link, *(s.link for s in spheres)})
     out = []
-    for cfg in _corner_configs([j for j in joints.values()]):
+    for cfg in corner_configs([j for j in joints.values()]):
         poses = link_poses(joints, cfg, links)
         world = [Sphere(tuple(poses[s.link][:3, :3] @ np.asarray(s.offset) + poses[s.link][:3, 3]), s.radius)
                  for s in spheres]
@@ -177,13 +123,6 @@ def borrowed_coverage(joints: dict[str, JointSpec], geoms: dict[str, LinkGeometr
 
 
 # ----------------------------------------------------------------------------- main
-
-
-def link_radius_bound(geometry: LinkGeometry) -> float:
-    """The default sphere radius bound of a link (m): half the middle edge of its collision
-    geometry's axis-aligned bounding box (in its own frame)."""
-    edges = sorted(float(e) for e in geometry.bounds[1] - geometry.bounds[0])
-    return 0.5 * edges[1]
 
 
 def _parse_counts(items: list[str]) -> dict[str, int]:
@@ -250,17 +189,8 @@ def _fit(argv: list[str] | None) -> int:
     geoms = {l: link_geometry(urdf, l) for l in links}
     report_seed = args.seed + 1_000_003
 
-    fitted: list[SphereSpec] = []
-    for link, g in geoms.items():
-        if link in counts:
-            spheres = fit_spheres(g, n_spheres=counts[link], n_samples=args.samples, seed=args.seed)
-        else:
-            bound = link_radius_bound(g) if args.max_radius is None else args.max_radius
-            spheres = fit_spheres(g, max_radius=bound, max_spheres=args.max_spheres,
-                                  n_samples=args.samples, seed=args.seed)
-        checks = floor_checks(joints, g, spheres, args.floor_tol)
-        fitted += [SphereSpec(f"{link}_{i}", link, s.centre, s.radius, c)
-                   for i, (s, c) in enumerate(zip(spheres, checks))]
+    settings = FitSettings(args.samples, args.max_spheres, args.max_radius, args.seed, args.floor_tol)
+    fitted = fit_robot_spheres(urdf, settings, links, counts, geoms)
     print_report(f"fitted spheres ({urdf.name}, seed {args.seed}):", link_reports(geoms, fitted, report_seed))
     off_floor = [s.name for s in fitted if not s.check_floor]
     print(f"  check_floor: false on {off_floor or 'no sphere'}; the spec's no_floor_links (sim contact filter, "
@@ -272,19 +202,8 @@ def _fit(argv: list[str] | None) -> int:
         where = out.name
     argv_ = argv if argv is not None else sys.argv[1:]
     cmd = " ".join(shlex.quote(a) for a in ["scripts/fit_spheres.py", *argv_])
-    header = [
-        f"Collision spheres of {robot}, {FITTED_MARK} (realize.robot.sphere_fit)",
-        f"on {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d} to the collision geometry of {urdf.name}. Per link: vertices,",
-        f"sharp-edge points and {args.samples} surface samples split among the link's spheres (principal-axis",
-        "and k-means++ starts, Lloyd rounds; each sphere then shrunk to the minimal enclosing ball of what",
-        "only it covers, then grown to cover fresh samples); centres rounded to 1 mm, radii rounded up.",
-        "check_floor: false for spheres that cannot leave the floor (their link reaches the floor at every",
-        "lift height, or they do). Offsets in the link frame (m), radii (m). Made with (sphere counts:",
-        "--count, else those of the file it replaced):",
-        f"  .venv/bin/python {cmd}",
-    ]
     without = [l for l in collision_links(urdf) if l not in links]  # --links: the rest is left to neighbours
-    write_spheres(out, robot, fitted, header, without_spheres=without)
+    write_fitted_spheres(out, robot, urdf, fitted, args.samples, cmd, without_spheres=without)
     print(f"wrote {len(fitted)} spheres to {where}")
 
     if args.compare:
