@@ -6,7 +6,7 @@
 * the Koch (no committed config; ``tests/_koch.py`` is one by hand): the draft loads and passes
   ``check_urdf_names`` and ``grip_geometry``;
 * the mobile Panda: a mobile base (x, y, yaw), the lift first in ``upper``, its shipped .glb meshes;
-* the Koch draft's TCP and spheres against pytorch_kinematics (``tests/test_robot_kinematics.py``'s check);
+* the Koch draft's TCP and spheres against pytorch_kinematics (in ``tests/test_robot_kinematics.py``, beside every committed robot's);
 * a URDF without gripper joints, two equal arms (``--gripper-joints`` picks one), an existing config
   without ``--force``: one line each.
 
@@ -170,16 +170,3 @@ def test_an_existing_config_is_kept_without_force(tmp_path: Path) -> None:
     (tmp_path / "c" / "koch.yaml").write_text("name: koch\n")
     with pytest.raises(ConfigError, match="exists: pass --force"):
         onboard_robot("koch", KOCH_URDF, tmp_path / "c", tmp_path / "s", fit=FAST)
-
-
-def test_the_koch_draft_s_kinematics_match_pytorch_kinematics(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The drafted TCP and spheres through ``RobotKinematics``, against pytorch_kinematics as every
-    committed robot is (``tests/test_robot_kinematics.py``, whose check and float64 reader this reuses)."""
-    import test_robot_kinematics as trk
-    import torch
-
-    from realize.robot.kinematics import RobotKinematics
-
-    trk.float64_urdf_origins.__wrapped__(monkeypatch)
-    spec = _draft(tmp_path, "koch_draft", KOCH_URDF).spec
-    trk._check_against_pytorch_kinematics(spec, RobotKinematics(spec, dtype=torch.float64))

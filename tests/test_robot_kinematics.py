@@ -8,6 +8,8 @@ pytorch_kinematics through ``realize.robot.urdf.urdf_for_pytorch_kinematics`` (i
 from __future__ import annotations
 
 
+from pathlib import Path
+
 import pytest
 import pytorch_kinematics as pk
 import torch
@@ -133,3 +135,16 @@ def _check_against_pytorch_kinematics(spec: RobotSpec, kin: RobotKinematics) -> 
                 expected[:, :, kin.joint_names.index(joint)] = jref[:, :rows, i]
         err = (ours - expected).abs().max()
         assert err < TOL, f"{robot}: Jacobian of {name}: {err:.2e}"
+
+
+def test_the_onboard_draft_of_the_koch_matches_pytorch_kinematics(tmp_path: Path) -> None:
+    """The Koch as ``python -m realize.robot.onboard`` drafts it (tests/test_onboard.py checks the
+    draft's choices), through ``RobotKinematics`` against pytorch_kinematics, as every committed robot."""
+    from realize.robot.onboard import onboard_robot
+    from realize.robot.robot_spheres import FitSettings
+
+    for sub in ("c", "s"):
+        (tmp_path / sub).mkdir()
+    spec = onboard_robot("koch_draft", "mani_skill:robots/koch/follower_arm_v1.1.urdf", tmp_path / "c", tmp_path / "s",
+                         fit=FitSettings(samples=200, max_spheres=1)).spec
+    _check_against_pytorch_kinematics(spec, RobotKinematics(spec, dtype=F64))
