@@ -22,10 +22,11 @@ import pytest
 import torch
 
 from realize.search.ce.config import CEConfig
-from realize.search.chain import ChainSearch, chain_names
+from realize.search.chain import ChainSearch
 from realize.search.chain_pool import Pool
 from realize.search.protocol import EvalResult
-from realize.search.stitched import StitchConfig, StitchedSearch
+from realize.search.segments import StitchConfig, chain_names
+from realize.search.stitched import StitchedSearch
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
 

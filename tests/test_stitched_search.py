@@ -13,7 +13,8 @@ import torch
 
 from realize.search.ce.config import CEConfig
 from realize.search.protocol import EvalResult
-from realize.search.stitched import SEGMENT_NAMES, StitchConfig, StitchedSearch
+from realize.search.segments import StitchConfig
+from realize.search.stitched import SEGMENT_NAMES, StitchedSearch
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
 

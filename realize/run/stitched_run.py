@@ -27,8 +27,9 @@ from typing import Any
 from realize.spec.run_spec import RunSpec
 from realize.run_dir.names import HISTORY_FILE, candidate_file
 from realize.run_dir.summaries import IterationSummary
-from realize.search.chain import ChainSearch, chain_names
-from realize.search.stitched import PREFIX, SEGMENT_NAMES, SUFFIX, StitchConfig, StitchedSearch
+from realize.search.chain import ChainSearch
+from realize.search.segments import StitchConfig, chain_names
+from realize.search.stitched import PREFIX, SEGMENT_NAMES, SUFFIX, StitchedSearch
 from realize.tasks.spec import TaskSpec
 from realize.tasks.split import chain_tasks, split_task
 

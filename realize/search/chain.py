@@ -55,21 +55,12 @@ from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.search.ce.state import IterationRecord
 from realize.search.chain_pool import Pool
 from realize.search.protocol import Batch, EvalResult, SearchReport
-from realize.search.stitched import StitchConfig, SegmentEvaluator
+from realize.search.segments import SegmentEvaluator, StitchConfig, chain_names
 from realize.tasks.param_layout import ParamLayout
 
-__all__ = ["ChainSearch", "ChainIteration", "ChainResult", "CHAIN_KIND", "chain_names"]
+__all__ = ["ChainSearch", "ChainIteration", "ChainResult", "CHAIN_KIND"]
 
 CHAIN_KIND = "stitched_chain"  # the "kind" of its state_dict (a checkpoint's ce_state)
-
-
-def chain_names(k: int) -> dict[int | None, str]:
-    """The batches' segment names by candidate index (the workers' task, the history key):
-    None is the confirmation ("full"); two segments are "prefix" and "suffix" (as
-    ``StitchedSearch``'s), more ``segment1 .. segmentK``."""
-    if k == 2:
-        return {None: "full", 1: "prefix", 2: "suffix"}
-    return {None: "full", **{j: f"segment{j}" for j in range(1, k + 1)}}
 
 
 @dataclass

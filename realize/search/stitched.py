@@ -30,6 +30,8 @@ a guess (a restored state starts at rest, its contacts made anew), the confirmed
 (states through their ``to_json``; a ``read_state`` given to the constructor reads them back)
 and the stitched plans kept.
 
+Its budget is ``realize.search.segments.StitchConfig``.
+
 What it doesn't: simulate or capture states (``realize.run.stitched_run``, ``realize.run.loop``),
 pick the split, or rank a prefix by the suffixes it allows (a cheaper grasp that makes the place
 dearer still wins its pool place; the confirmation sees the sum). The segments' searches run a
@@ -52,71 +54,15 @@ from realize.search.ce.config import CEConfig
 from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.search.ce.state import IterationRecord
 from realize.search.protocol import Batch, EvalResult, SearchReport
+from realize.search.segments import SegmentEvaluator, StitchConfig
 from realize.tasks.param_layout import ParamLayout
 
-__all__ = ["StitchConfig", "StitchedIteration", "StitchedResult", "StitchedSearch", "SegmentEvaluator",
-           "PREFIX", "SUFFIX", "SEGMENT_NAMES", "STITCHED_KIND"]
+__all__ = ["StitchedIteration", "StitchedResult", "StitchedSearch", "PREFIX", "SUFFIX", "SEGMENT_NAMES",
+           "STITCHED_KIND"]
 
 PREFIX, SUFFIX = 1, 2  # a batch's candidate: the task index in the run's workers and the history key
 SEGMENT_NAMES: dict[int | None, str] = {None: "full", PREFIX: "prefix", SUFFIX: "suffix"}
 STITCHED_KIND = "stitched"  # the "kind" of its state_dict (a checkpoint's ce_state)
-
-# (segment, Z, starts) -> (result, end states of the rows or None)
-SegmentEvaluator = Callable[[str, Tensor, "Sequence[Any] | None"], "tuple[EvalResult, list[Any] | None]"]
-
-
-@dataclass(frozen=True)
-class StitchConfig:
-    """The stitched search's budget: samples per segment and round, rounds, the prefix pool, how
-    many stitched plans are confirmed whole, and the cut (``split``: the suffix's first action;
-    None: the action after the plan's first grasp, ``realize.tasks.split.default_split``). A
-    chain of more segments (``splits``) or one with ``credit`` runs ``realize.search.chain``
-    (``n_suffix`` rows for each segment after the first)."""
-
-    n_prefix: int = 100
-    n_suffix: int = 100
-    iterations: int = 10
-    pool: int = 10
-    confirm: int = 10
-    split: int | None = None
-    # a chain (``realize.search.chain``): every segment's first action after the first (None: ``(split,)``)
-    splits: tuple[int, ...] | None = None
-    credit: int = 0  # a chain's pool entry is dead after this many rows from it, none feasible (0: off)
-    credit_radius: float = 0.1  # a row is doomed within this normalized distance of a dead entry
-
-    def __post_init__(self) -> None:
-        for name in ("n_prefix", "n_suffix", "iterations", "pool", "confirm"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"stitch.{name} = {v!r} is invalid: expected an integer >= 1")
-        if self.iterations < 2:
-            raise ValueError("stitch.iterations must be >= 2: the suffix starts from the prefixes of round 0")
-        if isinstance(self.credit, bool) or not isinstance(self.credit, int) or self.credit < 0:
-            raise ValueError(f"stitch.credit = {self.credit!r} is invalid: expected an integer >= 0")
-        if not self.credit_radius >= 0:
-            raise ValueError(f"stitch.credit_radius = {self.credit_radius!r} is invalid: expected a number >= 0")
-        if self.splits is not None and (not self.splits or list(self.splits) != sorted(set(self.splits))):
-            raise ValueError(f"stitch.splits = {list(self.splits)!r} is invalid: expected increasing action indices")
-
-    @property
-    def cuts(self) -> tuple[int, ...]:
-        """Each segment's first action after the first (the split, or a chain's ``splits``)."""
-        if self.splits is not None:
-            return tuple(self.splits)
-        return () if self.split is None else (self.split,)
-
-    @property
-    def chain(self) -> bool:
-        """Whether ``realize.search.chain.ChainSearch`` runs it: more than one cut, or credit."""
-        return len(self.cuts) > 1 or self.credit > 0
-
-    @property
-    def batches(self) -> int:
-        """Batches of a whole search (at most): segment j's in each round from round j on, then
-        the confirmation (two segments: a prefix per round, a suffix per round after the first)."""
-        k = len(self.cuts) + 1
-        return k * self.iterations - k * (k - 1) // 2 + 1 if k > 2 else 2 * self.iterations
-
 
 @dataclass
 class StitchedIteration:

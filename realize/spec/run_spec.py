@@ -37,7 +37,7 @@ from realize.search.budget import HalvingBudget, plan_budget
 from realize.search.ce.config import CEConfig
 from realize.spec.run_settings import LoggingSettings, ValidationSettings
 from realize.spec.stitch_settings import StitchSettings, read_stitch
-from realize.search.stitched import StitchConfig
+from realize.search.segments import StitchConfig
 from realize.config import ConfigError, Settings, as_mapping, check_unknown, setting
 from realize.spec.task_plans import (PlannerSettings, TaskOrigin, build_task_candidates, check_halving_budget,
                                 load_task_file)
