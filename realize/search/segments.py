@@ -10,8 +10,8 @@ checks it; ``chain_names(k)`` names the batches of k segments by their candidate
 workers' task, the history key: ``history_c{j}.npz``, result.json's ``segment_per_iter``);
 ``SegmentEvaluator`` is the type of what realizes a segment's batch without a run directory
 (``ChainSearch.run``).
-What it doesn't: search (``realize.search.stitched`` for one cut, ``realize.search.chain`` for
-more, or with credit), read the run config (``realize.spec.stitch_settings``), cut the plan
+What it doesn't: search (``realize.search.chain``: every stitched search, one cut its
+two-segment case), read the run config (``realize.spec.stitch_settings``), cut the plan
 (``realize.tasks.split``) or simulate (``realize.run.stitched_run``).
 """
 
@@ -83,7 +83,8 @@ class StitchConfig:
 
     @property
     def chain(self) -> bool:
-        """Whether ``realize.search.chain.ChainSearch`` runs it: more than one cut, or credit."""
+        """More than one cut, or credit: what ``result.json``'s ``stitched`` block then says too
+        (the cuts, the credit, each segment). The same ``ChainSearch`` runs either way."""
         return len(self.cuts) > 1 or self.credit > 0
 
     @property
