@@ -117,7 +117,7 @@ class RunSpec:
     worlds: Worlds | None = None
     # replan_from: the plan's remaining actions from a given state (realize.spec.replan_from); None otherwise
     replan: ReplanSpec | None = None
-    stitch: StitchConfig | None = None  # stitched segments (realize.search.stitched); None: one CE over the plan
+    stitch: StitchConfig | None = None  # stitched segments (realize.search.chain); None: one CE over the plan
 
     @property
     def start(self) -> SceneState | None:

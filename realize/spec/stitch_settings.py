@@ -5,7 +5,7 @@ chain of segments: ``stitch.splits`` or ``stitch.cut``, with ``credit``); ``read
 task)`` checks them against the run's CE settings and its task (the cuts, the rounds a chain
 needs, what a stitched search cannot run) and returns a ``StitchConfig`` (None: off). Every
 problem is one ``ConfigError`` naming the key.
-What it doesn't: search (``realize.search.stitched``, ``realize.search.chain``) or read the rest
+What it doesn't: search (``realize.search.chain``) or read the rest
 of the run config (``realize.spec.run_spec``).
 """
 
@@ -25,8 +25,8 @@ __all__ = ["StitchSettings", "read_stitch"]
 
 @dataclass
 class StitchSettings(Settings):
-    """The run config's ``stitch`` node: search the plan as two segments realized side by side,
-    then confirmed whole (``realize.search.stitched``; ``levers=stitched`` turns it on)."""
+    """The run config's ``stitch`` node: search the plan as segments realized side by side,
+    then confirmed whole (``realize.search.chain``; ``levers=stitched`` turns it on)."""
 
     config_key = "stitch"
 
