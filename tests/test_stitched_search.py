@@ -2,7 +2,8 @@
 prefix and a suffix) on an analytic problem: no simulator. The prefix's cost is a quadratic
 bowl, its end state the point it reached; the suffix's cost a bowl plus a term of where it
 starts; the whole plan's cost the two summed, so the stitched cost of a plan must equal its
-confirmed cost, and the search must find the bowls' joint minimum."""
+confirmed cost, and the search must find the bowls' joint minimum. A paused search goes on from
+its state as if never paused, from a state of the one-cut search the chain replaced too."""
 
 from __future__ import annotations
 
@@ -135,6 +136,43 @@ def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_af
     assert second.fresh[0].states == first.fresh[0].states  # (after 2: a prefix's rows wait for the suffix)
     rest = second.run(ev)
     assert torch.equal(rest.z, whole.z) and rest.cost == whole.cost and rest.confirmed == whole.confirmed
+
+
+def _as_stitched(d: dict) -> dict:
+    """The chain's ``state_dict`` in the form a one-cut run checkpointed before the chain ran it
+    (kind "stitched": the prefix's, suffix's and confirmation's searches, the pool and the
+    waiting prefixes without ids, each stitched plan as its prefix's and its suffix's columns)."""
+    def rows(p: dict) -> dict:
+        return {k: p[k] for k in ("z", "cost", "states")}
+
+    return {"kind": "stitched", "round": d["round"], "phase": {0: "prefix", 1: "suffix"}.get(d["phase"], d["phase"]),
+            "batches": d["batches"], "prefix": d["segments"][0], "suffix": d["segments"][1], "full": d["full"],
+            "pool": rows(d["pools"][0]), "fresh": rows(d["fresh"][0]),
+            "stitched": [[c, z[:2], z[2:]] for c, z in d["stitched"]]}
+
+
+@pytest.mark.parametrize("pause_after", [1, 2, 3, 5])  # ... and before the confirmation
+def test_a_one_cut_run_checkpointed_before_the_chain_ran_it_goes_on(pause_after: int) -> None:
+    """An interrupted one-cut run's checkpoint from before the chain was its search resumes as if
+    never paused (``realize.search.segments.stitched_as_chain``); a malformed one is refused."""
+    import json
+
+    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
+    whole = _search(cfg).run(Evaluator())
+    ev, first = Evaluator(), _search(cfg)
+    for _ in range(pause_after):
+        b = first.ask()
+        r, ends = ev(chain_names(2)[b.candidate], b.Z, b.starts)
+        r.end_states = ends
+        first.tell(r)
+    second = _search(cfg)
+    second.read_state = tuple
+    second.load_state_dict(json.loads(json.dumps(_as_stitched(first.state_dict()))))
+    assert second.iterations_done == pause_after and second.phase == first.phase
+    rest = second.run(ev)
+    assert torch.equal(rest.z, whole.z) and rest.cost == whole.cost and rest.confirmed == whole.confirmed
+    with pytest.raises(ValueError, match="malformed stitched state"):
+        _search(cfg).load_state_dict({"kind": "stitched", "round": 0})
 
 
 def test_the_confirmation_is_a_given_batch_whose_best_is_the_searchs() -> None:

@@ -38,7 +38,8 @@ doomed row is still realized, kept and tried downstream: the verdict is a guess 
 ``run(evaluate)`` drives the same ask/tell without a run directory (the analytic tests).
 ``state_dict`` holds the segments' and the confirmation's searches, the pools and the round's
 rows waiting to join them (states through their ``to_json``; a ``read_state`` given to the
-constructor reads them back), the credit's verdicts and the stitched plans kept.
+constructor reads them back), the credit's verdicts and the stitched plans kept; a one-cut
+run's state from before the chain ran it loads too (``realize.search.segments.stitched_as_chain``).
 
 What it doesn't: simulate or capture states (``realize.run.stitched_run``), choose the cuts
 (``realize.tasks.split``), rank a row by the later segments it allows (without credit, a
@@ -65,12 +66,11 @@ from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.search.ce.state import IterationRecord
 from realize.search.chain_pool import Pool
 from realize.search.protocol import Batch, EvalResult, SearchReport
-from realize.search.segments import SegmentEvaluator, StitchConfig, chain_names
+from realize.search.segments import CHAIN_KIND, STITCHED_KIND, SegmentEvaluator, StitchConfig, chain_names, \
+    stitched_as_chain
 from realize.tasks.param_layout import ParamLayout
 
 __all__ = ["ChainSearch", "ChainIteration", "ChainResult", "CHAIN_KIND"]
-
-CHAIN_KIND = "stitched_chain"  # the "kind" of its state_dict (a checkpoint's ce_state)
 
 
 @dataclass
@@ -241,7 +241,10 @@ class ChainSearch:
         }
 
     def load_state_dict(self, d: Mapping[str, Any]) -> None:
-        """Continue from ``state_dict()`` output; ``ValueError`` if it is not this chain's state."""
+        """Continue from ``state_dict()`` output (or, with two segments, a one-cut run's older state:
+        ``stitched_as_chain``); ``ValueError`` if it is not this chain's state."""
+        if d.get("kind") == STITCHED_KIND and self.k == 2:
+            d = stitched_as_chain(d)
         if d.get("kind") != CHAIN_KIND:
             raise ValueError(f"not a stitched chain's state (kind {d.get('kind')!r})")
         try:

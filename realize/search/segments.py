@@ -9,7 +9,9 @@ the pool of start states, the stitched plans confirmed whole, the cuts and the c
 checks it; ``chain_names(k)`` names the batches of k segments by their candidate index (the
 workers' task, the history key: ``history_c{j}.npz``, result.json's ``segment_per_iter``);
 ``SegmentEvaluator`` is the type of what realizes a segment's batch without a run directory
-(``ChainSearch.run``).
+(``ChainSearch.run``). ``CHAIN_KIND`` is the kind of the search's ``state_dict`` (a
+checkpoint's ``ce_state``); ``stitched_as_chain`` reads the state a one-cut run checkpointed
+before the chain ran it (kind ``STITCHED_KIND``) as the two-segment chain's, so such a run resumes.
 What it doesn't: search (``realize.search.chain``: every stitched search, one cut its
 two-segment case), read the run config (``realize.spec.stitch_settings``), cut the plan
 (``realize.tasks.split``) or simulate (``realize.run.stitched_run``).
@@ -17,7 +19,7 @@ two-segment case), read the run config (``realize.spec.stitch_settings``), cut t
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +27,10 @@ from torch import Tensor
 
 from realize.search.protocol import EvalResult
 
-__all__ = ["StitchConfig", "SegmentEvaluator", "chain_names"]
+__all__ = ["StitchConfig", "SegmentEvaluator", "chain_names", "CHAIN_KIND", "STITCHED_KIND", "stitched_as_chain"]
+
+CHAIN_KIND = "stitched_chain"  # the "kind" of ChainSearch.state_dict (a checkpoint's ce_state)
+STITCHED_KIND = "stitched"  # the kind a one-cut run's state had before ChainSearch ran it
 
 # (segment name, Z, starts or None) -> (result, the rows' end states or None); a state is whatever
 # the evaluator hands out and gets back (a ``SceneState`` in a run, a tuple in the analytic tests)
@@ -93,3 +98,30 @@ class StitchConfig:
         the confirmation (two segments: a prefix per round, a suffix per round after the first)."""
         k = len(self.cuts) + 1
         return k * self.iterations - k * (k - 1) // 2 + 1 if k > 2 else 2 * self.iterations
+
+
+def stitched_as_chain(d: Mapping[str, Any]) -> dict[str, Any]:
+    """A one-cut run's search state checkpointed before the chain ran it (kind ``STITCHED_KIND``:
+    the prefix's, the suffix's and the confirmation's searches, the pool, the round's prefixes
+    waiting for the suffix, the stitched plans as prefix and suffix columns; phase ``prefix``,
+    ``suffix``, ``confirm`` or ``done``) as the two-segment chain's ``state_dict``: the same
+    searches, rows and plans, so the run goes on as it would have. The pool's entries get ids in
+    their order, no parent and no tries or wins: such a run had no credit, which alone reads them.
+    ``ValueError`` if it is malformed."""
+    try:
+        pool, fresh = d["pool"], d["fresh"]
+
+        def entries(p: Mapping[str, Any], first: int) -> dict[str, Any]:
+            n = len(p["cost"])
+            return {"z": p["z"], "cost": p["cost"], "states": p["states"], "ids": list(range(first, first + n)),
+                    "parent": [-1] * n, "doomed": [False] * n, "tries": [0] * n, "wins": [0] * n}
+
+        n_pool, phase = len(pool["cost"]), d["phase"]
+        return {"kind": CHAIN_KIND, "round": d["round"], "batches": d["batches"],
+                "phase": {"prefix": 0, "suffix": 1}.get(phase, phase),
+                "segments": [d["prefix"], d["suffix"]], "full": d["full"],
+                "pools": [entries(pool, 0)], "fresh": [entries(fresh, n_pool)], "known": [[]],
+                "next_id": n_pool + len(fresh["cost"]), "dead_total": 0,
+                "stitched": [[c, [*zp, *zs]] for c, zp, zs in d["stitched"]]}
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"malformed stitched state ({type(e).__name__}: {e})") from None
