@@ -1,8 +1,8 @@
 """A chain of stitched segments through the search loop, the workers and the run directory
 (slow: each simulates). The seed task's golden default search (``tests/golden_runs.py``,
-``seed_paper_default``) run as a two-segment ``ChainSearch`` (``stitch.credit`` on: with two
-rounds no dropped start is ever asked for again) gives the fixture's numbers bit for bit, so the
-chain realizes, captures and restores states as the one-cut search does. A four-block tower cut
+``seed_paper_default``, itself the two-segment chain) with ``stitch.credit`` on (with two rounds
+no dropped start is ever asked for again) gives the fixture's numbers bit for bit, so credit
+that drops nothing changes nothing. A four-block tower cut
 after each place runs its three segments in order, each from the one before's end states, and
 result.json says which batch was which and each segment's seconds. An interrupted chain run
 resumes to the uninterrupted one's result."""

@@ -1,10 +1,8 @@
 """A chain of stitched segments (``realize.search.chain``) on analytic problems: no simulator.
 
-* Two segments without credit are ``StitchedSearch`` bit for bit: every batch drawn, every
-  confirmed plan, the returned plan and the segments' distributions.
 * Three segments of separable bowls (the whole plan's cost the segments' summed) find the
-  analytic optimum, stitched cost == confirmed; the same problem cut once (``StitchedSearch``)
-  and cut twice returns the same plan (to the searches' precision). Elsewhere a segment also
+  analytic optimum, stitched cost == confirmed; the same problem cut once (two segments) and
+  cut twice returns the same plan (to the searches' precision). Elsewhere a segment also
   pays a term of where it starts, so the starts handed out must be the right end states.
 * Credit: a suffix that fails from every start of the prefix's cheaper mode moves the prefix's
   distribution to its other mode (without credit it stays), and the same one segment back in a
@@ -22,10 +20,10 @@ import pytest
 import torch
 
 from realize.search.ce.config import CEConfig
-from realize.search.chain import ChainSearch, chain_names
+from realize.search.chain import ChainSearch
 from realize.search.chain_pool import Pool
 from realize.search.protocol import EvalResult
-from realize.search.stitched import StitchConfig, StitchedSearch
+from realize.search.segments import StitchConfig, chain_names
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
 
@@ -106,43 +104,6 @@ def _ce(n: int, iterations: int, seed: int = 0, n_elite: int = 5, **kw) -> CECon
     return CEConfig(n_envs=n, n_elite=n_elite, iterations=iterations, seed=seed, **kw)
 
 
-# ---- two segments: StitchedSearch bit for bit --------------------------------------------------
-
-class Recorder:
-    """Wraps an evaluator and keeps every batch it was handed."""
-
-    def __init__(self, ev) -> None:
-        self.ev, self.batches = ev, []
-
-    def __call__(self, segment, Z, starts):
-        self.batches.append((segment, Z.clone(), None if starts is None else list(starts)))
-        return self.ev(segment, Z, starts)
-
-
-@pytest.mark.parametrize("seed,extra", [(0, {}), (3, {"alpha": 0.7}), (1, {"rank_weighted": True})])
-def test_two_segments_are_the_stitched_search_bit_for_bit(seed: int, extra: dict) -> None:
-    groups = [[0], [1, 2]]
-    full, segs, cols = _chain_layouts(groups)
-    cfg = StitchConfig(n_prefix=16, n_suffix=20, iterations=4, pool=3, confirm=3)
-    ce = _ce(20, 4, seed, **extra)
-
-    def fail_if(start):  # a share of the prefixes' end states lead nowhere
-        return start[:, 0] < -0.5
-
-    a_ev, b_ev = Recorder(Bowls(groups, chain_names(2), fail_if)), Recorder(Bowls(groups, chain_names(2), fail_if))
-    a_s = StitchedSearch(full, segs[0], segs[1], cols[0], cols[1], ce, cfg)
-    b_s = ChainSearch(full, segs, cols, ce, cfg)
-    a, b = a_s.run(a_ev), b_s.run(b_ev)
-    assert len(a_ev.batches) == len(b_ev.batches) == cfg.batches
-    for (sa, za, ta), (sb, zb, tb) in zip(a_ev.batches, b_ev.batches):
-        assert sa == sb and torch.equal(za, zb) and ta == tb
-    assert a.feasible and torch.equal(a.z, b.z) and a.cost == b.cost and a.stitched_cost == b.stitched_cost
-    assert a.confirmed == b.confirmed and torch.equal(a.candidates, b.candidates)
-    ra, rb = a_s.report().state, b_s.report().state
-    assert torch.equal(ra.mean, rb.mean) and torch.equal(ra.std, rb.std) and ra.best_cost == rb.best_cost
-    assert [h.pool for h in a.history] == [h.pools[0] for h in b.history]
-
-
 # ---- three segments ----------------------------------------------------------------------------
 
 # separable (no start terms, w = 0): the optimum is every bowl's centre
@@ -174,11 +135,11 @@ def test_three_segments_find_the_analytic_optimum_and_confirm_their_cost() -> No
 
 
 def test_one_cut_and_two_cuts_return_the_same_plan() -> None:
-    """The same bowls cut once (P0 | P1 P2, ``StitchedSearch``) and twice (P0 | P1 | P2): both
-    return the analytic optimum's plan, so each other's, to the searches' precision."""
+    """The same bowls cut once (P0 | P1 P2) and twice (P0 | P1 | P2): both return the analytic
+    optimum's plan, so each other's, to the searches' precision."""
     full, segs, cols = _chain_layouts([[0], [1, 2]])
-    one = StitchedSearch(full, segs[0], segs[1], cols[0], cols[1], _ce(60, 16, n_elite=10),
-                         StitchConfig(n_prefix=60, n_suffix=60, iterations=16, pool=5, confirm=4)).run(
+    one = ChainSearch(full, segs, cols, _ce(60, 16, n_elite=10),
+                      StitchConfig(n_prefix=60, n_suffix=60, iterations=16, pool=5, confirm=4)).run(
         Bowls([[0], [1, 2]], chain_names(2), w=0.0))
     two, ev = _three(StitchConfig(n_prefix=60, n_suffix=60, iterations=16, pool=5, confirm=4, splits=(1, 2)), w=0.0,
                      n_elite=10)

@@ -106,7 +106,8 @@ def test_a_resumed_stitched_run_goes_on_from_its_checkpoint(stitched_run: Path, 
     cut = tmp_path / "cut"
     assert run(compose_config(*OVER), cut, after_iteration=stop).interrupted
     ckpt = json.loads((cut / "checkpoint.json").read_text())["ce_state"]
-    assert ckpt["kind"] == "stitched" and ckpt["phase"] == "prefix" and ckpt["pool"]["states"] and ckpt["stitched"]
+    # the one cut's search is the two-segment chain: round 2's prefix (segment 0) comes next
+    assert ckpt["kind"] == "stitched_chain" and ckpt["phase"] == 0 and ckpt["pools"][0]["states"] and ckpt["stitched"]
     run(compose_config("logging.progress=false", f"resume={cut}"), tmp_path / "hydra_dir")
     a, b = (json.loads((d / "result.json").read_text()) for d in (stitched_run, cut))
     assert b["status"] == "done" and b["feasible"] and b["stitched"]["segment_per_iter"] == SEGMENTS

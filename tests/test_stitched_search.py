@@ -1,8 +1,9 @@
-"""Stitched segments' search (``realize.search.stitched``) on an analytic two-segment problem:
-no simulator. The prefix's cost is a quadratic bowl, its end state the point it reached; the
-suffix's cost a bowl plus a term of where it starts; the whole plan's cost the two summed, so
-the stitched cost of a plan must equal its confirmed cost, and the search must find the bowls'
-joint minimum."""
+"""The stitched search at one cut (``realize.search.chain.ChainSearch`` of two segments, a
+prefix and a suffix) on an analytic problem: no simulator. The prefix's cost is a quadratic
+bowl, its end state the point it reached; the suffix's cost a bowl plus a term of where it
+starts; the whole plan's cost the two summed, so the stitched cost of a plan must equal its
+confirmed cost, and the search must find the bowls' joint minimum. A paused search goes on from
+its state as if never paused, from a state of the one-cut search the chain replaced too."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ import pytest
 import torch
 
 from realize.search.ce.config import CEConfig
+from realize.search.chain import ChainSearch
 from realize.search.protocol import EvalResult
-from realize.search.stitched import SEGMENT_NAMES, StitchConfig, StitchedSearch
+from realize.search.segments import StitchConfig, chain_names
 from realize.tasks.param_layout import ParamLayout
 from realize.tasks.regions import Box
 
@@ -61,10 +63,10 @@ class Evaluator:
         return EvalResult(cost, zp[:, 0] > -1.0), None
 
 
-def _search(cfg: StitchConfig, seed: int = 0) -> StitchedSearch:
+def _search(cfg: StitchConfig, seed: int = 0) -> ChainSearch:
     full, pre, suf = _layouts()
     ce = CEConfig(n_envs=cfg.n_prefix, n_elite=5, iterations=cfg.iterations, seed=seed)
-    return StitchedSearch(full, pre, suf, [0, 1], [2, 3, 4], ce, cfg)
+    return ChainSearch(full, [pre, suf], [[0, 1], [2, 3, 4]], ce, cfg)
 
 
 def test_stitched_search_finds_the_joint_minimum_and_confirms_its_cost() -> None:
@@ -83,7 +85,7 @@ def test_stitched_search_finds_the_joint_minimum_and_confirms_its_cost() -> None
     assert ev.calls == [("prefix", 60)] + [("prefix", 60), ("suffix", 60)] * (cfg.iterations - 1) + \
         [("full", cfg.confirm)]
     assert res.samples == 60 * cfg.iterations + 60 * (cfg.iterations - 1) + cfg.confirm
-    assert [h.pool for h in res.history] == [5] * cfg.iterations
+    assert [h.pools for h in res.history] == [[5]] * cfg.iterations
 
 
 def test_stitched_search_is_deterministic() -> None:
@@ -93,20 +95,21 @@ def test_stitched_search_is_deterministic() -> None:
 
 
 def test_the_pool_keeps_the_cheapest_feasible_prefixes_with_their_states() -> None:
-    s = _search(StitchConfig(n_prefix=6, n_suffix=6, iterations=2, pool=3, confirm=1))
+    s, ev = _search(StitchConfig(n_prefix=6, n_suffix=6, iterations=2, pool=3, confirm=1)), Evaluator()
     Z = torch.tensor([[0.0, 0.0], [-2.0, 0.0], [0.5, -1.0], [1.0, 1.0], [0.4, -1.0], [2.0, 2.0]], dtype=torch.float64)
-    ok = Z[:, 0] > -1.0
-    ends = [tuple(z.tolist()) if f else None for z, f in zip(Z, ok)]
-    s._fresh(Z, EvalResult(_prefix_cost(Z), ok, end_states=ends))  # the round's prefixes, then into the pool
-    s._join_fresh()
-    assert s.pool_z.tolist() == [[0.5, -1.0], [0.4, -1.0], [0.0, 0.0]]
-    assert s.pool_state == [tuple(z) for z in s.pool_z.tolist()]
+    s.opts[0].give(Z)  # round 0's prefix rows (the second fails "the grasp")
+    b = s.ask()
+    r, ends = ev("prefix", b.Z, b.starts)
+    r.end_states = ends
+    s.tell(r)  # round 0 has no suffix: its prefixes join the pool at once
+    assert s.pools[0].z.tolist() == [[0.5, -1.0], [0.4, -1.0], [0.0, 0.0]]
+    assert s.pools[0].states == [tuple(z) for z in s.pools[0].z.tolist()]
 
 
 def test_a_split_that_does_not_cover_the_columns_is_refused() -> None:
     full, pre, suf = _layouts()
     with pytest.raises(ValueError, match="split the plan's 5 columns"):
-        StitchedSearch(full, pre, suf, [0, 1], [1, 2, 3], CEConfig(n_envs=10, n_elite=2), StitchConfig())
+        ChainSearch(full, [pre, suf], [[0, 1], [1, 2, 3]], CEConfig(n_envs=10, n_elite=2), StitchConfig())
     with pytest.raises(ValueError, match="stitch.iterations must be >= 2"):
         StitchConfig(iterations=1)
     with pytest.raises(ValueError, match="stitch.pool = 0"):
@@ -122,16 +125,54 @@ def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_af
     ev, first = Evaluator(), _search(cfg)
     for _ in range(pause_after):
         b = first.ask()
-        r, ends = ev(SEGMENT_NAMES[b.candidate], b.Z, b.starts)
+        r, ends = ev(chain_names(2)[b.candidate], b.Z, b.starts)
         r.end_states = ends
         first.tell(r)
     saved = json.loads(json.dumps(first.state_dict()))  # as a checkpoint holds it
     second = _search(cfg)
     second.read_state = tuple  # the analytic states are tuples; JSON gives lists
     second.load_state_dict(saved)
-    assert second.iterations_done == pause_after and second.pool_state == first.pool_state
+    assert second.iterations_done == pause_after and second.pools[0].states == first.pools[0].states
+    assert second.fresh[0].states == first.fresh[0].states  # (after 2: a prefix's rows wait for the suffix)
     rest = second.run(ev)
     assert torch.equal(rest.z, whole.z) and rest.cost == whole.cost and rest.confirmed == whole.confirmed
+
+
+def _as_stitched(d: dict) -> dict:
+    """The chain's ``state_dict`` in the form a one-cut run checkpointed before the chain ran it
+    (kind "stitched": the prefix's, suffix's and confirmation's searches, the pool and the
+    waiting prefixes without ids, each stitched plan as its prefix's and its suffix's columns)."""
+    def rows(p: dict) -> dict:
+        return {k: p[k] for k in ("z", "cost", "states")}
+
+    return {"kind": "stitched", "round": d["round"], "phase": {0: "prefix", 1: "suffix"}.get(d["phase"], d["phase"]),
+            "batches": d["batches"], "prefix": d["segments"][0], "suffix": d["segments"][1], "full": d["full"],
+            "pool": rows(d["pools"][0]), "fresh": rows(d["fresh"][0]),
+            "stitched": [[c, z[:2], z[2:]] for c, z in d["stitched"]]}
+
+
+@pytest.mark.parametrize("pause_after", [1, 2, 3, 5])  # ... and before the confirmation
+def test_a_one_cut_run_checkpointed_before_the_chain_ran_it_goes_on(pause_after: int) -> None:
+    """An interrupted one-cut run's checkpoint from before the chain was its search resumes as if
+    never paused (``realize.search.segments.stitched_as_chain``); a malformed one is refused."""
+    import json
+
+    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
+    whole = _search(cfg).run(Evaluator())
+    ev, first = Evaluator(), _search(cfg)
+    for _ in range(pause_after):
+        b = first.ask()
+        r, ends = ev(chain_names(2)[b.candidate], b.Z, b.starts)
+        r.end_states = ends
+        first.tell(r)
+    second = _search(cfg)
+    second.read_state = tuple
+    second.load_state_dict(json.loads(json.dumps(_as_stitched(first.state_dict()))))
+    assert second.iterations_done == pause_after and second.phase == first.phase
+    rest = second.run(ev)
+    assert torch.equal(rest.z, whole.z) and rest.cost == whole.cost and rest.confirmed == whole.confirmed
+    with pytest.raises(ValueError, match="malformed stitched state"):
+        _search(cfg).load_state_dict({"kind": "stitched", "round": 0})
 
 
 def test_the_confirmation_is_a_given_batch_whose_best_is_the_searchs() -> None:
@@ -150,5 +191,5 @@ def test_a_smoothed_search_confirms_too() -> None:
     full, pre, suf = _layouts()
     cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=3)
     ce = CEConfig(n_envs=20, n_elite=5, iterations=3, seed=0, alpha=0.7)
-    res = StitchedSearch(full, pre, suf, [0, 1], [2, 3, 4], ce, cfg).run(Evaluator())
+    res = ChainSearch(full, [pre, suf], [[0, 1], [2, 3, 4]], ce, cfg).run(Evaluator())
     assert res.feasible and res.confirmed

@@ -3,9 +3,9 @@
 What it does: ``prepare_run(cfg, out_dir)`` validates the whole config first (``realize.spec.run_spec``;
 a ``ConfigError`` leaves a ``failed`` result.json and nothing simulated), picks the searcher
 (``CrossEntropyOptimizer`` for one plan; ``SuccessiveHalving`` over the planner's candidates
-with ``task.planner.top_k > 1``; ``StitchedSearch`` with ``stitch.enabled``, whose batches are
-the plan's two segments and the confirmation: ``realize.run.stitched_run.run_segments``) and the
-sinks, in their order per iteration:
+with ``task.planner.top_k > 1``; ``ChainSearch`` with ``stitch.enabled``, whose batches are
+the plan's segments (one cut: a prefix and a suffix) and the confirmation:
+``realize.run.stitched_run.run_segments``) and the sinks, in their order per iteration:
 
   1. ``CheckpointSink``: ``history.npz`` (``history_c{i}.npz`` per candidate), then
      ``checkpoint.json``, the commit point;
@@ -160,7 +160,7 @@ class _Assembly:
         self.tasks = list(spec.candidates) if spec.halving else [spec.task]
         self.keys: list[int | None] = list(range(len(self.tasks))) if spec.halving else [None]
         self.stitched: Searcher | None = None
-        if spec.stitch is not None:  # the whole plan (its confirmation), the prefix and the suffix
+        if spec.stitch is not None:  # the whole plan (its confirmation) and its segments
             from realize.run.stitched_run import run_segments
 
             self.tasks, self.keys, self.stitched = run_segments(spec)
@@ -373,7 +373,7 @@ class _Assembly:
         cost = f"{o.best_cost:.0f}" if math.isfinite(o.best_cost) else "none"
         if spec.halving:
             hist, rrd = candidate_file(HISTORY_FILE, 0) + ", ...", candidate_file(spec.logging.rrd, 0) + ", ..."
-        elif spec.stitch is not None:  # the confirmation, then the prefix's and the suffix's batches
+        elif spec.stitch is not None:  # the confirmation, then each segment's batches
             hist, rrd = (", ".join([f, *(candidate_file(f, k) for k in self.keys[1:])])
                          for f in (HISTORY_FILE, spec.logging.rrd))
         else:

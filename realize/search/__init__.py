@@ -3,7 +3,8 @@
 Modules: ``protocol`` (``Searcher``, ``Batch``, ``EvalResult``: what the loop asks and tells),
 ``ce`` (the cross-entropy optimizer, Algorithm 1), ``candidates`` and ``budget`` (successive
 halving over the k best symbolic plans), ``warm_start`` (a search begun from an earlier run's
-final distribution), ``stitched``, ``chain`` and ``chain_pool`` (a plan searched as segments
-stitched together: one cut, or a chain of them with credit, and the chain's pools of start states).
+final distribution), ``segments``, ``chain`` and ``chain_pool`` (a plan searched as segments
+stitched together, one cut or several, with credit: the budget and names, the search, and its
+pools of start states).
 What it doesn't: simulate (``realize.realization``) or run the loop (``realize.run.loop``).
 """

@@ -1,22 +1,27 @@
-"""Stitched segments as a chain (issue 57): a plan cut into K >= 2 segments, each with its own CE search.
+"""Stitched segments (issues 35, 57): a plan cut into K >= 2 segments, each with its own CE search.
 
-What it does: ``ChainSearch`` is an ask/tell ``realize.search.protocol.Searcher`` that generalizes
-``realize.search.stitched.StitchedSearch`` from one cut to ``K - 1`` cuts. Segment j (0-based)
-has its own ``CrossEntropyOptimizer`` over its columns (``n_prefix`` rows for segment 0,
-``n_suffix`` for each later one; seed ``ce.seed + j``; ``iterations - j`` rounds). Each round r:
+What it does: ``ChainSearch`` is the ask/tell ``realize.search.protocol.Searcher`` of every
+stitched search (``realize.search.segments.StitchConfig``): one cut is its two-segment case (a
+prefix and a suffix), more cuts a longer chain. Segment j (0-based) has its own
+``CrossEntropyOptimizer`` over its columns (``n_prefix`` rows for segment 0, ``n_suffix`` for
+each later one; seed ``ce.seed + j``; ``iterations - j`` rounds). Each round r:
   * segment 0's batch, realized from the task's start, the rows' end states captured;
   * then, in order, each later segment j whose start pool is not empty: row i starts from entry
-    ``i mod len(pool)`` of pool j-1 (``Batch.starts``), ranked by its own cost; a segment before
-    the last has its rows' end states captured too;
+    ``i mod len(pool)`` of pool j-1 (``Batch.starts``), ranked by its own cost (so pruning a row
+    by its own cost is exact); a segment before the last has its rows' end states captured too;
   * then the round's feasible rows join their segment's pool: the ``pool`` cheapest feasible
     partial plans through that segment so far, by cumulative cost (their columns, costs, end
-    states). Segment j of round r thus starts from rows of rounds before r; it first runs in
-    round j, so a chain needs ``iterations >= K``.
+    states; ties to the older, then row order). Segment j of round r thus starts from rows of
+    rounds before r; it first runs in round j, so a chain needs ``iterations >= K``. The last
+    round's first batch feeds no later segment and is kept (docs/results.md, "Dropping the
+    last prefix batch").
 Every feasible row of the last segment is a stitched plan (cost: its segments' costs summed);
-the ``confirm`` cheapest are realized whole from the task's start at the end, as in
-``StitchedSearch`` (a ``CrossEntropyOptimizer`` over the whole layout, seed ``ce.seed + K``, ranks
-them; its best is ``report().state``'s). With two segments and ``credit = 0`` it draws, ranks and
-returns bit for bit what ``StitchedSearch`` does (``tests/test_chain_search.py``).
+the ``confirm`` cheapest are realized whole from the task's start at the end (a
+``CrossEntropyOptimizer`` over the whole layout, seed ``ce.seed + K``, ranks them:
+``CrossEntropyOptimizer.give``); its best is the search's (``report().state``). A stitched cost
+is a guess (a restored state starts at rest, its contacts made anew), the confirmed cost the plan's.
+A search of two segments without credit draws, ranks and returns bit for bit what the one-cut
+search before the chain did (the golden run ``seed_paper_default``, ``tests/golden_runs.py``).
 
 Credit (``credit = c > 0``): a later segment's failures reach the earlier segment's elites.
   * A pool entry counts the rows started from it (tries) and those that ended feasible (wins);
@@ -31,11 +36,17 @@ Credit (``credit = c > 0``): a later segment's failures reach the earlier segmen
 So a segment whose successors keep failing from one mode of it refits on its other rows. A
 doomed row is still realized, kept and tried downstream: the verdict is a guess from neighbours.
 ``run(evaluate)`` drives the same ask/tell without a run directory (the analytic tests).
+``state_dict`` holds the segments' and the confirmation's searches, the pools and the round's
+rows waiting to join them (states through their ``to_json``; a ``read_state`` given to the
+constructor reads them back), the credit's verdicts and the stitched plans kept; a one-cut
+run's state from before the chain ran it loads too (``realize.search.segments.stitched_as_chain``).
 
 What it doesn't: simulate or capture states (``realize.run.stitched_run``), choose the cuts
-(``realize.tasks.split``), or let a segment's rows depend on the predecessor's columns: each
-segment's CE is one distribution over its own columns, whatever row its start came from. The
-segments' searches run a constant schedule without elite memory, screen or patience.
+(``realize.tasks.split``), rank a row by the later segments it allows (without credit, a
+cheaper grasp that makes the place dearer still wins its pool place; the confirmation sees the
+sum), or let a segment's rows depend on the predecessor's columns: each segment's CE is one
+distribution over its own columns, whatever row its start came from. The segments' searches
+run a constant schedule without elite memory, screen or patience.
 """
 
 from __future__ import annotations
@@ -55,21 +66,11 @@ from realize.search.ce.optimizer import CrossEntropyOptimizer
 from realize.search.ce.state import IterationRecord
 from realize.search.chain_pool import Pool
 from realize.search.protocol import Batch, EvalResult, SearchReport
-from realize.search.stitched import StitchConfig, SegmentEvaluator
+from realize.search.segments import CHAIN_KIND, STITCHED_KIND, SegmentEvaluator, StitchConfig, chain_names, \
+    stitched_as_chain
 from realize.tasks.param_layout import ParamLayout
 
-__all__ = ["ChainSearch", "ChainIteration", "ChainResult", "CHAIN_KIND", "chain_names"]
-
-CHAIN_KIND = "stitched_chain"  # the "kind" of its state_dict (a checkpoint's ce_state)
-
-
-def chain_names(k: int) -> dict[int | None, str]:
-    """The batches' segment names by candidate index (the workers' task, the history key):
-    None is the confirmation ("full"); two segments are "prefix" and "suffix" (as
-    ``StitchedSearch``'s), more ``segment1 .. segmentK``."""
-    if k == 2:
-        return {None: "full", 1: "prefix", 2: "suffix"}
-    return {None: "full", **{j: f"segment{j}" for j in range(1, k + 1)}}
+__all__ = ["ChainSearch", "ChainIteration", "ChainResult", "CHAIN_KIND"]
 
 
 @dataclass
@@ -89,14 +90,16 @@ class ChainIteration:
 
 @dataclass
 class ChainResult:
-    """As ``realize.search.stitched.StitchedResult``, with the rounds as ``ChainIteration``s and
-    the seconds each segment's batches took (``segment_s``)."""
+    """The returned plan (``z``, full layout; None if no stitched plan confirmed feasible), its
+    confirmed cost, the stitched cost it was chosen by, every confirmed plan's costs and the
+    plans, the rounds, and the seconds of the search (confirmation included), of the
+    confirmation and of each segment's batches (``segment_s``)."""
 
     z: Tensor | None
     cost: float
     stitched_cost: float
-    confirmed: list[tuple[float, float, bool]] = field(default_factory=list)
-    candidates: Tensor | None = None
+    confirmed: list[tuple[float, float, bool]] = field(default_factory=list)  # (stitched, confirmed, feasible)
+    candidates: Tensor | None = None  # (len(confirmed), D) the confirmed plans, in ``confirmed``'s order
     history: list[ChainIteration] = field(default_factory=list)
     search_s: float = 0.0
     confirm_s: float = 0.0
@@ -238,7 +241,10 @@ class ChainSearch:
         }
 
     def load_state_dict(self, d: Mapping[str, Any]) -> None:
-        """Continue from ``state_dict()`` output; ``ValueError`` if it is not this chain's state."""
+        """Continue from ``state_dict()`` output (or, with two segments, a one-cut run's older state:
+        ``stitched_as_chain``); ``ValueError`` if it is not this chain's state."""
+        if d.get("kind") == STITCHED_KIND and self.k == 2:
+            d = stitched_as_chain(d)
         if d.get("kind") != CHAIN_KIND:
             raise ValueError(f"not a stitched chain's state (kind {d.get('kind')!r})")
         try:

@@ -35,7 +35,7 @@ __all__ = ["Batch", "EvalResult", "SearchReport", "Searcher"]
 class Batch:
     """One iteration's samples. ``mean``/``std`` (D,) (or (k, D) with ``weights`` (k,) for a
     mixture) are the distribution ``Z`` was drawn from; all ``None`` for a uniform batch.
-    A stitched search's segments (``realize.search.stitched``) also set ``starts`` (one start
+    A stitched search's segments (``realize.search.chain``) also set ``starts`` (one start
     state per row; None: the task's start) and ``capture_end`` (the rows' end states are wanted)."""
 
     Z: Tensor

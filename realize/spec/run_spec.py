@@ -37,7 +37,7 @@ from realize.search.budget import HalvingBudget, plan_budget
 from realize.search.ce.config import CEConfig
 from realize.spec.run_settings import LoggingSettings, ValidationSettings
 from realize.spec.stitch_settings import StitchSettings, read_stitch
-from realize.search.stitched import StitchConfig
+from realize.search.segments import StitchConfig
 from realize.config import ConfigError, Settings, as_mapping, check_unknown, setting
 from realize.spec.task_plans import (PlannerSettings, TaskOrigin, build_task_candidates, check_halving_budget,
                                 load_task_file)
@@ -117,7 +117,7 @@ class RunSpec:
     worlds: Worlds | None = None
     # replan_from: the plan's remaining actions from a given state (realize.spec.replan_from); None otherwise
     replan: ReplanSpec | None = None
-    stitch: StitchConfig | None = None  # stitched segments (realize.search.stitched); None: one CE over the plan
+    stitch: StitchConfig | None = None  # stitched segments (realize.search.chain); None: one CE over the plan
 
     @property
     def start(self) -> SceneState | None:

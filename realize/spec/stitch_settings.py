@@ -5,7 +5,7 @@ chain of segments: ``stitch.splits`` or ``stitch.cut``, with ``credit``); ``read
 task)`` checks them against the run's CE settings and its task (the cuts, the rounds a chain
 needs, what a stitched search cannot run) and returns a ``StitchConfig`` (None: off). Every
 problem is one ``ConfigError`` naming the key.
-What it doesn't: search (``realize.search.stitched``, ``realize.search.chain``) or read the rest
+What it doesn't: search (``realize.search.chain``) or read the rest
 of the run config (``realize.spec.run_spec``).
 """
 
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 from realize.config import ConfigError, Settings, setting
 from realize.search.ce.config import CEConfig
 if TYPE_CHECKING:
-    from realize.search.stitched import StitchConfig
+    from realize.search.segments import StitchConfig
     from realize.tasks.spec import TaskSpec
 
 __all__ = ["StitchSettings", "read_stitch"]
@@ -25,8 +25,8 @@ __all__ = ["StitchSettings", "read_stitch"]
 
 @dataclass
 class StitchSettings(Settings):
-    """The run config's ``stitch`` node: search the plan as two segments realized side by side,
-    then confirmed whole (``realize.search.stitched``; ``levers=stitched`` turns it on)."""
+    """The run config's ``stitch`` node: search the plan as segments realized side by side,
+    then confirmed whole (``realize.search.chain``; ``levers=stitched`` turns it on)."""
 
     config_key = "stitch"
 
@@ -48,7 +48,7 @@ def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, top_k: int = 1, replan: bo
     """The stitched search's budget (``None``: off): rounds are ``ce.iterations``, the rows at
     most ``ce.n_envs`` (the scene's copies; ``confirm`` is capped there), the split checked on
     ``task``. A robust, kNN-ranked, top-k, replan or warm-started run is refused."""
-    from realize.search.stitched import StitchConfig
+    from realize.search.segments import StitchConfig
     from realize.tasks.split import default_split, split_task
 
     st = StitchSettings.from_mapping(d if d is not None else {})
@@ -78,7 +78,7 @@ def read_stitch(d: Any, ce: CEConfig, task: TaskSpec, top_k: int = 1, replan: bo
 
 def _read_chain(st: StitchSettings, ce: CEConfig, task: TaskSpec, n_prefix: int, n_suffix: int) -> StitchConfig:
     """A chain of segments: ``stitch.splits``, or the cuts of ``stitch.cut`` (checked on ``task``)."""
-    from realize.search.stitched import StitchConfig
+    from realize.search.segments import StitchConfig
     from realize.tasks.split import chain_tasks, place_cuts
 
     if st.split is not None:

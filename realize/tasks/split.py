@@ -12,7 +12,7 @@ What it does:
     an earlier one the part of the goal its places settle for good, ``settled_goal``) and the full
     layout's columns of each; ``place_cuts(task)``: after every place that another
     action follows (the hand is empty, the object at rest: a stable symbolic state).
-What it doesn't: search or simulate the segments (``realize.search.stitched``, ``realize.run.stitched_run``).
+What it doesn't: search or simulate the segments (``realize.search.chain``, ``realize.run.stitched_run``).
 """
 
 from __future__ import annotations

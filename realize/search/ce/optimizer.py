@@ -166,7 +166,7 @@ class CrossEntropyOptimizer:
 
     def give(self, Z: Tensor) -> None:
         """Make ``Z (N, D)`` the current iteration's batch instead of a draw: rows chosen elsewhere
-        (a stitched search's plans, confirmed whole: ``realize.search.stitched``). ``tell`` ranks
+        (a stitched search's plans, confirmed whole: ``realize.search.chain``). ``tell`` ranks
         and refits from them as from drawn rows; the record says ``sampled_from = "given"``."""
         if self.done:
             raise RuntimeError("give() after the search is done")
