@@ -116,11 +116,8 @@ def test_a_split_that_does_not_cover_the_columns_is_refused() -> None:
         StitchConfig(pool=0)
 
 
-@pytest.mark.parametrize("pause_after", [1, 2, 3])  # round 0, a prefix whose rows wait for the suffix, a round
-def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_after: int) -> None:
-    import json
-
-    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
+def _paused(cfg: StitchConfig, pause_after: int):
+    """The whole search's result, and an evaluator and a search that ran its first ``pause_after`` batches."""
     whole = _search(cfg).run(Evaluator())
     ev, first = Evaluator(), _search(cfg)
     for _ in range(pause_after):
@@ -128,6 +125,15 @@ def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_af
         r, ends = ev(chain_names(2)[b.candidate], b.Z, b.starts)
         r.end_states = ends
         first.tell(r)
+    return whole, ev, first
+
+
+@pytest.mark.parametrize("pause_after", [1, 2, 3])  # round 0, a prefix whose rows wait for the suffix, a round
+def test_a_paused_search_goes_on_from_its_state_dict_as_if_never_paused(pause_after: int) -> None:
+    import json
+
+    cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
+    whole, ev, first = _paused(cfg, pause_after)
     saved = json.loads(json.dumps(first.state_dict()))  # as a checkpoint holds it
     second = _search(cfg)
     second.read_state = tuple  # the analytic states are tuples; JSON gives lists
@@ -158,13 +164,7 @@ def test_a_one_cut_run_checkpointed_before_the_chain_ran_it_goes_on(pause_after:
     import json
 
     cfg = StitchConfig(n_prefix=20, n_suffix=20, iterations=3, pool=3, confirm=2)
-    whole = _search(cfg).run(Evaluator())
-    ev, first = Evaluator(), _search(cfg)
-    for _ in range(pause_after):
-        b = first.ask()
-        r, ends = ev(chain_names(2)[b.candidate], b.Z, b.starts)
-        r.end_states = ends
-        first.tell(r)
+    whole, ev, first = _paused(cfg, pause_after)
     second = _search(cfg)
     second.read_state = tuple
     second.load_state_dict(json.loads(json.dumps(_as_stitched(first.state_dict()))))
